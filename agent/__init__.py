@@ -1,0 +1,1 @@
+"""The zswarm agent process: runtime loop and the pure algorithms it steps."""

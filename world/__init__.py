@@ -1,0 +1,1 @@
+"""The zswarm world process: ground truth and sensors."""

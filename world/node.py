@@ -1,0 +1,96 @@
+"""The world node: integrates the truth and publishes sensor packets and truth.
+
+Engine-agnostic: ``zswarm sim`` calls :meth:`World.sample` at virtual times;
+``python -m world`` calls it from a real-time loop.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from world import sensors
+from world.motion import PrescribedAttitudes
+from zswarm import keys, wire
+from zswarm.bus import Bus
+from zswarm.scenario import Scenario
+
+
+class World:
+    """Truth and sensors of a scenario, publishing on ``bus``.
+
+    Sensor samples are taken at world times ``k / sensor_rate``; the noise of
+    agent i comes from its own generator seeded by ``(seed, i)``, so a seed
+    gives the same measurements on every engine.
+    """
+
+    def __init__(self, scenario: Scenario, bus: Bus, run: str, seed: int) -> None:
+        self.sc = scenario
+        self.run = run
+        self.motion = PrescribedAttitudes(
+            np.array([a.R_matrix for a in scenario.agents]),
+            np.array([a.p for a in scenario.agents]),
+            [a.omega for a in scenario.agents],
+            scenario.step,
+        )
+        self.ids = list(scenario.ids)
+        self.index = {i: k for k, i in enumerate(self.ids)}
+        self.bias = np.array([a.gyro_bias for a in scenario.agents])
+        self.gyro_std = math.sqrt(scenario.gyro_var)
+        self.bearing_std = math.sqrt(scenario.bearing_var)
+        self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
+        self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
+        self.leaders = {a.id for a in scenario.agents if a.role == "leader"}
+        self.pub_sense = {i: bus.publisher(keys.sense(run, i)) for i in self.ids}
+        self.pub_truth = bus.publisher(keys.truth(run))
+        self.pub_stats = bus.publisher(keys.stats(run, "world", 0))
+        self.stats_seq = 0
+        self.k = 0  # index of the next sensor sample
+        self.seq = 0
+        self.samples = 0
+        self.late = 0  # samples the real-time loop had to skip
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.sc.sensor_rate
+
+    def next_time(self) -> float:
+        return self.k * self.period
+
+    def sample(self) -> float:
+        """Advance the truth to the next sample time, publish it, return that time."""
+        t = self.next_time()
+        self.motion.advance_to(t)
+        R, p = self.motion.R, self.motion.p
+        W = self.motion.omega(t)
+        seq = self.seq
+        self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
+        for i in self.ids:
+            a = self.index[i]
+            rng = self.rngs[i]
+            g = sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)
+            bs = {j: sensors.noisy_bearing(sensors.bearing(R[a], p[a], p[self.index[j]]), self.bearing_std, rng) for j in self.nbrs[i]}
+            extra = {"R": R[a], "p": p[a]} if i in self.leaders else {}
+            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, gyro=g, bearings=bs, **extra))
+        self.seq += 1
+        self.samples += 1
+        self.k += 1
+        return t
+
+    def skip_to(self, t: float) -> int:
+        """Skip sample indices whose time is before ``t`` (the loop fell behind); return how many."""
+        k_new = max(self.k, int(math.floor(t / self.period + 1e-9)))
+        skipped = k_new - self.k
+        self.k = k_new
+        self.late += skipped
+        return skipped
+
+    def counters(self) -> dict[str, object]:
+        return {"samples": self.samples, "late": self.late, "sent": {f"world->{i}": self.seq for i in self.ids}}
+
+    def publish_stats(self, t: float, final: bool = False) -> None:
+        counters = self.counters()
+        counters["final"] = final
+        self.pub_stats.put(wire.encode("stats", 0, self.stats_seq, t, role="world", counters=counters))
+        self.stats_seq += 1

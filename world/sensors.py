@@ -1,0 +1,45 @@
+"""Measurement models of the thesis, with its noise and bias models.
+
+* Gyro: ``ω_i^m = ω_i + b_ω_i + n``, ``n ~ N(0, gyro_var)`` per sample (thesis §3.2.5).
+* Bearing: ``b_ij^i = R_i^T (p_j - p_i)/||p_j - p_i||`` (3.2); with noise, the
+  projective model (3.18)–(3.19): perturb ``(b1/b3, b2/b3)`` by
+  ``n ~ N(0, bearing_var)`` each, rebuild ``sign(b3)·(x, y, 1)/||(x, y, 1)||``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+Vec3 = NDArray[np.float64]
+
+
+def bearing(R_i: NDArray[np.float64], p_i: Vec3, p_j: Vec3) -> Vec3:
+    """Body-frame bearing ``b_ij^i = R_i^T b_ij`` from agent i to agent j (3.2)."""
+    d = p_j - p_i
+    return R_i.T @ (d / math.sqrt(float(d @ d)))
+
+
+def noisy_bearing(b: Vec3, std: float, rng: np.random.Generator) -> Vec3:
+    """Bearing noise model (3.18)–(3.19) with per-coordinate noise std ``std``.
+
+    Near ``b3 = 0`` the projective coordinates blow up; there the model is
+    undefined and the clean bearing is returned (|b3| < 1e-9 has probability
+    zero for the papers' scenarios).
+    """
+    if std == 0.0:
+        return b
+    n1, n2 = rng.normal(0.0, std, 2)
+    if abs(b[2]) < 1e-9:
+        return b
+    x = b[0] / b[2] + n1
+    y = b[1] / b[2] + n2
+    v = np.array((x, y, 1.0))
+    return math.copysign(1.0, b[2]) * v / math.sqrt(float(v @ v))
+
+
+def gyro(omega: Vec3, bias: Vec3, std: float, rng: np.random.Generator) -> Vec3:
+    """Gyro measurement ``ω + b_ω + n`` with ``n ~ N(0, std²)`` per axis."""
+    return omega + bias + rng.normal(0.0, std, 3) if std > 0 else omega + bias

@@ -1,0 +1,206 @@
+"""Transport behind a small protocol: ``ZenohBus`` (real) and ``MemoryBus`` (in-process).
+
+Callbacks receive ``(key, payload)`` and must only store what they get: they
+run on Zenoh's threads (ZenohBus) or inside ``put`` (MemoryBus).  This is the
+only module that imports zenoh.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
+
+DataCallback = Callable[[str, bytes], None]
+AliveCallback = Callable[[str, bool], None]
+
+
+class Publisher(Protocol):
+    def put(self, payload: bytes) -> None: ...
+
+
+class Bus(Protocol):
+    def publisher(self, key: str) -> Publisher: ...
+    def subscribe(self, key_expr: str, callback: DataCallback) -> None: ...
+    def declare_token(self, key: str) -> None: ...
+    def watch_alive(self, key_expr: str, callback: AliveCallback) -> None: ...
+    def close(self) -> None: ...
+
+
+# --------------------------------------------------------------------------- key expressions
+
+
+def key_matches(key_expr: str, key: str) -> bool:
+    """Zenoh-style matching of a concrete ``key`` by ``key_expr`` (``*`` one chunk, ``**`` any)."""
+    pat = key_expr.split("/")
+    ks = key.split("/")
+
+    def m(a: int, b: int) -> bool:
+        if a == len(pat):
+            return b == len(ks)
+        if pat[a] == "**":
+            return any(m(a + 1, c) for c in range(b, len(ks) + 1))
+        if b == len(ks):
+            return False
+        return (pat[a] == "*" or pat[a] == ks[b]) and m(a + 1, b + 1)
+
+    return m(0, 0)
+
+
+# --------------------------------------------------------------------------- in-process
+
+
+class MemoryBus:
+    """In-process bus: ``put`` delivers synchronously to every matching subscriber.
+
+    Deterministic: subscribers are called in the order they subscribed.  Used by
+    ``zswarm sim`` and the component tests; never a stand-in for Zenoh in
+    integration tests.
+    """
+
+    def __init__(self) -> None:
+        self._subs: list[tuple[str, DataCallback]] = []
+        self._watchers: list[tuple[str, AliveCallback]] = []
+        self._tokens: set[str] = set()
+        self._cache: dict[str, list[DataCallback]] = {}
+
+    def publisher(self, key: str) -> Publisher:
+        bus = self
+
+        class _Pub:
+            def put(self, payload: bytes) -> None:
+                bus.put(key, payload)
+
+        return _Pub()
+
+    def put(self, key: str, payload: bytes) -> None:
+        cbs = self._cache.get(key)
+        if cbs is None:
+            cbs = [cb for ke, cb in self._subs if key_matches(ke, key)]
+            self._cache[key] = cbs
+        for cb in cbs:
+            cb(key, payload)
+
+    def subscribe(self, key_expr: str, callback: DataCallback) -> None:
+        self._subs.append((key_expr, callback))
+        self._cache.clear()
+
+    def declare_token(self, key: str) -> None:
+        self._tokens.add(key)
+        for ke, cb in self._watchers:
+            if key_matches(ke, key):
+                cb(key, True)
+
+    def undeclare_token(self, key: str) -> None:
+        """Withdraw a token, as a killed process's session would."""
+        if key in self._tokens:
+            self._tokens.discard(key)
+            for ke, cb in self._watchers:
+                if key_matches(ke, key):
+                    cb(key, False)
+
+    def watch_alive(self, key_expr: str, callback: AliveCallback) -> None:
+        self._watchers.append((key_expr, callback))
+        for key in sorted(self._tokens):
+            if key_matches(key_expr, key):
+                callback(key, True)
+
+    def close(self) -> None:
+        self._subs.clear()
+        self._watchers.clear()
+        self._cache.clear()
+
+
+# --------------------------------------------------------------------------- Zenoh
+
+
+def zenoh_config(
+    mode: str = "client",
+    connect: Sequence[str] = (),
+    listen: Sequence[str] = (),
+    config_file: str | None = None,
+    lease_ms: int = 1000,
+) -> Any:
+    """A ``zenoh.Config`` for zswarm: no multicast scouting, explicit endpoints, short lease.
+
+    The lease bounds how long a hung (not killed) process's liveliness token
+    survives; 1 s instead of Zenoh's default 10 s.
+    """
+    import zenoh
+
+    conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    # Never let Zenoh pick its default tcp/[::] listener: only what we were told.
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("transport/link/tx/lease", str(lease_ms))
+    conf.insert_json5("transport/link/tx/keep_alive", "4")
+    return conf
+
+
+class ZenohBus:
+    """A real Zenoh session behind the :class:`Bus` protocol (a context manager).
+
+    Control-path publishers use ``CongestionControl.DROP``, ``express=True`` and
+    ``Priority.REAL_TIME`` (DESIGN.md: never BLOCK on a control path).
+    Everything declared is closed with the session in :meth:`close`.
+    """
+
+    def __init__(self, conf: Any) -> None:
+        import zenoh
+
+        self._z = zenoh
+        self.session = zenoh.open(conf)
+        self._objs: list[Any] = []
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def __enter__(self) -> ZenohBus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def publisher(self, key: str) -> Publisher:
+        z = self._z
+        pub = self.session.declare_publisher(
+            key,
+            congestion_control=z.CongestionControl.DROP,
+            priority=z.Priority.REAL_TIME,
+            express=True,
+        )
+        self._objs.append(pub)
+        return pub  # type: ignore[no-any-return]
+
+    def subscribe(self, key_expr: str, callback: DataCallback) -> None:
+        def _cb(sample: Any) -> None:
+            callback(str(sample.key_expr), sample.payload.to_bytes())
+
+        self._objs.append(self.session.declare_subscriber(key_expr, _cb))
+
+    def declare_token(self, key: str) -> None:
+        self._objs.append(self.session.liveliness().declare_token(key))
+
+    def watch_alive(self, key_expr: str, callback: AliveCallback) -> None:
+        z = self._z
+
+        def _cb(sample: Any) -> None:
+            callback(str(sample.key_expr), sample.kind == z.SampleKind.PUT)
+
+        self._objs.append(self.session.liveliness().declare_subscriber(key_expr, _cb, history=True))
+
+    def close(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        for obj in reversed(self._objs):
+            try:
+                obj.undeclare()
+            except Exception:  # noqa: BLE001 - best effort; the session close below is what matters
+                pass
+        self._objs.clear()
+        self.session.close()

@@ -1,0 +1,114 @@
+"""Clocks: world time on the wall clock (time-scaled), a virtual clock, agents' own clocks.
+
+*World time* ``t`` is the simulated time of the run, 0 at the common epoch.
+``WallClock`` maps it to the wall clock: ``t = (unix_time - epoch) * time_scale``.
+An agent's *own clock* reads ``(1 + drift_ppm·1e-6)·t + offset``; the agent
+schedules its ticks and measures its ``dt`` on that clock only.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Protocol
+
+import numpy as np
+
+from zswarm.scenario import ClockSpec
+
+
+class Clock(Protocol):
+    def now(self) -> float:
+        """Current world time, s."""
+        ...
+
+
+class WallClock:
+    """World time on this host's wall clock, started at ``epoch`` (Unix seconds)."""
+
+    def __init__(self, epoch: float, time_scale: float = 1.0) -> None:
+        if time_scale <= 0:
+            raise ValueError(f"time_scale must be > 0 (got {time_scale})")
+        self.epoch = epoch
+        self.time_scale = time_scale
+        # Monotonic base fixed once, so an NTP step mid-run does not move world time.
+        self._mono_epoch = time.monotonic() + (epoch - time.time())
+
+    def now(self) -> float:
+        return (time.monotonic() - self._mono_epoch) * self.time_scale
+
+    def wall_delay(self, t: float) -> float:
+        """Wall seconds until world time ``t`` (negative if past)."""
+        return (self._mono_epoch + t / self.time_scale) - time.monotonic()
+
+    def sleep_until(self, t: float, stop: threading.Event) -> bool:
+        """Sleep until world time ``t``; return False if ``stop`` was set meanwhile."""
+        while True:
+            d = self.wall_delay(t)
+            if d <= 0:
+                return not stop.is_set()
+            if stop.wait(min(d, 0.5)):
+                return False
+
+
+class ManualClock:
+    """A clock the caller sets: the virtual clock of ``zswarm sim`` and of tests."""
+
+    def __init__(self, t: float = 0.0) -> None:
+        self.t = t
+
+    def now(self) -> float:
+        return self.t
+
+    def set(self, t: float) -> None:
+        self.t = t
+
+
+class AgentClock:
+    """An agent's own clock and tick schedule (rate, jitter, drift, offset).
+
+    Ticks are nominally every ``1/rate`` s *of the agent's own clock*; each
+    wake-up is perturbed by zero-mean Gaussian jitter (std ``jitter``, clipped
+    to ±0.45 period so ticks stay ordered).  The schedule is a pure function
+    of the spec and seed, so ``sim`` and ``run`` use the same tick times.
+    """
+
+    def __init__(self, spec: ClockSpec, seed: int) -> None:
+        self.spec = spec
+        self.scale = 1.0 + spec.drift_ppm * 1e-6
+        self.period = 1.0 / spec.rate
+        self._seed = seed
+        self.k = 0
+
+    def local(self, t_world: float) -> float:
+        """The agent's own clock reading at world time ``t_world``."""
+        return self.scale * t_world + self.spec.offset
+
+    def world(self, t_local: float) -> float:
+        return (t_local - self.spec.offset) / self.scale
+
+    def first_tick(self, t_world_start: float) -> float:
+        """World time of the first tick at or after ``t_world_start``; resets the schedule."""
+        loc = self.local(t_world_start)
+        self.k = int(np.ceil(loc / self.period - 1e-9))
+        return self._tick_world(self.k)
+
+    def next_tick(self, t_world_now: float) -> tuple[float, int]:
+        """World time of the next tick after the current one, and how many were skipped.
+
+        Ticks whose time already passed at ``t_world_now`` (the process was
+        late by more than a period) are skipped and counted as missed.
+        """
+        self.k += 1
+        missed = 0
+        while self._tick_world(self.k) < t_world_now - self.period / self.scale:
+            self.k += 1
+            missed += 1
+        return self._tick_world(self.k), missed
+
+    def _tick_world(self, k: int) -> float:
+        j = 0.0
+        if self.spec.jitter > 0:
+            # One draw per tick index, reproducible however the ticks are visited.
+            j = float(np.clip(np.random.default_rng([k % (1 << 63), self._seed % (1 << 63)]).normal(0.0, self.spec.jitter), -0.45 * self.period, 0.45 * self.period))
+        return self.world(k * self.period + j)

@@ -1,0 +1,163 @@
+"""Pure SO(3) helpers shared by every algorithm and by the world.
+
+Notation follows the thesis (Boughellaba 2024, §2.1):
+
+* ``hat(x)`` is ``[x]^x``, the skew-symmetric matrix with ``hat(x) @ y = x × y``;
+  ``vee`` is its inverse.
+* ``psi(C) = vee(Pa(C))`` with ``Pa(C) = (C - C^T)/2`` (eq. (2.5) of the thesis).
+* ``Ra(theta, v) = I + sin(theta)[v]^x + (1 - cos(theta))[v]^x^2`` (angle-axis).
+* ``attitude_norm(R) = |R|_I = sqrt(tr(I - R)/4)`` in [0, 1]; it equals
+  ``sin(theta/2)`` for a rotation by ``theta``.
+* ``projector(x) = P_x = I - x x^T/||x||^2``.
+
+Only numpy and the standard library are imported here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+Vec3 = NDArray[np.float64]
+Mat3 = NDArray[np.float64]
+
+_EYE = np.eye(3)
+
+
+def cross(a: Vec3, b: Vec3) -> Vec3:
+    """Cross product ``a × b`` of two 3-vectors.
+
+    Hand-written: ``np.cross`` costs ~10 µs of call overhead per 3-vector,
+    which dominates an observer step (see DESIGN.md, "Per-agent math").
+    """
+    return np.array(
+        (
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        )
+    )
+
+
+def hat(x: Vec3) -> Mat3:
+    """Skew-symmetric matrix ``[x]^x`` such that ``hat(x) @ y == x × y``."""
+    return np.array(
+        (
+            (0.0, -x[2], x[1]),
+            (x[2], 0.0, -x[0]),
+            (-x[1], x[0], 0.0),
+        )
+    )
+
+
+def vee(S: Mat3) -> Vec3:
+    """Inverse of :func:`hat` (reads the skew part of ``S`` only)."""
+    return np.array((S[2, 1], S[0, 2], S[1, 0]))
+
+
+def Pa(C: Mat3) -> Mat3:
+    """Anti-symmetric part ``(C - C^T)/2``."""
+    return 0.5 * (C - C.T)
+
+
+def psi(C: Mat3) -> Vec3:
+    """``psi(C) = vee(Pa(C))`` (thesis eq. (2.5))."""
+    return 0.5 * np.array((C[2, 1] - C[1, 2], C[0, 2] - C[2, 0], C[1, 0] - C[0, 1]))
+
+
+def exp(w: Vec3) -> Mat3:
+    """Exponential map ``exp([w]^x)`` by Rodrigues' formula.
+
+    Uses the Taylor expansions of ``sin(t)/t`` and ``(1-cos t)/t^2`` below
+    ``t = 1e-4`` rad, where the closed forms lose digits to cancellation.
+    """
+    t2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if t2 < 1e-8:
+        a = 1.0 - t2 / 6.0
+        b = 0.5 - t2 / 24.0
+    else:
+        t = math.sqrt(t2)
+        a = math.sin(t) / t
+        b = (1.0 - math.cos(t)) / t2
+    K = hat(w)
+    return _EYE + a * K + b * (K @ K)
+
+
+def exp_batch(W: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rodrigues' formula for a stack of rotation vectors, shape (n, 3) -> (n, 3, 3)."""
+    W = np.asarray(W, dtype=np.float64)
+    t2 = np.einsum("ij,ij->i", W, W)
+    small = t2 < 1e-8
+    t = np.sqrt(np.where(small, 1.0, t2))
+    a = np.where(small, 1.0 - t2 / 6.0, np.sin(t) / t)
+    b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(t)) / np.where(small, 1.0, t2))
+    K = np.zeros((W.shape[0], 3, 3))
+    K[:, 0, 1] = -W[:, 2]
+    K[:, 0, 2] = W[:, 1]
+    K[:, 1, 0] = W[:, 2]
+    K[:, 1, 2] = -W[:, 0]
+    K[:, 2, 0] = -W[:, 1]
+    K[:, 2, 1] = W[:, 0]
+    return _EYE + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def log(R: Mat3) -> Vec3:
+    """Logarithm map: the rotation vector ``w`` with ``exp(w) = R``, ``|w| <= pi``.
+
+    Near ``theta = pi`` the antisymmetric part vanishes, so the axis is taken
+    from the symmetric part ``(R + I)/2 = v v^T`` instead.
+    """
+    c = (float(np.trace(R)) - 1.0) * 0.5
+    c = min(1.0, max(-1.0, c))
+    theta = math.acos(c)
+    s = psi(R)  # = sin(theta) * v
+    if theta < 1e-6:
+        return s * (1.0 + theta * theta / 6.0)
+    if theta < math.pi - 1e-4:
+        return s * (theta / math.sin(theta))
+    B = 0.5 * (R + _EYE)
+    k = int(np.argmax(np.diag(B)))
+    v = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
+    v = v / np.linalg.norm(v)
+    if float(v @ s) < 0.0:  # pick the sign consistent with the small skew part
+        v = -v
+    return theta * v
+
+
+def Ra(theta: float, v: Vec3) -> Mat3:
+    """Angle-axis rotation ``Ra(theta, v)``; ``v`` need not be unit (it is normalised)."""
+    v = np.asarray(v, dtype=np.float64)
+    n = float(np.linalg.norm(v))
+    if n == 0.0:
+        raise ValueError("Ra: rotation axis must be non-zero")
+    K = hat(v / n)
+    return _EYE + math.sin(theta) * K + (1.0 - math.cos(theta)) * (K @ K)
+
+
+def attitude_norm(R: Mat3) -> float:
+    """``|R|_I = sqrt(tr(I - R)/4)`` in [0, 1] (thesis §2.1)."""
+    return math.sqrt(max(0.0, (3.0 - float(np.trace(R))) * 0.25))
+
+
+def projector(x: Vec3) -> Mat3:
+    """Orthogonal projector ``P_x = I - x x^T/||x||^2`` onto the plane normal to ``x``."""
+    n2 = float(x @ x)
+    return _EYE - np.outer(x, x) / n2
+
+
+def is_rotation(R: Mat3, tol: float = 1e-9) -> bool:
+    """True when ``R^T R = I`` and ``det R = 1`` within ``tol``."""
+    R = np.asarray(R)
+    return (
+        R.shape == (3, 3)
+        and bool(np.all(np.isfinite(R)))
+        and float(np.max(np.abs(R.T @ R - _EYE))) <= tol
+        and abs(float(np.linalg.det(R)) - 1.0) <= tol
+    )
+
+
+def geodesic_interp(R0: Mat3, R1: Mat3, s: float) -> Mat3:
+    """Point at fraction ``s`` of the geodesic from ``R0`` to ``R1`` (``R0 exp(s log(R0^T R1))``)."""
+    return R0 @ exp(s * log(R0.T @ R1))

@@ -1,0 +1,148 @@
+"""Message types on the wire: msgpack maps, validated on decode.
+
+Every message is a map with ``v`` (schema version), ``type``, ``src``
+(sender id), ``seq`` (per-key sequence number) and ``t`` (world time of the
+content, s) plus type-specific fields.  Arrays travel as ``[shape, bytes]``
+with raw little-endian float64 data.  :func:`decode` checks everything and
+raises :class:`MessageError` (never anything else) on a malformed message.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import msgpack
+import numpy as np
+
+VERSION = 1
+
+
+class MessageError(ValueError):
+    """A message that is not a valid zswarm message."""
+
+
+# field kinds: "int", "float", "str", (shape,) for float64 arrays,
+# "vecmap" for {int: float64[3]}, "intmap" for {str: int}, "any" (msgpack-native, small)
+SCHEMAS: Mapping[str, Mapping[str, Any]] = {
+    # world -> agent i
+    "sense": {"gyro": (3,), "bearings": "vecmap", "R": (3, 3), "p": (3,)},
+    # agent j -> agent i along edge j->i: estimates and j's bearing toward i (b_ji^j)
+    "edge": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "b": (3,)},
+    # agent i -> recorder
+    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "vecmap"},
+    # world -> recorder: ids[k] has attitude R[k], position p[k], true angular velocity w[k]
+    "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3)},
+    # counters of a process
+    "stats": {"role": "str", "counters": "any"},
+    # run control
+    "start": {"epoch": "float", "time_scale": "float", "duration": "float", "seed": "int", "run": "str"},
+    "stop": {"reason": "str"},
+    "progress": {"duration": "float"},
+}
+OPTIONAL = {"sense": {"R", "p"}}
+
+
+def _arr(a: np.ndarray) -> list[Any]:
+    a = np.ascontiguousarray(a, dtype="<f8")
+    return [list(a.shape), a.tobytes()]
+
+
+def encode(mtype: str, src: int, seq: int, t: float, **fields: Any) -> bytes:
+    """Encode a message of type ``mtype``; arrays may be numpy arrays."""
+    schema = SCHEMAS[mtype]
+    m: dict[str, Any] = {"v": VERSION, "type": mtype, "src": src, "seq": seq, "t": float(t)}
+    for k, v in fields.items():
+        kind = schema[k]
+        if isinstance(kind, tuple):
+            m[k] = _arr(v)
+        elif kind == "vecmap":
+            m[k] = {int(j): _arr(x) for j, x in v.items()}
+        elif kind == "float":
+            m[k] = float(v)
+        else:
+            m[k] = v
+    return msgpack.packb(m, use_bin_type=True)
+
+
+def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
+    if not (isinstance(v, (list, tuple)) and len(v) == 2 and isinstance(v[1], bytes) and isinstance(v[0], (list, tuple))):
+        raise MessageError(f"{fld}: expected [shape, bytes]")
+    shp = tuple(v[0])
+    if len(shp) != len(shape) or not all(isinstance(s, int) and s >= 0 for s in shp):
+        raise MessageError(f"{fld}: bad shape {shp}")
+    for want, got in zip(shape, shp, strict=True):
+        if want != -1 and want != got:
+            raise MessageError(f"{fld}: shape {shp}, expected {shape}")
+    n = 1
+    for s in shp:
+        n *= s
+    if len(v[1]) != 8 * n:
+        raise MessageError(f"{fld}: {len(v[1])} bytes for shape {shp}")
+    a = np.frombuffer(v[1], dtype="<f8").reshape(shp)
+    if not np.all(np.isfinite(a)):
+        raise MessageError(f"{fld}: non-finite values")
+    return a
+
+
+def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Decode and validate; arrays come back as read-only float64 numpy arrays.
+
+    Raises
+    ------
+    MessageError
+        For anything that is not a well-formed message (of type ``expect``).
+    """
+    try:
+        m = msgpack.unpackb(payload, raw=False, strict_map_key=False, max_bin_len=1 << 20, max_str_len=1 << 16)
+    except Exception as exc:  # msgpack raises a zoo of types on garbage
+        raise MessageError(f"not msgpack ({type(exc).__name__})") from None
+    if not isinstance(m, dict):
+        raise MessageError("not a map")
+    if m.get("v") != VERSION:
+        raise MessageError(f"schema version {m.get('v')!r}, expected {VERSION}")
+    mtype = m.get("type")
+    if mtype not in SCHEMAS:
+        raise MessageError(f"unknown type {mtype!r}")
+    if expect is not None and mtype not in ((expect,) if isinstance(expect, str) else expect):
+        raise MessageError(f"type {mtype!r} where {expect!r} was expected")
+    for k in ("src", "seq"):
+        if isinstance(m.get(k), bool) or not isinstance(m.get(k), int):
+            raise MessageError(f"{k}: expected an integer")
+    t = m.get("t")
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+        raise MessageError("t: expected a finite number")
+    out: dict[str, Any] = {"type": mtype, "src": m["src"], "seq": m["seq"], "t": float(t)}
+    optional = OPTIONAL.get(mtype, set())
+    for k, kind in SCHEMAS[mtype].items():
+        if k not in m:
+            if k in optional:
+                continue
+            raise MessageError(f"{k}: missing")
+        v = m[k]
+        if isinstance(kind, tuple):
+            out[k] = _dec_arr(v, kind, k)
+        elif kind == "vecmap":
+            if not isinstance(v, dict) or not all(isinstance(j, int) for j in v):
+                raise MessageError(f"{k}: expected a map of int to vector")
+            out[k] = {j: _dec_arr(x, (3,), f"{k}[{j}]") for j, x in v.items()}
+        elif kind == "float":
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise MessageError(f"{k}: expected a finite number")
+            out[k] = float(v)
+        elif kind == "int":
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise MessageError(f"{k}: expected an integer")
+            out[k] = v
+        elif kind == "str":
+            if not isinstance(v, str):
+                raise MessageError(f"{k}: expected a string")
+            out[k] = v
+        elif kind == "intlist":
+            if not isinstance(v, list) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+                raise MessageError(f"{k}: expected a list of integers")
+            out[k] = v
+        else:
+            out[k] = v
+    return out
