@@ -133,9 +133,6 @@ def summarize(
 ) -> dict[str, Any]:
     """The summary.json content (see README, "Results folder")."""
     t_end = duration
-    alive_now: dict[str, bool] = {}
-    for ev in rec.alive_events:
-        alive_now[ev["key"]] = bool(ev["alive"])
     agents: dict[str, Any] = {}
     links: dict[str, dict[str, int]] = {}
     sent: dict[str, int] = {}
@@ -145,8 +142,9 @@ def summarize(
     for a in sc.agents:
         st = rec.stats.get(("agent", a.id), {})
         rows = errs.get(a.id, np.zeros((0, 3)))
-        key = next((k for k in alive_now if k.endswith(f"/alive/agent/{a.id}")), None)
-        alive = bool(alive_now.get(key, False)) if key else False
+        # Alive at the end: it stopped cleanly (its final counters were recorded,
+        # which a killed process never sends) and, when known, exited with 0.
+        alive = bool(st.get("final"))
         if exit_codes is not None and f"agent-{a.id}" in exit_codes:
             alive = alive and exit_codes[f"agent-{a.id}"] == 0
         agents[str(a.id)] = {

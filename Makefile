@@ -1,0 +1,32 @@
+# Each target works on a fresh machine with only Python 3.11+: it creates .venv and installs into it.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test test-fast bench sim clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+## make demo: the §3.2 scenario over real processes (router, world, 8 agents, recorder), then the summary
+demo: $(STAMP)
+	$(VENV)/bin/zswarm run topologies/thesis-3.2-fixed8.toml --duration 40
+
+## make test: unit, component and integration tests
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+## make test-fast: everything but the integration tests
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not integration"
+
+## make bench: latency, step time, rate and CPU over real processes, beside raw zenoh pub/sub
+bench: $(STAMP)
+	$(PY) bench/bench_runtime.py
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,93 @@
+"""python -m agent --topology F --id I [--connect ENDPOINT ...]: one agent process.
+
+Declares its subscriptions, then its liveliness token, waits for the world's
+start announcement, and steps on its own clock until the run ends, the world
+disappears, or SIGINT/SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from typing import Any
+
+from agent.runtime import AgentNode, run_realtime
+from zswarm import keys, procutil, wire
+from zswarm.bus import ZenohBus
+from zswarm.clock import WallClock
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m agent", description=__doc__.splitlines()[0])
+    p.add_argument("--topology", required=True, help="scenario TOML file")
+    p.add_argument("--id", type=int, required=True, help="agent id in the scenario")
+    procutil.add_run_args(p)
+    p.add_argument("--startup-timeout", type=procutil.positive_float, default=120.0, help="give up if no start within this many s")
+    procutil.add_zenoh_args(p)
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    sc = procutil.load_or_exit(args.topology)
+    if args.id not in sc.ids:
+        procutil.fail_usage(f"--id: no agent {args.id} in {args.topology} (ids: {list(sc.ids)})")
+    conf = procutil.zenoh_conf(args)
+    log = procutil.setup_logging(f"agent-{args.id}")
+    stop = procutil.stop_on_signals()
+    run = keys.check_run_id(args.run_id)
+    seed = sc.seed if args.seed is None else args.seed
+    clock: list[WallClock] = []
+    started = threading.Event()
+    start: dict[str, Any] = {}
+    world_seen = threading.Event()
+
+    def on_start(key: str, payload: bytes) -> None:
+        if started.is_set():
+            return
+        try:
+            start.update(wire.decode(payload, "start"))
+        except wire.MessageError as exc:
+            log.warning("ignored malformed start on %s: %s", key, exc)
+            return
+        started.set()
+
+    def on_stop(key: str, payload: bytes) -> None:
+        stop.set()
+
+    def on_world(key: str, up: bool) -> None:
+        if up:
+            world_seen.set()
+        elif world_seen.is_set():
+            log.warning("the world went away: stopping")
+            stop.set()
+
+    with ZenohBus(conf) as bus:
+        node = AgentNode(sc, args.id, bus, run, seed, now=lambda: clock[0].now() if clock else 0.0)
+        bus.subscribe(keys.ctl(run, "start"), on_start)
+        bus.subscribe(keys.ctl(run, "stop"), on_stop)
+        bus.watch_alive(keys.alive(run, "world", 0), on_world)
+        bus.declare_token(keys.alive(run, "agent", args.id))
+        log.info("ready on run %r, waiting for start", run)
+        waited = 0.0
+        while not started.wait(0.2):
+            waited += 0.2
+            if stop.is_set():
+                return 0
+            if waited > args.startup_timeout:
+                log.error("no start within %.0f s", args.startup_timeout)
+                return 1
+        clock.append(WallClock(start["epoch"], start["time_scale"]))
+        log.info("started: time scale %g, duration %g s", start["time_scale"], start["duration"])
+        try:
+            run_realtime(node, clock[0].now, lambda t: clock[0].sleep_until(t, stop), start["duration"])
+        finally:
+            node.publish_stats(min(clock[0].now(), start["duration"]), final=True)
+            c = node.counters()
+            log.info("stopped after %d steps (%.2f Hz, %d missed deadlines)", c["steps"], c["step_rate_hz"], c["missed_deadlines"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,96 @@
+"""SO(3) identities at tight tolerances, cross-checked against scipy's Rotation.
+
+Tolerances: 1e-12 for identities that hold exactly in exact arithmetic on
+well-conditioned inputs (a few ulps of float64 times the 3×3 products), 1e-9
+near θ = π where log is conditioned by 1/sin θ.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from zswarm import so3
+
+vec = st.lists(st.floats(-10, 10, allow_nan=False), min_size=3, max_size=3).map(np.array)
+angle = st.floats(0.0, math.pi)
+axis = vec.filter(lambda v: np.linalg.norm(v) > 1e-3)
+
+
+@given(vec, vec)
+def test_hat_is_cross_product(a, b):
+    assert np.allclose(so3.hat(a) @ b, np.cross(a, b), atol=1e-12)
+    assert np.allclose(so3.cross(a, b), np.cross(a, b), atol=1e-12)
+    assert np.allclose(so3.vee(so3.hat(a)), a, atol=0)
+
+
+@given(vec)
+def test_exp_is_a_rotation_and_matches_scipy(w):
+    R = so3.exp(w)
+    assert so3.is_rotation(R, 1e-12)
+    assert np.allclose(R, Rotation.from_rotvec(w).as_matrix(), atol=1e-12)
+
+
+@given(angle, axis)
+def test_log_inverts_exp(theta, v):
+    w = theta * v / np.linalg.norm(v)
+    R = so3.exp(w)
+    w2 = so3.log(R)
+    assert np.allclose(so3.exp(w2), R, atol=1e-9)
+    assert np.linalg.norm(w2) <= math.pi + 1e-12
+
+
+@pytest.mark.parametrize("theta", [0.0, 1e-10, 1e-7, 1e-4, 0.5, math.pi - 1e-3, math.pi - 1e-6, math.pi])
+def test_log_near_zero_and_pi(theta):
+    v = np.array([0.3, -0.5, 0.8])
+    v /= np.linalg.norm(v)
+    R = so3.Ra(theta, v)
+    w = so3.log(R)
+    assert np.allclose(so3.exp(w), R, atol=1e-9)
+    assert abs(np.linalg.norm(w) - theta) < 1e-9
+    if 0 < theta < math.pi - 1e-5:
+        assert np.allclose(w / np.linalg.norm(w), v, atol=1e-6)
+
+
+@given(angle, axis)
+def test_Ra_matches_exp_and_attitude_norm_is_sin_half_angle(theta, v):
+    R = so3.Ra(theta, v)
+    assert np.allclose(R, so3.exp(theta * v / np.linalg.norm(v)), atol=1e-12)
+    assert abs(so3.attitude_norm(R) - math.sin(theta / 2)) < 1e-7
+    assert 0.0 <= so3.attitude_norm(R) <= 1.0
+
+
+@given(vec)
+def test_psi_of_rotation_is_sin_theta_axis(w):
+    R = so3.exp(w)
+    th = np.linalg.norm(w)
+    if th > 1e-6:
+        assert np.allclose(so3.psi(R), math.sin(th) * w / th, atol=1e-12)
+
+
+@settings(max_examples=50)
+@given(vec, vec)
+def test_exp_batch_matches_exp(a, b):
+    W = np.stack([a, b, np.zeros(3), 1e-6 * a])
+    Rs = so3.exp_batch(W)
+    for k in range(4):
+        assert np.allclose(Rs[k], so3.exp(W[k]), atol=1e-13)
+
+
+@given(axis, vec)
+def test_projector(x, y):
+    P = so3.projector(x)
+    assert np.allclose(P @ x, 0, atol=1e-9)
+    assert np.allclose(P @ P, P, atol=1e-12)
+    assert np.allclose(P, P.T, atol=0)
+
+
+def test_geodesic_interp_endpoints_and_midpoint():
+    R0 = so3.Ra(0.3, np.array([1.0, 0, 0]))
+    R1 = so3.Ra(1.1, np.array([1.0, 0, 0]))
+    assert np.allclose(so3.geodesic_interp(R0, R1, 0.0), R0, atol=1e-12)
+    assert np.allclose(so3.geodesic_interp(R0, R1, 1.0), R1, atol=1e-12)
+    assert np.allclose(so3.geodesic_interp(R0, R1, 0.5), so3.Ra(0.7, np.array([1.0, 0, 0])), atol=1e-12)

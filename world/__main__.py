@@ -1,0 +1,108 @@
+"""python -m world --topology F [--connect ENDPOINT ...]: the world process.
+
+Waits until every agent of the scenario (and, with --wait-for-recorder, the
+recorder) holds its liveliness token, announces a common epoch, then samples
+the truth and publishes sensor packets on the wall clock until the duration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+
+from world.node import World
+from zswarm import keys, procutil, wire
+from zswarm.bus import ZenohBus
+from zswarm.clock import WallClock
+
+START_LEAD_S = 0.5  # wall seconds between the start announcement and the epoch
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m world", description=__doc__.splitlines()[0])
+    p.add_argument("--topology", required=True, help="scenario TOML file")
+    procutil.add_run_args(p)
+    p.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds (default: the scenario's)")
+    p.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
+    p.add_argument("--wait-for-recorder", action="store_true", help="also wait for the recorder's token before starting")
+    p.add_argument("--startup-timeout", type=procutil.positive_float, default=120.0, help="give up if the others are not alive within this many s")
+    procutil.add_zenoh_args(p)
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    sc = procutil.load_or_exit(args.topology)
+    conf = procutil.zenoh_conf(args)
+    log = procutil.setup_logging("world")
+    stop = procutil.stop_on_signals()
+    seed = sc.seed if args.seed is None else args.seed
+    duration = sc.duration if args.duration is None else args.duration
+    run = keys.check_run_id(args.run_id)
+    with ZenohBus(conf) as bus:
+        world = World(sc, bus, run, seed)
+        pub_start = bus.publisher(keys.ctl(run, "start"))
+        pub_stop = bus.publisher(keys.ctl(run, "stop"))
+        pub_progress = bus.publisher(keys.ctl(run, "progress"))
+        alive: set[tuple[str, int]] = set()
+        changed = threading.Event()
+
+        def on_alive(key: str, up: bool) -> None:
+            who = keys.parse_alive(key)
+            if who:
+                (alive.add if up else alive.discard)(who)
+                changed.set()
+
+        bus.watch_alive(keys.alive_all(run), on_alive)
+        bus.declare_token(keys.alive(run, "world", 0))
+        need = {("agent", i) for i in sc.ids} | ({("recorder", 0)} if args.wait_for_recorder else set())
+        deadline = time.monotonic() + args.startup_timeout
+        log.info("waiting for %d processes on run %r", len(need), run)
+        while not need <= alive:
+            if stop.is_set():
+                return 0
+            if time.monotonic() > deadline:
+                log.error("not alive after %.0f s: %s", args.startup_timeout, sorted(need - alive))
+                return 1
+            changed.wait(0.2)
+            changed.clear()
+        epoch = time.time() + START_LEAD_S / 1.0
+        clock = WallClock(epoch, args.time_scale)
+        start = wire.encode("start", 0, 0, 0.0, epoch=epoch, time_scale=args.time_scale, duration=duration, seed=seed, run=run)
+        pub_start.put(start)
+        log.info("start: epoch %.3f, time scale %g, duration %g s", epoch, args.time_scale, duration)
+        next_announce = time.monotonic() + 1.0
+        reason = "duration"
+        while True:
+            t = world.next_time()
+            if t > duration + 1e-9:
+                break
+            if not clock.sleep_until(t, stop):
+                reason = "signal"
+                break
+            now = clock.now()
+            if now - t > world.period:
+                world.skip_to(now)
+                if world.next_time() > duration + 1e-9:
+                    break
+            world.sample()
+            if world.k % int(round(sc.sensor_rate)) == 0:
+                world.publish_stats(t)
+            if time.monotonic() >= next_announce:
+                # Re-announce so that a late (re)started process can join the run.
+                pub_start.put(start)
+                pub_progress.put(wire.encode("progress", 0, world.seq, t, duration=duration))
+                next_announce += 0.5
+        end_t = min(clock.now(), duration)
+        world.publish_stats(end_t, final=True)
+        pub_stop.put(wire.encode("stop", 0, 0, end_t, reason=reason))
+        log.info("stopped (%s) at t = %.3f s after %d samples, %d late", reason, end_t, world.samples, world.late)
+        # Give the stop message time to leave before the session closes.
+        time.sleep(0.1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

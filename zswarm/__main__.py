@@ -1,0 +1,5 @@
+import sys
+
+from zswarm.cli import main
+
+sys.exit(main())

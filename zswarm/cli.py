@@ -1,0 +1,176 @@
+"""The ``zswarm`` command: run, sim, router, record, report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from zswarm import keys, procutil
+
+
+def _common_run_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("topology", help="scenario TOML file (see topologies/)")
+    p.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds (default: the scenario's)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+    p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="zswarm", description="Multi-agent distributed estimation over Zenoh: one process per agent.")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    r = sub.add_parser("run", help="run a scenario over real processes (router, world, agents, recorder)")
+    _common_run_args(r)
+    r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
+    r.add_argument("--quiet", action="store_true", help="no progress output")
+
+    s = sub.add_parser("sim", help="run the same world and agents in one process on a virtual clock")
+    _common_run_args(s)
+    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+
+    ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
+    procutil.add_zenoh_args(ro, default_mode="router")
+
+    rec = sub.add_parser("record", help="record a run (started by hand) into a results folder")
+    rec.add_argument("topology", help="scenario TOML file")
+    rec.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
+    rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end")
+    procutil.add_run_args(rec)
+    procutil.add_zenoh_args(rec)
+
+    rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
+    rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return {"run": cmd_run, "sim": cmd_sim, "router": cmd_router, "record": cmd_record, "report": cmd_report}[args.cmd](args)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from zswarm import launch
+
+    sc = procutil.load_or_exit(args.topology)
+    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet)
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    import shutil
+
+    from zswarm import report
+    from zswarm.launch import results_dir
+    from zswarm.sim import simulate
+
+    sc = procutil.load_or_exit(args.topology)
+    duration = sc.duration if args.duration is None else args.duration
+    seed = sc.seed if args.seed is None else args.seed
+    out = results_dir(args.out, sc.name)
+    shutil.copyfile(args.topology, out / "scenario.toml")
+    tty = sys.stderr.isatty()
+
+    def progress(t: float) -> None:
+        if tty:
+            print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
+
+    t0 = time.perf_counter()
+    simulate(sc, out, duration, seed, progress=progress)
+    wall = time.perf_counter() - t0
+    if tty:
+        print(file=sys.stderr)
+    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots)
+    summary["wall_time_s"] = wall
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(report.table(summary))
+    print(f"simulated {duration:g} s in {wall:.1f} s of wall time; results: {out}")
+    return 0
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    from zswarm.bus import ZenohBus
+
+    if not args.listen and not args.config:
+        procutil.fail_usage("router needs --listen ENDPOINT, e.g. --listen tcp/127.0.0.1:7447")
+    stop = procutil.stop_on_signals()
+    log = procutil.setup_logging("router")
+    with ZenohBus(procutil.zenoh_conf(args)):
+        log.info("zenoh %s listening on %s; Ctrl-C to stop", args.mode, ", ".join(args.listen) or "(config)")
+        stop.wait()
+    return 0
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from zswarm import report, wire
+    from zswarm.bus import ZenohBus
+    from zswarm.launch import results_dir
+    from zswarm.record import Recorder
+
+    sc = procutil.load_or_exit(args.topology)
+    conf = procutil.zenoh_conf(args)
+    log = procutil.setup_logging("recorder")
+    stop = procutil.stop_on_signals()
+    run = keys.check_run_id(args.run_id)
+    out = results_dir(args.out, sc.name)
+    if not (out / "scenario.toml").exists():
+        (out / "scenario.toml").write_text(sc.text)
+    start: dict[str, object] = {}
+    with ZenohBus(conf) as bus:
+        rec = Recorder(bus, run, out / "recording.mcap", metadata={"engine": "run", "scenario": sc.name, "run": run})
+
+        def on_start(key: str, payload: bytes) -> None:
+            if not start:
+                try:
+                    start.update(wire.decode(payload, "start"))
+                except wire.MessageError:
+                    pass
+
+        bus.subscribe(keys.ctl(run, "start"), on_start)
+        bus.declare_token(keys.alive(run, "recorder", 0))
+        log.info("recording run %r into %s", run, out / "recording.mcap")
+        try:
+            while not stop.is_set() and not rec.stopped.is_set():
+                stop.wait(0.5)
+                rec.flush()
+            if rec.stopped.is_set() and not stop.is_set():
+                # The run ended: give the agents' final stats a moment to arrive.
+                stop.wait(1.0)
+        finally:
+            rec.close()
+            log.info("closed recording: %d messages", rec.count)
+    if not args.no_report and start:
+        summary = report.make_report(out, sc, "run", float(start["duration"]), float(start["time_scale"]), int(start["seed"]))  # type: ignore[arg-type]
+        print(report.table(summary))
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from zswarm import report
+    from zswarm.record import read
+    from zswarm import wire
+
+    sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
+    rec_path = args.results / "recording.mcap"
+    if not rec_path.exists():
+        procutil.fail_usage(f"{rec_path}: no recording there")
+    start = None
+    for topic, payload, _t in read(rec_path):
+        if topic == "ctl/start":
+            start = wire.decode(payload, "start")
+            break
+    prev = {}
+    if (args.results / "summary.json").exists():
+        prev = json.loads((args.results / "summary.json").read_text())
+    engine = prev.get("engine", "run")
+    duration = float(prev.get("duration_s", start["duration"] if start else sc.duration))
+    scale = float(prev.get("time_scale", start["time_scale"] if start else 1.0))
+    seed = int(prev.get("seed", start["seed"] if start else sc.seed))
+    summary = report.make_report(args.results, sc, engine, duration, scale, seed)
+    print(report.table(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

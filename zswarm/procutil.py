@@ -1,0 +1,77 @@
+"""What every zswarm process shares: Zenoh flags, logging, signals, scenario loading."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from typing import Any, NoReturn
+
+from zswarm.scenario import Scenario, ScenarioError, load
+
+EXIT_USAGE = 2
+
+
+def add_zenoh_args(p: argparse.ArgumentParser, default_mode: str = "client") -> None:
+    """The Zenoh flags, defined once for every entry point."""
+    g = p.add_argument_group("zenoh")
+    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
+    g.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config file (endpoints above override it)")
+    g.add_argument("--mode", choices=("client", "peer", "router"), default=default_mode, help=f"Zenoh session mode (default {default_mode})")
+
+
+def zenoh_conf(args: argparse.Namespace) -> Any:
+    from zswarm.bus import zenoh_config
+
+    if not args.connect and not args.listen and not args.config and args.mode == "client":
+        fail_usage("a client needs --connect ENDPOINT (or --config FILE)")
+    return zenoh_config(args.mode, args.connect, args.listen, args.config)
+
+
+def add_run_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--run-id", default="default", help="run id shared by every process of a run (default: default)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+
+
+def fail_usage(msg: str) -> NoReturn:
+    print(f"{sys.argv[0]}: error: {msg}", file=sys.stderr)
+    sys.exit(EXIT_USAGE)
+
+
+def load_or_exit(path: str) -> Scenario:
+    """Load a scenario or exit 2 with its one-line ``file: field: problem``."""
+    try:
+        return load(path)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(EXIT_USAGE)
+
+
+def setup_logging(name: str, level: str = "INFO") -> logging.Logger:
+    logging.basicConfig(level=level, format=f"%(asctime)s {name} %(levelname)s %(message)s", stream=sys.stderr)
+    return logging.getLogger(name)
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM: the process then stops cleanly and exits 0."""
+    stop = threading.Event()
+
+    def handler(signum: int, _frame: object) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+    return stop
+
+
+def positive_float(s: str) -> float:
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {s!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0 (got {s})")
+    return v
