@@ -1,0 +1,103 @@
+"""Scenario loading and every bad-input path: ``file: field: problem (got X)``."""
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tests.conftest import ROOT, TOPO
+from zswarm import so3
+from zswarm.scenario import ScenarioError, load, loads
+
+
+@pytest.mark.parametrize("name", ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered", "thesis-3.2-fixed8-noisy"])
+def test_shipped_scenarios_load(name):
+    sc = load(TOPO / f"{name}.toml")
+    assert sc.name == name and len(sc.agents) == 8 and sc.duration == 40.0
+
+
+def test_fixed8_reproduces_thesis_3_2_5():
+    sc = load(TOPO / "thesis-3.2-fixed8.toml")
+    assert sc.agent(7).p == (2.0, 2.0, 6.0)
+    assert sc.agent(6).neighbors == (2, 4, 5)
+    assert [a.role for a in sc.agents] == ["leader"] * 2 + ["follower"] * 6
+    R6 = np.array(sc.agent(6).estimate.R_hat).reshape(3, 3)
+    assert np.allclose(R6, so3.Ra(0.9 * math.pi, np.array([1.0, 0, 0])), atol=1e-15)
+    assert sc.agent(8).estimate.p_hat == (-3.0, 0.5, 2.0)
+    assert sc.agent(5).omega[2](0.1) == pytest.approx(math.sin(0.9))
+    assert dict(sc.gains) == {"k_R": 1.0, "k_p": 1.0}
+    noisy = load(TOPO / "thesis-3.2-fixed8-noisy.toml")
+    assert noisy.agent(6).gyro_bias == (0.1, 0.04, 0.03) and noisy.gyro_var == 0.01 and noisy.bearing_var == 0.001
+    filt = load(TOPO / "thesis-3.2-fixed8-filtered.toml")
+    assert dict(filt.gains) == {"k_Omega": 1.0, "k_p": 1.0}
+
+
+BAD = [
+    # (replace this, with that, error must match)
+    ("seed = 1", "seed = 1\ncolour = 3", r"x\.toml: scenario\.colour: unknown key"),
+    ("duration = 40.0", 'duration = "long"', r"x\.toml: scenario\.duration: must be a number \(got 'long'\)"),
+    ("k_R = 1.0", "k_R = -0.5", r"x\.toml: algorithm\.gains\.k_R: must be > 0 \(got -0\.5\)"),
+    ("neighbors = [1, 7]", "neighbors = [7]", r"x\.toml: agents\[7\]\.neighbors: a follower needs at least 2 in-neighbours"),
+    ("neighbors = [2, 3]", "neighbors = [2, 5]", r"x\.toml: agents\[3\]\.neighbors: in-neighbours must be numbered below the agent.*\(got 5\)"),
+    ('omega = ["-cos(t)", "1", "sin(2*t)"]', 'omega = ["-cos(t)", "1", "sinh(2*t)"]', r"x\.toml: agents\[2\]\.omega\[2\]: unknown name 'sinh'"),
+    ('name = "bearing_pose_fixed"', 'name = "magic"', r"x\.toml: algorithm\.name: unknown algorithm"),
+    ("p = [0, 2, 7]", "p = [2, 2, 6]", r"x\.toml: agents\[7\]\.p: agent 8 is collocated with agent 7"),
+    ('role = "leader"\np = [2, 0, 1]', 'role = "follower"\np = [2, 0, 1]', r"x\.toml: agents\[1\]\.role: agent 2 must be a leader"),
+    ("id = 8", "id = 9", r"x\.toml: agents: ids must be 1\.\.n"),
+    ("rate = 100.0", "rate = 0", r"x\.toml: clock\.rate: must be > 0 \(got 0\)"),
+    ("step = 0.001", "step = 0.01", r"x\.toml: world\.step: must be <= 0\.001"),
+]
+
+
+@pytest.mark.parametrize("old, new, match", BAD)
+def test_bad_input_names_file_field_problem(fixed8_text, old, new, match):
+    assert old in fixed8_text
+    with pytest.raises(ScenarioError, match=match):
+        loads(fixed8_text.replace(old, new, 1), "x.toml")
+
+
+def test_collinear_bearings_rejected(fixed8_text):
+    # Agent 3 at (2, 2, 2) sees 1 at (0,0,0) and 2 moved to (1,1,1): collinear bearings.
+    text = fixed8_text.replace("p = [2, 0, 1]", "p = [1, 1, 1]", 1)
+    with pytest.raises(ScenarioError, match=r"x\.toml: agents\[2\]\.neighbors: bearings to in-neighbours are collinear"):
+        loads(text, "x.toml")
+
+
+def test_missing_file_and_bad_toml(tmp_path):
+    with pytest.raises(ScenarioError, match="nope.toml: cannot read file"):
+        load(tmp_path / "nope.toml")
+    bad = tmp_path / "b.toml"
+    bad.write_text("[scenario\n")
+    with pytest.raises(ScenarioError, match="b.toml: TOML syntax"):
+        load(bad)
+
+
+def _zswarm(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "zswarm", *args], capture_output=True, text=True, cwd=cwd, timeout=60)
+
+
+@pytest.mark.parametrize("old, new, match", BAD[:6])
+def test_cli_exits_2_with_one_line(tmp_path, fixed8_text, old, new, match):
+    f = tmp_path / "x.toml"
+    f.write_text(fixed8_text.replace(old, new, 1))
+    r = _zswarm("sim", str(f), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(f) in lines[0]
+    import re
+
+    assert re.search(match.replace(r"x\.toml", ""), lines[0])
+
+
+@pytest.mark.parametrize("argv", [[], ["run"], ["sim"], ["run", "t.toml", "--duration", "-3"], ["run", "t.toml", "--time-scale", "x"], ["frobnicate"]])
+def test_cli_usage_errors(argv):
+    r = _zswarm(*argv)
+    assert r.returncode == 2 and "usage:" in r.stderr
+
+
+def test_process_entry_points_usage_errors():
+    for mod, argv in (("agent", ["--topology", "topologies/thesis-3.2-fixed8.toml"]), ("world", []), ("agent", ["--topology", "topologies/thesis-3.2-fixed8.toml", "--id", "99", "--connect", "tcp/127.0.0.1:1"])):
+        r = subprocess.run([sys.executable, "-m", mod, *argv], capture_output=True, text=True, cwd=ROOT, timeout=60)
+        assert r.returncode == 2, (mod, argv, r.stderr)

@@ -1,0 +1,69 @@
+import msgpack
+import numpy as np
+import pytest
+
+from zswarm import wire
+
+R = np.eye(3)
+v = np.array([1.0, 2.0, 3.0])
+CASES = {
+    "sense": dict(gyro=v, bearings={1: v, 7: -v}, R=R, p=v),
+    "edge": dict(t_local=1.5, R_hat=R, p_hat=v, b=v),
+    "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={0: v}),
+    "truth": dict(ids=[1, 2], R=np.stack([R, R]), p=np.stack([v, v]), w=np.stack([v, v])),
+    "stats": dict(role="agent", counters={"steps": 3, "links": {"1->3": {"delivered": 2}}}),
+    "start": dict(epoch=1e9, time_scale=2.0, duration=40.0, seed=1, run="r1"),
+    "stop": dict(reason="duration"),
+    "progress": dict(duration=40.0),
+}
+
+
+def test_every_type_has_a_round_trip_case():
+    assert set(CASES) == set(wire.SCHEMAS)
+
+
+@pytest.mark.parametrize("mtype", sorted(CASES))
+def test_round_trip(mtype):
+    m = wire.decode(wire.encode(mtype, 3, 42, 1.25, **CASES[mtype]))
+    assert (m["type"], m["src"], m["seq"], m["t"]) == (mtype, 3, 42, 1.25)
+    for k, want in CASES[mtype].items():
+        got = m[k]
+        if isinstance(want, np.ndarray):
+            assert np.array_equal(got, want)
+        elif isinstance(want, dict) and want and isinstance(next(iter(want.values())), np.ndarray):
+            assert set(got) == set(want) and all(np.array_equal(got[j], want[j]) for j in want)
+        else:
+            assert got == want
+
+
+def _raw(**over):
+    m = {"v": 1, "type": "edge", "src": 1, "seq": 0, "t": 0.0, "t_local": 0.0, "R_hat": [[3, 3], R.tobytes()], "p_hat": [[3], v.tobytes()], "b": [[3], v.tobytes()]}
+    m.update(over)
+    return msgpack.packb({k: x for k, x in m.items() if x is not None}, use_bin_type=True)
+
+
+@pytest.mark.parametrize(
+    "payload, match",
+    [
+        (b"\xc1garbage", "not msgpack"),
+        (b"", "not msgpack"),
+        (msgpack.packb([1, 2]), "not a map"),
+        (_raw(v=2), "schema version"),
+        (_raw(type="nope"), "unknown type"),
+        (_raw(seq="x"), "seq"),
+        (_raw(t=float("nan")), "t: expected a finite number"),
+        (_raw(b=None), "b: missing"),
+        (_raw(R_hat=[[3, 3], b"\x00" * 8]), "R_hat: 8 bytes"),
+        (_raw(R_hat=[[4, 4], b"\x00" * 128]), "R_hat: shape"),
+        (_raw(p_hat=[[3], np.array([np.inf, 0, 0]).tobytes()]), "non-finite"),
+        (_raw(p_hat=5), r"expected \[shape, bytes\]"),
+    ],
+)
+def test_malformed_raises_message_error_only(payload, match):
+    with pytest.raises(wire.MessageError, match=match):
+        wire.decode(payload)
+
+
+def test_wrong_type_for_key_rejected():
+    with pytest.raises(wire.MessageError, match="where 'sense' was expected"):
+        wire.decode(wire.encode("stop", 0, 0, 0.0, reason="x"), "sense")
