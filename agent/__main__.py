@@ -35,7 +35,6 @@ def main(argv: list[str] | None = None) -> int:
         procutil.fail_usage(f"--id: no agent {args.id} in {args.topology} (ids: {list(sc.ids)})")
     conf = procutil.zenoh_conf(args)
     log = procutil.setup_logging(f"agent-{args.id}")
-    stop = procutil.stop_on_signals()
     run = keys.check_run_id(args.run_id)
     seed = sc.seed if args.seed is None else args.seed
     clock: list[WallClock] = []
@@ -64,6 +63,9 @@ def main(argv: list[str] | None = None) -> int:
             stop.set()
 
     with ZenohBus(conf) as bus:
+        # Handlers only once the session is open: until then SIGTERM's default
+        # action ends the process at once, even inside a connect wait.
+        stop = procutil.stop_on_signals()
         node = AgentNode(sc, args.id, bus, run, seed, now=lambda: clock[0].now() if clock else 0.0)
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.subscribe(keys.ctl(run, "stop"), on_stop)

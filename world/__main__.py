@@ -37,11 +37,13 @@ def main(argv: list[str] | None = None) -> int:
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args)
     log = procutil.setup_logging("world")
-    stop = procutil.stop_on_signals()
     seed = sc.seed if args.seed is None else args.seed
     duration = sc.duration if args.duration is None else args.duration
     run = keys.check_run_id(args.run_id)
     with ZenohBus(conf) as bus:
+        # Handlers only once the session is open: until then SIGTERM's default
+        # action ends the process at once, even inside a connect wait.
+        stop = procutil.stop_on_signals()
         world = World(sc, bus, run, seed)
         pub_start = bus.publisher(keys.ctl(run, "start"))
         pub_stop = bus.publisher(keys.ctl(run, "stop"))

@@ -134,6 +134,11 @@ def zenoh_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        # Processes may be started in any order (README's manual way): a client
+        # retries for 30 s before giving up on a router that is not up yet.
+        conf.insert_json5("connect/timeout_ms", "{router: -1, peer: -1, client: 30000}")
+        conf.insert_json5("connect/exit_on_failure", "{router: false, peer: false, client: true}")
+        conf.insert_json5("connect/retry", "{period_init_ms: 100, period_max_ms: 1000, period_increase_factor: 2}")
     # Never let Zenoh pick its default tcp/[::] listener: only what we were told.
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("transport/link/tx/lease", str(lease_ms))

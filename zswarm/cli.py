@@ -94,9 +94,9 @@ def cmd_router(args: argparse.Namespace) -> int:
 
     if not args.listen and not args.config:
         procutil.fail_usage("router needs --listen ENDPOINT, e.g. --listen tcp/127.0.0.1:7447")
-    stop = procutil.stop_on_signals()
     log = procutil.setup_logging("router")
     with ZenohBus(procutil.zenoh_conf(args)):
+        stop = procutil.stop_on_signals()
         log.info("zenoh %s listening on %s; Ctrl-C to stop", args.mode, ", ".join(args.listen) or "(config)")
         stop.wait()
     return 0
@@ -111,13 +111,13 @@ def cmd_record(args: argparse.Namespace) -> int:
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args)
     log = procutil.setup_logging("recorder")
-    stop = procutil.stop_on_signals()
     run = keys.check_run_id(args.run_id)
     out = results_dir(args.out, sc.name)
     if not (out / "scenario.toml").exists():
         (out / "scenario.toml").write_text(sc.text)
     start: dict[str, object] = {}
     with ZenohBus(conf) as bus:
+        stop = procutil.stop_on_signals()
         rec = Recorder(bus, run, out / "recording.mcap", metadata={"engine": "run", "scenario": sc.name, "run": run})
 
         def on_start(key: str, payload: bytes) -> None:

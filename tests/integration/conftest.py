@@ -1,0 +1,102 @@
+"""Helpers for tests that start real processes over Zenoh on 127.0.0.1.
+
+Every process is started in its own session (process group) and reaped by
+PID at teardown, whatever the test's outcome; children that ``zswarm run``
+spawned are found in its ``processes.json`` and reaped by PID as well.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import ROOT
+
+pytestmark = pytest.mark.integration
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # A zombie still answers kill(0); treat it as gone (its parent reaps it).
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+class Procs:
+    def __init__(self) -> None:
+        self.started: list[subprocess.Popen[bytes]] = []
+        self.extra_pids: set[int] = set()
+
+    def start(self, args: list[str], log: Path | None = None) -> subprocess.Popen[bytes]:
+        out = open(log, "wb") if log else subprocess.DEVNULL  # noqa: SIM115
+        p = subprocess.Popen(args, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+        self.started.append(p)
+        return p
+
+    def adopt(self, results: Path) -> list[dict]:
+        """Remember the PIDs a launcher wrote in results/processes.json (to reap them at the end)."""
+        f = results / "processes.json"
+        kids = json.loads(f.read_text())["children"] if f.exists() else []
+        self.extra_pids |= {c["pid"] for c in kids}
+        return kids
+
+    def reap(self) -> list[int]:
+        """Kill what is still running; return the launcher-spawned PIDs that were left.
+
+        Processes the test started itself are killed quietly (a failing test
+        may leave them); processes a launcher spawned must have been reaped by
+        the launcher, so any of those still alive is reported.
+        """
+        leftovers = []
+        for p in self.started:
+            if p.poll() is None:
+                try:
+                    os.killpg(p.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            p.wait(10)
+        for pid in self.extra_pids:
+            if pid_alive(pid):
+                leftovers.append(pid)
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+        return leftovers
+
+
+@pytest.fixture
+def procs():
+    ps = Procs()
+    try:
+        yield ps
+    finally:
+        left = ps.reap()
+    assert not left, f"processes left behind: {left}"
+
+
+def wait_for(pred, timeout: float, what: str, step: float = 0.05):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        v = pred()
+        if v:
+            return v
+        time.sleep(step)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+def zswarm(*args: str) -> list[str]:
+    return [sys.executable, "-m", "zswarm", *args]
