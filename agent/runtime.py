@@ -59,7 +59,7 @@ class Inbox:
         self._lock = threading.Lock()
         self.now = now  # the receiver's own clock, stamps every arrival as "rx"
         self.latest: dict[str, dict[str, Any]] = {}
-        # (rx, gyro) of recent sensor packets, for integrating the rate over a step
+        # (acquisition world time, gyro) of recent sensor packets, for integrating the rate over a step
         self.gyro: deque[tuple[float, np.ndarray]] = deque(maxlen=64)
         self.links: dict[str, LinkCounter] = {}
         self.malformed = 0
@@ -88,7 +88,7 @@ class Inbox:
                 if prev is None or msg["seq"] >= prev["seq"]:
                     self.latest[link] = msg
                     if expect == "sense":
-                        self.gyro.append((msg["rx"], msg["gyro"]))
+                        self.gyro.append((msg["t"], msg["gyro"]))
 
         return on_message
 
@@ -183,9 +183,12 @@ class AgentNode:
             if R_hat is None or p_hat is None:
                 return
         else:
-            # Bearings were measured at the packet's arrival; rotate them to this
-            # tick with the gyro (b(t) = exp(-τ[ω]^x) b(t_s), τ on the own clock).
-            align = so3.exp(-(t_local - sense["rx"]) * sense["gyro"])
+            # Bearings were measured at the packet's acquisition time t_s (an
+            # on-board sensor stamps samples on the agent's own clock, local(t_s));
+            # rotate them to this tick with the gyro: b(t) = exp(-τ[ω]^x) b(t_s).
+            # Arrival time would add the world's scheduling delay (ms on a busy host).
+            t_acq = self.clock.local(sense["t"])
+            align = so3.exp(-(t_local - t_acq) * sense["gyro"])
             nbrs = []
             for j, k in zip(self.spec.neighbors, self.spec.k_neighbors, strict=True):
                 m = self.inbox.get(f"{j}->{self.id}")
@@ -194,7 +197,8 @@ class AgentNode:
                     continue  # no data from j yet: its term is left out of the sums
                 nbrs.append(NeighborData(k, m["R_hat"], m["p_hat"], m["b"], align @ b_own))
             if dt > 0:
-                omega = interval_mean_rate(self.inbox.gyro_samples(), t_local - dt, t_local)
+                samples = [(self.clock.local(t), w) for t, w in self.inbox.gyro_samples()]
+                omega = interval_mean_rate(samples, t_local - dt, t_local)
                 self.state, outputs = self.algo.step(self.state, self.algo.Inputs(omega, tuple(nbrs)), dt, self.gains)
                 extra["sigma"] = outputs.sigma
             R_hat, p_hat = self.state.R_hat, self.state.p_hat
@@ -204,7 +208,7 @@ class AgentNode:
         self.seq += 1
         # A follower's R̂ is at this tick, so its bearing is aligned to it too; a
         # leader sends the packet's own (R, b) pair, both taken at the packet time.
-        align_out = np.eye(3) if self.leader else so3.exp(-(t_local - sense["rx"]) * sense["gyro"])
+        align_out = np.eye(3) if self.leader else so3.exp(-(t_local - self.clock.local(sense["t"])) * sense["gyro"])
         t_stamp = sense["t"] if self.leader else t_world
         for i, pub in self.pub_edge.items():
             b = sense["bearings"].get(i)
