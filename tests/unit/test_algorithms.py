@@ -108,6 +108,8 @@ def test_interval_mean_rate_is_exact_for_piecewise_linear_rates():
     samples = [(t, np.array([t, 2 * t, -t])) for t in (0.0, 0.005, 0.010, 0.015)]
     m = interval_mean_rate(samples, 0.002, 0.012)
     assert np.allclose(m, [0.007, 0.014, -0.007], atol=1e-15)
-    # Held constant past the newest sample.
+    # Extrapolated linearly for one sample gap past the newest sample (exact here)...
+    assert np.allclose(interval_mean_rate(samples, 0.012, 0.018), [0.015, 0.03, -0.015], atol=1e-15)
+    # ...then held: over [0.015, 0.025] the rate is 0.015→0.020 (linear) then 0.020.
+    assert np.allclose(interval_mean_rate(samples, 0.015, 0.025), [0.01875, 0.0375, -0.01875], atol=1e-15)
     assert np.allclose(interval_mean_rate(samples[:1], 0.0, 0.01), [0, 0, 0])
-    assert np.allclose(interval_mean_rate(samples, 0.015, 0.025), [0.015, 0.03, -0.015], atol=1e-15)
