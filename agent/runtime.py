@@ -30,26 +30,37 @@ log = logging.getLogger("zswarm.agent")
 
 
 class LinkCounter:
-    """Counts what arrives on one link; loss is inferred from sequence-number gaps."""
+    """Counts what arrives on one link; loss is inferred from sequence-number gaps.
 
-    __slots__ = ("delivered", "max_seq", "reordered")
+    Also keeps the last 2000 latencies (receiver's clock at arrival minus the
+    sender's send stamp): meaningful when the clocks share a base, as they do
+    for processes on one host with no configured offset or drift.
+    """
+
+    __slots__ = ("delivered", "max_seq", "reordered", "latency")
 
     def __init__(self) -> None:
         self.delivered = 0
         self.max_seq = -1
         self.reordered = 0
+        self.latency: deque[float] = deque(maxlen=2000)
 
-    def see(self, seq: int) -> None:
+    def see(self, seq: int, latency: float) -> None:
         self.delivered += 1
+        self.latency.append(latency)
         if seq < self.max_seq:
             self.reordered += 1
         else:
             self.max_seq = seq
 
-    def as_dict(self) -> dict[str, int]:
+    def as_dict(self) -> dict[str, Any]:
         # Messages numbered 0..max_seq were sent before the last one received;
         # those not delivered were lost on the way.
-        return {"delivered": self.delivered, "dropped": max(0, self.max_seq + 1 - self.delivered), "reordered": self.reordered}
+        d: dict[str, Any] = {"delivered": self.delivered, "dropped": max(0, self.max_seq + 1 - self.delivered), "reordered": self.reordered}
+        if self.latency:
+            q = np.percentile(np.array(self.latency), [50, 99])
+            d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
+        return d
 
 
 class Inbox:
@@ -81,9 +92,10 @@ class Inbox:
                 if first:
                     self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
                 return
-            msg["rx"] = self.now()
+            msg["rx"] = rx = self.now()
+            sent = msg["t_local"] if "t_local" in msg else msg["t"]
             with self._lock:
-                self.links.setdefault(link, LinkCounter()).see(msg["seq"])
+                self.links.setdefault(link, LinkCounter()).see(msg["seq"], rx - sent)
                 prev = self.latest.get(link)
                 if prev is None or msg["seq"] >= prev["seq"]:
                     self.latest[link] = msg

@@ -134,7 +134,7 @@ def summarize(
     """The summary.json content (see README, "Results folder")."""
     t_end = duration
     agents: dict[str, Any] = {}
-    links: dict[str, dict[str, int]] = {}
+    links: dict[str, dict[str, Any]] = {}
     sent: dict[str, int] = {}
     for (_role, _src), st in rec.stats.items():
         for link, n in st.get("sent", {}).items():
