@@ -206,6 +206,9 @@ class AgentNode:
         dt = 0.0 if self.last_local is None else t_local - self.last_local
         self.last_local = t_local
         extra: dict[str, np.ndarray] = {}
+        # A leader sends the packet's own (R, b) pair, both taken at the packet
+        # time, so its bearings need no alignment.
+        align = np.eye(3)
         if self.leader:
             R_hat, p_hat = sense.get("R"), sense.get("p")
             if R_hat is None or p_hat is None:
@@ -234,14 +237,12 @@ class AgentNode:
                 extra["Omega"] = self.state.Omega
         seq = self.seq
         self.seq += 1
-        # A follower's R̂ is at this tick, so its bearing is aligned to it too; a
-        # leader sends the packet's own (R, b) pair, both taken at the packet time.
-        align_out = np.eye(3) if self.leader else so3.exp(-(t_local - self.clock.local(sense["t"])) * sense["gyro"])
+        # A follower's R̂ is at this tick, so the bearing it sends is aligned to it too.
         t_stamp = sense["t"] if self.leader else t_world
         for i, pub in self.pub_edge.items():
             b = sense["bearings"].get(i)
             if b is not None:
-                b = align_out @ b
+                b = align @ b
                 pub.put(wire.encode("edge", self.id, seq, t_stamp, t_local=t_local, R_hat=R_hat, p_hat=p_hat, b=b))
         self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, t_local=t_local, R_hat=R_hat, p_hat=p_hat, extra=_extra_map(extra)))
         c = time.perf_counter() - c0
