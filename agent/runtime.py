@@ -21,6 +21,7 @@ import numpy as np
 
 from agent.algorithms import REGISTRY
 from agent.algorithms.bearing_terms import NeighborData
+from agent.algorithms.relative_attitude_terms import EdgeData
 from zswarm import keys, so3, wire
 from zswarm.bus import Bus
 from zswarm.clock import AgentClock
@@ -70,8 +71,9 @@ class Inbox:
         self._lock = threading.Lock()
         self.now = now  # the receiver's own clock, stamps every arrival as "rx"
         self.latest: dict[str, dict[str, Any]] = {}
-        # (acquisition world time, gyro) of recent sensor packets, for integrating the rate over a step
-        self.gyro: deque[tuple[float, np.ndarray]] = deque(maxlen=64)
+        # (acquisition world time, value) of recent sensor packets' gyro and inertial
+        # velocity, for integrating them over a step
+        self.rates: dict[str, deque[tuple[float, np.ndarray]]] = {"gyro": deque(maxlen=64), "vel": deque(maxlen=64)}
         self.links: dict[str, LinkCounter] = {}
         self.malformed = 0
         self._logged: set[str] = set()
@@ -100,16 +102,19 @@ class Inbox:
                 if prev is None or msg["seq"] >= prev["seq"]:
                     self.latest[link] = msg
                     if expect == "sense":
-                        self.gyro.append((msg["t"], msg["gyro"]))
+                        for name, q in self.rates.items():
+                            if name in msg:
+                                q.append((msg["t"], msg[name]))
 
         return on_message
 
     def get(self, link: str) -> dict[str, Any] | None:
         return self.latest.get(link)
 
-    def gyro_samples(self) -> list[tuple[float, np.ndarray]]:
+    def samples(self, name: str = "gyro") -> list[tuple[float, np.ndarray]]:
+        """Recent ``(acquisition world time, value)`` of a rate in sensor packets: "gyro" or "vel"."""
         with self._lock:
-            return list(self.gyro)
+            return list(self.rates[name])
 
     def counters(self) -> dict[str, Any]:
         with self._lock:
@@ -169,10 +174,28 @@ class AgentNode:
         self.run = run
         self.leader = self.spec.role == "leader"
         self.algo: ModuleType = REGISTRY[scenario.algorithm]
-        self.gains = self.algo.Gains(**scenario.gains)
+        self.tree = scenario.info.graph == "tree"
+        self.hybrid = scenario.info.params == "hybrid"
+        kw: dict[str, Any] = dict(self.spec.gains)
+        if scenario.params is not None:
+            pr = scenario.params
+            kw.update(A=pr.A_matrix, u=np.array(pr.u), gamma=pr.gamma, delta=pr.delta, Xi=pr.Xi)
+        self.gains = self.algo.Gains(**{f.name: kw[f.name] for f in dataclasses.fields(self.algo.Gains)})
+        # Tree edges (§4): neighbour j -> (edge index k, whether this agent heads k and owns ξ_k).
+        self.edge_of: dict[int, tuple[int, bool]] = {}
+        for k, (h, t) in enumerate(scenario.oriented, start=1):
+            if agent_id in (h, t):
+                self.edge_of[t if h == agent_id else h] = (k, h == agent_id)
         est = self.spec.estimate
-        init = {"R_hat": np.array(est.R_hat).reshape(3, 3), "p_hat": np.array(est.p_hat), "Omega": np.array(est.Omega)}
+        init = {
+            "R_hat": np.array(est.R_hat).reshape(3, 3),
+            "p_hat": np.array(est.p_hat),
+            "Omega": np.array(est.Omega),
+            "xi": {k: float(est.xi.get(k, 0.0)) for k, head in self.edge_of.values() if head},
+        }
         self.state = self.algo.State(**{f.name: init[f.name] for f in dataclasses.fields(self.algo.State)})
+        self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
+        self.jump_count: dict[int, int] = {k: 0 for k, head in self.edge_of.values() if head}
         self.clock = AgentClock(self.spec.clock, seed=(seed * 1000003 + agent_id) % (1 << 63))
         self.out = scenario.out_neighbors(agent_id)
         self.inbox = Inbox(f"zswarm.agent.{agent_id}", lambda: self.clock.local(now()))
@@ -206,45 +229,55 @@ class AgentNode:
         dt = 0.0 if self.last_local is None else t_local - self.last_local
         self.last_local = t_local
         extra: dict[str, np.ndarray] = {}
-        # A leader sends the packet's own (R, b) pair, both taken at the packet
-        # time, so its bearings need no alignment.
+        bearings = sense.get("bearings", {})
+        # Samples were measured at the packet's acquisition time t_s (an on-board
+        # sensor stamps them on the agent's own clock, local(t_s)); body-frame
+        # vectors are rotated to this tick with the gyro: b(t) = exp(-τ[ω]^x) b(t_s).
+        # Arrival time would add the world's scheduling delay (ms on a busy host).
+        # A leader sends the packet's own (R, b) pair, both taken at t_s.
         align = np.eye(3)
         if self.leader:
             R_hat, p_hat = sense.get("R"), sense.get("p")
             if R_hat is None or p_hat is None:
                 return
         else:
-            # Bearings were measured at the packet's acquisition time t_s (an
-            # on-board sensor stamps samples on the agent's own clock, local(t_s));
-            # rotate them to this tick with the gyro: b(t) = exp(-τ[ω]^x) b(t_s).
-            # Arrival time would add the world's scheduling delay (ms on a busy host).
-            t_acq = self.clock.local(sense["t"])
-            align = so3.exp(-(t_local - t_acq) * sense["gyro"])
-            nbrs = []
-            for j, k in zip(self.spec.neighbors, self.spec.k_neighbors, strict=True):
-                m = self.inbox.get(f"{j}->{self.id}")
-                b_own = sense["bearings"].get(j)
-                if m is None or b_own is None:
-                    continue  # no data from j yet: its term is left out of the sums
-                nbrs.append(NeighborData(k, m["R_hat"], m["p_hat"], m["b"], align @ b_own))
+            align = so3.exp(-(t_local - self.clock.local(sense["t"])) * sense["gyro"])
             if dt > 0:
-                samples = [(self.clock.local(t), w) for t, w in self.inbox.gyro_samples()]
-                omega = interval_mean_rate(samples, t_local - dt, t_local)
-                self.state, outputs = self.algo.step(self.state, self.algo.Inputs(omega, tuple(nbrs)), dt, self.gains)
+                omega = interval_mean_rate(self._samples("gyro"), t_local - dt, t_local)
+                inputs = self._tree_inputs(sense, omega, align, t_local) if self.tree else self._bearing_inputs(sense, omega, align, t_local, dt)
+                self.state, outputs = self.algo.step(self.state, inputs, dt, self.gains)
                 extra["sigma"] = outputs.sigma
-            R_hat, p_hat = self.state.R_hat, self.state.p_hat
+                for k, before, after in getattr(outputs, "jumps", ()):
+                    self.jumps.append((k, t_world, before, after))
+                    self.jump_count[k] += 1
+            R_hat = self.state.R_hat
+            p_hat = getattr(self.state, "p_hat", np.zeros(3))
             if hasattr(self.state, "Omega"):
                 extra["Omega"] = self.state.Omega
         seq = self.seq
         self.seq += 1
         # A follower's R̂ is at this tick, so the bearing it sends is aligned to it too.
         t_stamp = sense["t"] if self.leader else t_world
+        xi = getattr(self.state, "xi", {})
         for i, pub in self.pub_edge.items():
-            b = sense["bearings"].get(i)
+            fields: dict[str, Any] = {"t_local": t_local, "R_hat": R_hat, "p_hat": p_hat}
+            b = bearings.get(i)
             if b is not None:
-                b = align @ b
-                pub.put(wire.encode("edge", self.id, seq, t_stamp, t_local=t_local, R_hat=R_hat, p_hat=p_hat, b=b))
-        self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, t_local=t_local, R_hat=R_hat, p_hat=p_hat, extra=_extra_map(extra)))
+                fields["b"] = align @ b
+            elif not self.tree:
+                continue
+            if self.tree:
+                fields["w"] = sense["gyro"]
+                k, head = self.edge_of[i]
+                if head and k in xi:
+                    fields["xi"] = xi[k]
+            pub.put(wire.encode("edge", self.id, seq, t_stamp, **fields))
+        est: dict[str, Any] = {"t_local": t_local, "R_hat": R_hat, "p_hat": p_hat, "extra": _extra_map(extra)}
+        if xi:
+            est["xi"] = xi
+        if self.jumps:
+            est["jumps"], self.jumps = self.jumps, []
+        self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, **est))
         c = time.perf_counter() - c0
         self.compute_s += c
         self.compute_max = max(self.compute_max, c)
@@ -252,6 +285,65 @@ class AgentNode:
         if self.t_first is None:
             self.t_first = t_world
         self.t_last = t_world
+
+    def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
+        return [(self.clock.local(t), w) for t, w in self.inbox.samples(name)]
+
+    def _bearing_inputs(self, sense: dict[str, Any], omega: np.ndarray, align: np.ndarray, t_local: float, dt: float) -> Any:
+        """Inputs of the §3 observers: per in-neighbour j its (R̂_j, p̂_j, b_ji^j) and our b_ij^i."""
+        nbrs = []
+        bearings = sense.get("bearings", {})
+        for j, k in zip(self.spec.neighbors, self.spec.k_neighbors, strict=True):
+            m = self.inbox.get(f"{j}->{self.id}")
+            b_own = bearings.get(j)
+            if m is None or b_own is None or "b" not in m:
+                continue  # no data from j yet: its term is left out of the sums
+            nbrs.append(NeighborData(k, m["R_hat"], m["p_hat"], m["b"], align @ b_own))
+        if "vel" in sense:
+            v = interval_mean_rate(self._samples("vel"), t_local - dt, t_local)
+            return self.algo.Inputs(omega, v, tuple(nbrs))
+        return self.algo.Inputs(omega, tuple(nbrs))
+
+    def _tree_inputs(self, sense: dict[str, Any], omega: np.ndarray, align: np.ndarray, t_local: float) -> Any:
+        """Inputs of the §4 observers, every quantity brought to this tick.
+
+        The measured ``R_ij = R_i^T R_j`` is from time t_s and j's estimate from
+        its tick t_j; both are propagated with the gyros (ours, and j's rate
+        sent with its estimate):
+        ``R_ij(t) = exp(−τ_s[ω_i]) R_ij(t_s) exp(τ_s[ω_j])``,
+        ``R̂_j(t) = R̂_j(t_j) exp((t − t_j)[ω_j])``.  Without this, pairing a
+        10 ms old R̂_j with R_ij on an agent turning at 6.6 rad/s (§4.5, agent 5)
+        biases R̄ by ≈ 0.07 rad.  Stamps are compared on this agent's clock,
+        which assumes the agents' clocks are synchronised (as over one host).
+        """
+        edges = []
+        tau_s = t_local - self.clock.local(sense["t"])
+        rel = sense.get("rel_att", {})
+        bearings = sense.get("bearings", {})
+        for j, (k, head) in self.edge_of.items():
+            m = self.inbox.get(f"{j}->{self.id}")
+            R_m = rel.get(j)
+            if m is None or R_m is None or "w" not in m or (self.hybrid and not head and "xi" not in m):
+                continue  # nothing from j yet: the edge's terms are left out
+            w_j = m["w"]
+            tau_j = t_local - self.clock.local(m["t"])
+            b_own = bearings.get(j)
+            b_nbr = m.get("b")
+            edges.append(
+                EdgeData(
+                    k,
+                    head,
+                    align @ R_m @ so3.exp(tau_s * w_j),
+                    m["R_hat"] @ so3.exp(tau_j * w_j),
+                    float(m.get("xi", 0.0)),
+                    None if b_own is None else align @ b_own,
+                    None if b_nbr is None else so3.exp(-tau_j * w_j) @ b_nbr,
+                    m["p_hat"],
+                )
+            )
+        if "vel_body" in sense:
+            return self.algo.Inputs(omega, align @ sense["vel_body"], tuple(edges))
+        return self.algo.Inputs(omega, tuple(edges))
 
     # ------------------------------------------------------------------ reporting
 
@@ -269,6 +361,8 @@ class AgentNode:
                 "sent": {f"{self.id}->{i}": self.seq for i in self.out},
             }
         )
+        if self.jump_count:
+            c["jumps"] = {str(k): n for k, n in self.jump_count.items()}
         return c
 
     def publish_stats(self, t_world: float, final: bool = False) -> None:

@@ -1,8 +1,20 @@
-"""Prescribed motions: attitude kinematics Ṙ_i = R_i [ω_i(t)]^x (thesis (3.1)), fixed positions.
+"""Prescribed motions of the thesis' simulations.
 
-All agents are integrated together (batched over agents) with the exponential
-map at a fixed step: ``R(t+h) = R(t) exp(h [ω(t + h/2)]^x)`` (Lie midpoint),
-which is exact on SO(3) up to O(h^3) per step and never leaves the group.
+Attitudes follow Ṙ_i = R_i [ω_i(t)]^x ((3.1), (3.20), (4.1)), integrated for
+all agents together (batched) with the exponential map at a fixed step:
+``R(t+h) = R(t) exp(h [ω(t + h/2)]^x)`` (Lie midpoint, O(h³) per step, never
+leaves SO(3)).
+
+Positions ((3.21), (4.27)) are one of:
+
+* fixed (§3.2);
+* a rigidly rotating formation (§3.3.4, §4.5): ``p_i(t) = R_f(t)^T p_i(0)``
+  with ``R_f(t) = Ra(rate·t, axis)``, evaluated in closed form; the inertial
+  velocity is ``v_i = −rate · axis × p_i(t)``;
+* per-agent inertial velocities ``v_i(t)`` (expressions), integrated with the
+  midpoint rule at the same step.
+
+The body-frame velocity of (4.30) is ``v_i^i = R_i^T v_i``.
 """
 
 from __future__ import annotations
@@ -13,17 +25,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zswarm.expr import Expr
-from zswarm.so3 import exp_batch
+from zswarm.so3 import Ra, exp_batch
 
 
-class PrescribedAttitudes:
-    """Truth for n agents whose body-frame angular velocities are expressions in ``t``."""
+class PrescribedMotion:
+    """Truth for n agents: attitudes from ω_i(t), positions fixed, rotating or from v_i(t)."""
 
-    def __init__(self, R0: NDArray[np.float64], p0: NDArray[np.float64], omega: Sequence[Sequence[Expr]], step: float) -> None:
+    def __init__(
+        self,
+        R0: NDArray[np.float64],
+        p0: NDArray[np.float64],
+        omega: Sequence[Sequence[Expr]],
+        step: float,
+        formation: tuple[NDArray[np.float64], float] | None = None,
+        velocity: Sequence[Sequence[Expr] | None] | None = None,
+    ) -> None:
         self.R = np.array(R0, dtype=float).reshape(-1, 3, 3)
-        self.p = np.array(p0, dtype=float).reshape(-1, 3)
+        self.p0 = np.array(p0, dtype=float).reshape(-1, 3)
+        self.p = self.p0.copy()
         self.omega_exprs = [list(w) for w in omega]
         self.step = step
+        self.formation = None if formation is None else (np.asarray(formation[0], dtype=float), float(formation[1]))
+        self.velocity_exprs = None if velocity is None or all(v is None for v in velocity) else [None if v is None else list(v) for v in velocity]
         self.t = 0.0
 
     def omega(self, t: NDArray[np.float64] | float) -> NDArray[np.float64]:
@@ -34,6 +57,29 @@ class PrescribedAttitudes:
             for c in range(3):
                 W[:, a, c] = w[c](ts)
         return W[0] if np.ndim(t) == 0 else W
+
+    def _v_expr(self, ts: NDArray[np.float64]) -> NDArray[np.float64]:
+        V = np.zeros((ts.size, self.p0.shape[0], 3))
+        if self.velocity_exprs is not None:
+            for a, v in enumerate(self.velocity_exprs):
+                if v is not None:
+                    for c in range(3):
+                        V[:, a, c] = v[c](ts)
+        return V
+
+    def velocity(self) -> NDArray[np.float64]:
+        """True inertial velocities v_i at the current time, shape (n, 3)."""
+        if self.formation is not None:
+            axis, rate = self.formation
+            return -rate * np.cross(axis[None, :], self.p)
+        return self._v_expr(np.array([self.t]))[0]
+
+    def positions_at(self, t: float) -> NDArray[np.float64]:
+        """Positions of a rotating formation (or fixed ones) at time ``t``."""
+        if self.formation is None:
+            return self.p0.copy()
+        axis, rate = self.formation
+        return self.p0 @ Ra(rate * t, axis)  # rows: (R_f^T p_i(0))^T = p_i(0)^T R_f
 
     def advance_to(self, t: float) -> None:
         """Integrate from ``self.t`` to ``t`` with steps of ``self.step`` (the last one may be shorter)."""
@@ -49,4 +95,11 @@ class PrescribedAttitudes:
         W = self.omega(mids)
         for k in range(h.size):
             self.R = self.R @ exp_batch(h[k] * W[k])
+        if self.formation is not None:
+            self.p = self.positions_at(t)
+        elif self.velocity_exprs is not None:
+            self.p = self.p + np.einsum("k,kaj->aj", h, self._v_expr(mids))
         self.t = t
+
+
+PrescribedAttitudes = PrescribedMotion  # the §3.2 name

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from world import sensors
-from world.motion import PrescribedAttitudes
+from world.motion import PrescribedMotion
 from zswarm import keys, wire
 from zswarm.bus import Bus
 from zswarm.scenario import Scenario
@@ -28,17 +28,23 @@ class World:
     def __init__(self, scenario: Scenario, bus: Bus, run: str, seed: int) -> None:
         self.sc = scenario
         self.run = run
-        self.motion = PrescribedAttitudes(
+        f = scenario.formation
+        self.motion = PrescribedMotion(
             np.array([a.R_matrix for a in scenario.agents]),
             np.array([a.p for a in scenario.agents]),
             [a.omega for a in scenario.agents],
             scenario.step,
+            formation=None if f is None else (np.array(f.axis), f.rate),
+            velocity=[a.velocity for a in scenario.agents],
         )
+        self.sensors = scenario.info.sensors
         self.ids = list(scenario.ids)
         self.index = {i: k for k, i in enumerate(self.ids)}
         self.bias = np.array([a.gyro_bias for a in scenario.agents])
         self.gyro_std = math.sqrt(scenario.gyro_var)
         self.bearing_std = math.sqrt(scenario.bearing_var)
+        self.velocity_std = math.sqrt(scenario.velocity_var)
+        self.rel_att_std = math.sqrt(scenario.rel_att_var)
         self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
         self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
         self.leaders = {a.id for a in scenario.agents if a.role == "leader"}
@@ -64,15 +70,26 @@ class World:
         self.motion.advance_to(t)
         R, p = self.motion.R, self.motion.p
         W = self.motion.omega(t)
+        V = self.motion.velocity() if self.sc.moving else None
         seq = self.seq
         self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
         for i in self.ids:
             a = self.index[i]
             rng = self.rngs[i]
-            g = sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)
-            bs = {j: sensors.noisy_bearing(sensors.bearing(R[a], p[a], p[self.index[j]]), self.bearing_std, rng) for j in self.nbrs[i]}
-            extra = {"R": R[a], "p": p[a]} if i in self.leaders else {}
-            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, gyro=g, bearings=bs, **extra))
+            # One draw order per agent (gyro, bearings, relative attitudes, velocity)
+            # so a seed gives the same measurements on every engine.
+            m: dict[str, object] = {"gyro": sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)}
+            if "bearings" in self.sensors:
+                m["bearings"] = {j: sensors.noisy_bearing(sensors.bearing(R[a], p[a], p[self.index[j]]), self.bearing_std, rng) for j in self.nbrs[i]}
+            if "rel_att" in self.sensors:
+                m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
+            if V is not None and "velocity" in self.sensors:
+                m["vel"] = sensors.velocity(V[a], self.velocity_std, rng)
+            if "velocity_body" in self.sensors:
+                m["vel_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
+            if i in self.leaders:
+                m["R"], m["p"] = R[a], p[a]
+            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
         self.seq += 1
         self.samples += 1
         self.k += 1

@@ -4,6 +4,10 @@
 * Bearing: ``b_ij^i = R_i^T (p_j - p_i)/||p_j - p_i||`` (3.2); with noise, the
   projective model (3.18)–(3.19): perturb ``(b1/b3, b2/b3)`` by
   ``n ~ N(0, bearing_var)`` each, rebuild ``sign(b3)·(x, y, 1)/||(x, y, 1)||``.
+* Relative attitude (4.2): ``R_ij = R_i^T R_j``; with noise (§4.5)
+  ``R_ij exp([n_R]^x)``, ``n_R ~ N(0, rel_att_var)`` per axis.
+* Velocity (inertial (3.21) or body frame (4.30)): ``v + n``, ``n ~ N(0, velocity_var)``
+  per axis (§3.3.4: "linear and angular velocity measurements ... variance of 0.1").
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+
+from zswarm.so3 import exp
 
 Vec3 = NDArray[np.float64]
 
@@ -43,3 +49,14 @@ def noisy_bearing(b: Vec3, std: float, rng: np.random.Generator) -> Vec3:
 def gyro(omega: Vec3, bias: Vec3, std: float, rng: np.random.Generator) -> Vec3:
     """Gyro measurement ``ω + b_ω + n`` with ``n ~ N(0, std²)`` per axis."""
     return omega + bias + rng.normal(0.0, std, 3) if std > 0 else omega + bias
+
+
+def relative_attitude(R_i: NDArray[np.float64], R_j: NDArray[np.float64], std: float, rng: np.random.Generator) -> NDArray[np.float64]:
+    """``R_ij = R_i^T R_j`` (4.2), times ``exp([n_R]^x)`` with ``n_R ~ N(0, std²)`` per axis."""
+    R_ij = R_i.T @ R_j
+    return R_ij @ exp(rng.normal(0.0, std, 3)) if std > 0 else R_ij
+
+
+def velocity(v: Vec3, std: float, rng: np.random.Generator) -> Vec3:
+    """Velocity measurement ``v + n`` with ``n ~ N(0, std²)`` per axis."""
+    return v + rng.normal(0.0, std, 3) if std > 0 else np.array(v, dtype=float)

@@ -1,4 +1,4 @@
-"""The ``zswarm`` command: run, sim, router, record, report."""
+"""The ``zswarm`` command: run, sim, router, record, report, design-hybrid."""
 
 from __future__ import annotations
 
@@ -43,18 +43,34 @@ def build_parser() -> argparse.ArgumentParser:
 
     rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
+
+    d = sub.add_parser(
+        "design-hybrid",
+        help="Prop. 4.2: u, Δ*, and the bounds on γ and δ for A and Ξ; checks Condition 4.1",
+        description="Thesis Prop. 4.2 (§4.3.2.3): from the eigenvalues of A and the set Ξ, compute u, Δ*, "
+        "the bounds γ < 4Δ*/π² and δ < (4Δ*/π² − γ) ξ_L²/2, and check Condition 4.1 at the undesired critical "
+        "points.  Without --gamma/--delta, both are taken at 95 %% of their bounds (the thesis' choice).",
+    )
+    d.add_argument("--A", required=True, help="eigenvalues of a diagonal A, e.g. 5,8.57,12 (or 9 numbers, row-major)")
+    d.add_argument("--xi", required=True, help="the set Ξ, e.g. 0.08pi or 0.5,0.9pi")
+    d.add_argument("--gamma", default=None, help="γ to check (default: 0.95 of its bound)")
+    d.add_argument("--delta", default=None, help="δ to check (default: 0.95 of its bound)")
+    d.add_argument("--u", default=None, help="u to check against Prop. 4.2's (3 numbers)")
+    d.add_argument("--json", action="store_true", help="print the design as JSON")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return {"run": cmd_run, "sim": cmd_sim, "router": cmd_router, "record": cmd_record, "report": cmd_report}[args.cmd](args)
+    cmds = {"run": cmd_run, "sim": cmd_sim, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    return cmds[args.cmd](args)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     from zswarm import launch
 
     sc = procutil.load_or_exit(args.topology)
+    _warn(sc)
     return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet)
 
 
@@ -66,6 +82,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from zswarm.sim import simulate
 
     sc = procutil.load_or_exit(args.topology)
+    _warn(sc)
     duration = sc.duration if args.duration is None else args.duration
     seed = sc.seed if args.seed is None else args.seed
     out = results_dir(args.out, sc.name)
@@ -170,6 +187,71 @@ def cmd_report(args: argparse.Namespace) -> int:
     summary = report.make_report(args.results, sc, engine, duration, scale, seed)
     print(report.table(summary))
     return 0
+
+
+def _warn(sc: object) -> None:
+    for w in getattr(sc, "warnings", ()):
+        print(f"{getattr(sc, 'path', '')}: note: {w}", file=sys.stderr)
+
+
+def _number(s: str, flag: str) -> float:
+    """A number or an expression such as ``0.08pi`` / ``0.08*pi`` / ``pi/2``."""
+    import math
+    import re
+
+    from zswarm.expr import ExprError, parse
+
+    text = s.strip()
+    text = re.sub(r"^([0-9.eE+-]+)\s*pi$", r"\1*pi", text)
+    try:
+        x = float(parse(text)(0.0))
+    except ExprError as exc:
+        procutil.fail_usage(f"{flag}: {exc} (got {s!r})")
+    if not math.isfinite(x):
+        procutil.fail_usage(f"{flag}: must be finite (got {s!r})")
+    return x
+
+
+def cmd_design_hybrid(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from zswarm import hybrid
+
+    vals = [_number(x, "--A") for x in args.A.split(",")]
+    if len(vals) == 3:
+        A = np.diag(vals)
+    elif len(vals) == 9:
+        A = np.array(vals).reshape(3, 3)
+    else:
+        procutil.fail_usage(f"--A: give 3 eigenvalues or 9 entries (got {len(vals)} numbers)")
+    Xi = [_number(x, "--xi") for x in args.xi.split(",")]
+    gamma = None if args.gamma is None else _number(args.gamma, "--gamma")
+    delta = None if args.delta is None else _number(args.delta, "--delta")
+    try:
+        if args.u is not None:
+            u = [_number(x, "--u") for x in args.u.split(",")]
+            if len(u) != 3:
+                procutil.fail_usage(f"--u: give 3 numbers (got {len(u)})")
+            base = hybrid.design(A, Xi, gamma, delta)
+            d = hybrid.check_parameters(A, np.array(u), base.gamma, base.delta, Xi)
+        else:
+            d = hybrid.design(A, Xi, gamma, delta)
+    except hybrid.DesignError as exc:
+        procutil.fail_usage(f"--{exc.field.lower()}: {exc.problem}")
+    if args.json:
+        print(json.dumps(d.as_dict(), indent=2))
+        return 0
+    lam = d.eigenvalues
+    case_text = {1: "λ1 = λ2", 2: "λ2 ≥ λ1λ3/(λ3−λ1)", 3: "λ1 < λ2 < λ1λ3/(λ3−λ1)"}[d.case]
+    print(f"A: eigenvalues λ = {lam[0]:g}, {lam[1]:g}, {lam[2]:g}; Prop. 4.2 case {d.case} ({case_text}; λ1λ3/(λ3−λ1) = {lam[0] * lam[2] / (lam[2] - lam[0]):.6g})")
+    print(f"u       = [{', '.join(f'{x:.4f}' for x in d.u)}]   (α = [{', '.join(f'{a:.4f}' for a in d.alpha)}] on the eigenvectors of A)")
+    print(f"Δ*      = {d.Delta_star:.6g}")
+    print(f"γ       = {d.gamma:.6g}   (bound: γ < 4Δ*/π² = {d.gamma_max:.6g})")
+    print(f"δ       = {d.delta:.6g}   (bound: 0 < δ < (4Δ*/π² − γ) ξ_L²/2 = {d.delta_max:.6g}, ξ_L = {max(abs(x) for x in Xi):.6g})")
+    print(f"Ξ       = {{{', '.join(f'{x:.6g}' for x in Xi)}}}")
+    gaps = ", ".join(f"{g:.4g}" for g in d.gaps)
+    print(f"Condition 4.1: U(R̄,0) − min_Ξ U(R̄,ξ) at R̄ = Ra(π, q_β), β = 1,2,3: {gaps}  (> δ: {'holds' if d.condition_holds else 'FAILS'})")
+    return 0 if d.condition_holds else 1
 
 
 if __name__ == "__main__":

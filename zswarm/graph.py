@@ -39,17 +39,27 @@ def check_leader_follower(
     positions: Mapping[int, Sequence[float]],
     field_of: Mapping[int, str],
     collinear_tol: float = 1e-6,
-) -> None:
-    """Check Assumption 3.2 of the thesis (leader–follower cascade).
+    later: Sequence[Mapping[int, Sequence[float]]] = (),
+) -> list[str]:
+    """Check Assumption 3.2 (fixed agents) or 3.4 (moving agents) of the thesis.
 
     a) agents 1 and 2 are the leaders, with no in-neighbours;
     c) every follower ``i`` has ``|N_i| >= 2`` with ``N_i ⊆ {1..i-1}``, no two
        agents are collocated, and each follower's bearings to its neighbours
        are not all collinear (the matrix ``M_i = Σ b_ij b_ij^T`` has rank ≥ 2).
 
+    ``positions`` are those at t = 0; ``later`` are snapshots over the run
+    (moving agents).  Collocation at any snapshot is an error (Assumption
+    3.5).  Bearings collinear at t = 0 are an error unless the motion excites
+    them: the run-average of ``Σ_j P_{b_ij(t)}`` is positive definite (the
+    persistent-excitation argument that makes the thesis' own §3.3.4
+    scenario converge, where agent 4 and its two neighbours stay on one
+    rotating line).  Such a follower is returned as a warning.
+
     ``field_of[i]`` is the scenario field of agent ``i`` (``agents[2]``), used
-    in error messages.  Bearings are taken from ``positions`` at ``t = 0``.
+    in error messages.
     """
+    warnings: list[str] = []
     ids = sorted(neighbors)
     for i in ids:
         f = field_of[i]
@@ -74,20 +84,97 @@ def check_leader_follower(
                     f"{f}.neighbors",
                     f"in-neighbours must be numbered below the agent, N_i ⊆ {{1..{i - 1}}} (Assumption 3.2c) (got {j})",
                 )
-    for a, i in enumerate(ids):
-        for j in ids[a + 1 :]:
-            if np.linalg.norm(np.subtract(positions[i], positions[j])) < 1e-9:
-                raise GraphError(f"{field_of[j]}.p", f"agent {j} is collocated with agent {i} (Assumption 3.2c) (got {list(positions[j])})")
+    for snap_no, snap in enumerate([positions, *later]):
+        for a, i in enumerate(ids):
+            for j in ids[a + 1 :]:
+                if np.linalg.norm(np.subtract(snap[i], snap[j])) < 1e-9:
+                    when = "" if snap_no == 0 else f" during the run (snapshot {snap_no})"
+                    raise GraphError(f"{field_of[j]}.p", f"agent {j} is collocated with agent {i}{when} (Assumptions 3.2c/3.5) (got {list(snap[j])})")
     for i in ids:
         if roles[i] != "follower":
             continue
-        B = []
-        for j in neighbors[i]:
-            d = np.subtract(positions[j], positions[i], dtype=float)
-            B.append(d / np.linalg.norm(d))
-        sv = np.linalg.svd(np.array(B), compute_uv=False)
-        if len(sv) < 2 or sv[1] < collinear_tol:
+        sv = np.linalg.svd(np.array([_unit(positions[i], positions[j]) for j in neighbors[i]]), compute_uv=False)
+        if len(sv) >= 2 and sv[1] >= collinear_tol:
+            continue
+        M = np.zeros((3, 3))
+        for snap in later:
+            for j in neighbors[i]:
+                b = _unit(snap[i], snap[j])
+                M += np.eye(3) - np.outer(b, b)
+        lam = float(np.linalg.eigvalsh(M / len(later))[0]) if later else 0.0
+        if lam < 1e-3:
             raise GraphError(
                 f"{field_of[i]}.neighbors",
-                f"bearings to in-neighbours are collinear; at least two must not be (Assumption 3.2c) (got N_{i} = {list(neighbors[i])})",
+                f"bearings to in-neighbours are collinear at t = 0 and the motion does not excite them (run-average of Σ_j P_b_ij has "
+                f"smallest eigenvalue {lam:.2g}); at least two must not be collinear (Assumption 3.2c/3.4c) (got N_{i} = {list(neighbors[i])})",
             )
+        warnings.append(
+            f"{field_of[i]}: agent {i}'s bearings to {list(neighbors[i])} are collinear at t = 0 (against Assumption 3.4c); "
+            f"the motion excites them (run-average of Σ_j P_b_ij ≥ {lam:.2f}·I), so convergence rests on persistent excitation"
+        )
+    return warnings
+
+
+def _unit(p_i: Sequence[float], p_j: Sequence[float]) -> np.ndarray:
+    d = np.subtract(p_j, p_i, dtype=float)
+    return d / np.linalg.norm(d)
+
+
+def check_tree(ids: Sequence[int], edges: Sequence[tuple[int, int]], fld: str) -> None:
+    """Assumption 4.2: the undirected graph of ``edges`` is a tree spanning ``ids``.
+
+    No self-loops, no edge listed twice (in either orientation), connected and
+    acyclic (so ``m = n - 1``).  ``fld`` names the scenario field in errors.
+    """
+    seen: dict[frozenset[int], int] = {}
+    for k, (a, b) in enumerate(edges):
+        if a == b:
+            raise GraphError(f"{fld}[{k}]", f"self-loop on agent {a}")
+        key = frozenset((a, b))
+        if key in seen:
+            raise GraphError(f"{fld}[{k}]", f"edge {a}-{b} listed twice (also {fld}[{seen[key]}])")
+        seen[key] = k
+    parent = {i: i for i in ids}
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    adj: dict[int, list[int]] = {i: [] for i in ids}
+    for k, (a, b) in enumerate(edges):
+        ra, rb = root(a), root(b)
+        if ra == rb:
+            cycle = _path(adj, a, b) + [a]
+            raise GraphError(
+                f"{fld}[{k}]",
+                f"edge {a}-{b} closes the cycle {'-'.join(map(str, cycle))}; the graph must be an undirected tree (Assumption 4.2)",
+            )
+        parent[ra] = rb
+        adj[a].append(b)
+        adj[b].append(a)
+    comps = sorted({root(i) for i in ids})
+    if len(comps) > 1:
+        parts = [sorted(i for i in ids if root(i) == r) for r in comps]
+        raise GraphError(fld, f"the graph is not connected (components {parts}); it must be an undirected tree (Assumption 4.2)")
+
+
+def _path(adj: Mapping[int, Sequence[int]], a: int, b: int) -> list[int]:
+    """The path a ... b in a forest (breadth-first)."""
+    prev: dict[int, int | None] = {a: None}
+    queue = [a]
+    while queue:
+        x = queue.pop(0)
+        if x == b:
+            break
+        for y in adj[x]:
+            if y not in prev:
+                prev[y] = x
+                queue.append(y)
+    out: list[int] = []
+    x: int | None = b
+    while x is not None:
+        out.append(x)
+        x = prev[x]
+    return out[::-1]

@@ -1,10 +1,21 @@
 """Results of a run from its recording: errors.csv, summary.json, plots.
 
 Errors are those of the thesis figures: attitude error ``|R_i R̂_i^T|_I`` and
-position error ``||p_i − p̂_i||``, evaluated at each estimate's world time
-against the truth at that same time (the truth sample before it, propagated
-with the true ω over the < 1/sensor_rate gap: error O(ω̇ Δt²) ≈ 3e-5 rad).
-"final" is the mean over the last second of the run.
+position error ``||p_i − p̂_i||`` (§3, Figs. 3.4–3.17), evaluated at each
+estimate's world time against the truth at that same time (the truth sample
+before it, propagated with the true ω over the < 1/sensor_rate gap: error
+O(ω̇ Δt²) ≈ 3e-5 rad).  "final" is the mean over the last second of the run.
+
+The §4 observers estimate up to a common rotation (and translation), so for
+them (Figs. 4.4–4.9), on a 100 Hz grid using each agent's newest estimate:
+
+* per edge k (head h, tail t): ``|R̄_k|_I = |R̃_t^T R̃_h|_I`` with ``R̃_i = R_i R̂_i^T``,
+  and the relative position error ``||p̃_h − p̃_t||`` with ``p̃_i = R̃_i p̂_i − p_i``
+  (thesis (4.33));
+* per agent, "up to a common frame": ``|R̃_i R̃_c^T|_I`` with R̃_c the chordal
+  mean of the R̃_i (the nearest rotation to their average), and
+  ``||p̃_i − mean_q p̃_q||``;
+* ξ_k over time and every jump (time, edge, ξ before/after), from the heads.
 """
 
 from __future__ import annotations
@@ -39,11 +50,15 @@ class Recording:
     stop_seen: bool
     counts: dict[str, int] = field(default_factory=dict)
     malformed: int = 0
+    xi: dict[int, list[tuple[float, float]]] = field(default_factory=dict)  # edge k -> (t, ξ_k)
+    jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (k, t, before, after)
 
 
 def load_recording(path: Path) -> Recording:
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
+    xi: dict[int, list[tuple[float, float]]] = defaultdict(list)
+    jumps: list[tuple[int, float, float, float]] = []
     stats: dict[tuple[str, int], dict[str, Any]] = {}
     alive: list[dict[str, Any]] = []
     start = None
@@ -67,6 +82,9 @@ def load_recording(path: Path) -> Recording:
             truth.append(m)
         elif m["type"] == "est" and kind == "est":
             est[m["src"]].append((m["t"], m["R_hat"], m["p_hat"]))
+            for k, x in m.get("xi", {}).items():
+                xi[k].append((m["t"], x))
+            jumps.extend(m.get("jumps", []))
         elif m["type"] == "stats" and kind == "stats":
             role = m["role"]
             prev = stats.get((role, m["src"]))
@@ -94,6 +112,8 @@ def load_recording(path: Path) -> Recording:
         stop_seen=stop_seen,
         counts=dict(counts),
         malformed=malformed,
+        xi={k: sorted(v) for k, v in sorted(xi.items())},
+        jumps=sorted(jumps, key=lambda j: (j[1], j[0])),
     )
 
 
@@ -116,6 +136,90 @@ def errors(rec: Recording) -> dict[int, np.ndarray]:
     return out
 
 
+def _truth_at(rec: Recording, t: float, a: int) -> tuple[np.ndarray, np.ndarray] | None:
+    k = int(np.searchsorted(rec.truth_t, t, side="right")) - 1
+    if k < 0:
+        return None
+    R = rec.truth_R[k, a] @ so3.exp((t - rec.truth_t[k]) * rec.truth_w[k, a])
+    # Positions move slowly (< 2 m/s in the papers' scenarios): interpolate linearly.
+    if k + 1 < len(rec.truth_t):
+        s_ = (t - rec.truth_t[k]) / (rec.truth_t[k + 1] - rec.truth_t[k])
+        p = (1 - s_) * rec.truth_p[k, a] + s_ * rec.truth_p[k + 1, a]
+    else:
+        p = rec.truth_p[k, a]
+    return R, p
+
+
+@dataclass
+class TreeMetrics:
+    """§4 metrics on a common time grid (see the module docstring)."""
+
+    t: np.ndarray  # (T,)
+    rel_att: dict[int, np.ndarray]  # edge k -> |R̄_k|_I, (T,)
+    rel_pos: dict[int, np.ndarray]  # edge k -> ||p̃_h − p̃_t||, (T,)
+    att_common: dict[int, np.ndarray]  # agent -> |R̃_i R̃_c^T|_I
+    pos_common: dict[int, np.ndarray]  # agent -> ||p̃_i − mean p̃||
+
+
+def tree_metrics(sc: Scenario, rec: Recording, step: float = 0.01) -> TreeMetrics | None:
+    """Relative and common-frame errors of the §4 observers (None if some agent has no estimate)."""
+    col = {i: k for k, i in enumerate(rec.truth_ids)}
+    Rt: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    for i in sc.ids:
+        rows_t, rows_R, rows_p = [], [], []
+        for t, R_hat, p_hat in rec.est.get(i, []):
+            tr = _truth_at(rec, t, col[i])
+            if tr is None:
+                continue
+            R_tilde = tr[0] @ R_hat.T
+            rows_t.append(t)
+            rows_R.append(R_tilde)
+            rows_p.append(R_tilde @ p_hat - tr[1])
+        if not rows_t:
+            return None
+        Rt[i] = (np.array(rows_t), np.array(rows_R), np.array(rows_p))
+    t0 = max(v[0][0] for v in Rt.values())
+    t1 = max(v[0][-1] for v in Rt.values())
+    grid = np.arange(t0, t1 + 1e-9, step)
+    idx = {i: np.searchsorted(v[0], grid, side="right") - 1 for i, v in Rt.items()}
+    Rg = {i: Rt[i][1][idx[i]] for i in sc.ids}
+    pg = {i: Rt[i][2][idx[i]] for i in sc.ids}
+    rel_att, rel_pos = {}, {}
+    for k, (h, tl) in enumerate(sc.oriented, start=1):
+        Rbar = np.einsum("tji,tjk->tik", Rg[tl], Rg[h])
+        rel_att[k] = np.sqrt(np.clip((3.0 - np.trace(Rbar, axis1=1, axis2=2)) / 4.0, 0.0, 1.0))
+        rel_pos[k] = np.linalg.norm(pg[h] - pg[tl], axis=1)
+    Rc = np.array([_nearest_rotation(m) for m in np.mean([Rg[i] for i in sc.ids], axis=0)])
+    pc = np.mean([pg[i] for i in sc.ids], axis=0)
+    att_common, pos_common = {}, {}
+    for i in sc.ids:
+        E = np.einsum("tij,tkj->tik", Rg[i], Rc)
+        att_common[i] = np.sqrt(np.clip((3.0 - np.trace(E, axis1=1, axis2=2)) / 4.0, 0.0, 1.0))
+        pos_common[i] = np.linalg.norm(pg[i] - pc, axis=1)
+    return TreeMetrics(grid, rel_att, rel_pos, att_common, pos_common)
+
+
+def _nearest_rotation(M: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(M)
+    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Vt)) or 1.0)])
+    return U @ D @ Vt
+
+
+def _final(t: np.ndarray, v: np.ndarray, t_end: float, window: float = 1.0) -> float:
+    sel = t >= t_end - window
+    return float(np.mean(v[sel])) if np.any(sel) else float("nan")
+
+
+def _first_below(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
+    """First time after which ``v`` stays below ``thr`` (None if it never settles)."""
+    above = np.nonzero(v >= thr)[0]
+    if len(above) == 0:
+        return float(t[0])
+    if above[-1] + 1 >= len(t):
+        return None
+    return float(t[above[-1] + 1])
+
+
 def final_mean(rows: np.ndarray, t_end: float, col: int, window: float = 1.0) -> float:
     sel = rows[rows[:, 0] >= t_end - window]
     return float(np.mean(sel[:, col])) if len(sel) else float("nan")
@@ -130,6 +234,7 @@ def summarize(
     time_scale: float,
     seed: int,
     exit_codes: dict[str, int | None] | None = None,
+    tm: TreeMetrics | None = None,
 ) -> dict[str, Any]:
     """The summary.json content (see README, "Results folder")."""
     t_end = duration
@@ -165,7 +270,10 @@ def summarize(
     for link, n in sent.items():
         links.setdefault(link, {"sent": n, "delivered": 0, "dropped": n, "reordered": 0})
     followers = [agents[str(a.id)] for a in sc.agents if a.role == "follower"]
-    return {
+    extra: dict[str, Any] = {}
+    if sc.info.graph == "tree":
+        extra = _tree_summary(sc, rec, agents, t_end, tree_metrics(sc, rec) if tm is None else tm)
+    return extra | {
         "scenario": sc.name,
         "algorithm": sc.algorithm,
         "engine": engine,
@@ -175,14 +283,62 @@ def summarize(
         "completed": rec.stop_seen,
         "agents": agents,
         "links": dict(sorted(links.items())),
-        "mean_attitude_error_final": float(np.nanmean([f["attitude_error_final"] for f in followers])) if followers else 0.0,
-        "mean_position_error_final": float(np.nanmean([f["position_error_final"] for f in followers])) if followers else 0.0,
-        "mean_over": "followers",
+        "mean_attitude_error_final": _nanmean([f["attitude_error_final"] for f in followers]),
+        "mean_position_error_final": _nanmean([f["position_error_final"] for f in followers]),
+        "mean_over": "followers" if sc.info.graph != "tree" else "agents (up to a common frame)",
         "final_window_s": 1.0,
         "world": rec.stats.get(("world", 0), {}),
         "recorded_messages": rec.counts,
         "malformed_in_recording": rec.malformed,
+    } | ({"warnings": list(sc.warnings)} if sc.warnings else {})
+
+
+def _tree_summary(sc: Scenario, rec: Recording, agents: dict[str, Any], t_end: float, tm: TreeMetrics | None) -> dict[str, Any]:
+    """Per-edge relative errors, ξ and jumps; per-agent errors up to a common frame (in place)."""
+    pose = "bearings" in sc.info.sensors  # §4.4 estimates positions too
+    edges: dict[str, Any] = {}
+    for k, (h, tl) in enumerate(sc.oriented, start=1):
+        js = [j for j in rec.jumps if j[0] == k]
+        xs = rec.xi.get(k, [])
+        e: dict[str, Any] = {"head": h, "tail": tl, "xi_owner": h}
+        if tm is not None:
+            e["relative_attitude_error_final"] = _final(tm.t, tm.rel_att[k], t_end)
+            e["relative_attitude_error_max_after_10s"] = float(np.max(tm.rel_att[k][tm.t >= 10.0])) if np.any(tm.t >= 10.0) else None
+            e["relative_attitude_error_settles_below_1e-2_at"] = _first_below(tm.t, tm.rel_att[k], 1e-2)
+            if pose:
+                e["relative_position_error_final"] = _final(tm.t, tm.rel_pos[k], t_end)
+        if sc.params is not None and sc.params.Xi:
+            e["jumps"] = len(js)
+            e["jumps_reported_by_head"] = int(rec.stats.get(("agent", h), {}).get("jumps", {}).get(str(k), len(js)))
+            e["jump_log"] = [{"t": t, "xi_before": b, "xi_after": a} for _, t, b, a in js]
+            e["xi_final"] = xs[-1][1] if xs else None
+        edges[str(k)] = e
+    out: dict[str, Any] = {
+        "orientation": sc.oriented_from,
+        "edges": edges,
+        "errors_up_to": (
+            "common frame: an agent's attitude_error_final is |R̃_i R̃_c^T|_I (R̃_i = R_i R̂_i^T, R̃_c their chordal mean)"
+            + (", position_error_final is ||p̃_i − mean_q p̃_q|| with p̃_i = R̃_i p̂_i − p_i (thesis (4.33))" if pose else "")
+            + "; the thesis' own measure is the per-edge |R̄_k|_I (edges.*.relative_attitude_error_final)"
+        ),
     }
+    if tm is not None:
+        for i in sc.ids:
+            agents[str(i)]["attitude_error_final"] = _final(tm.t, tm.att_common[i], t_end)
+            agents[str(i)]["position_error_final"] = _final(tm.t, tm.pos_common[i], t_end) if pose else float("nan")
+        out["mean_relative_attitude_error_final"] = float(np.mean([e["relative_attitude_error_final"] for e in edges.values()]))
+        out["max_relative_attitude_error_final"] = float(np.max([e["relative_attitude_error_final"] for e in edges.values()]))
+        if pose:
+            out["mean_relative_position_error_final"] = float(np.mean([e["relative_position_error_final"] for e in edges.values()]))
+            out["max_relative_position_error_final"] = float(np.max([e["relative_position_error_final"] for e in edges.values()]))
+    if sc.params is not None and sc.params.Xi:
+        out["jumps_total"] = len(rec.jumps)
+    return out
+
+
+def _nanmean(xs: list[float]) -> float | None:
+    v = [x for x in xs if x is not None and np.isfinite(x)]
+    return float(np.mean(v)) if v else None
 
 
 def write_errors_csv(path: Path, errs: dict[int, np.ndarray]) -> None:
@@ -240,28 +396,132 @@ def make_report(
     """Read ``out_dir/recording.mcap``; write errors.csv, summary.json and plots; return the summary."""
     rec = load_recording(out_dir / "recording.mcap")
     errs = errors(rec)
-    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes)
+    tm = tree_metrics(sc, rec) if sc.info.graph == "tree" else None
+    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm)
     write_errors_csv(out_dir / "errors.csv", errs)
+    if tm is not None:
+        write_edges_csv(out_dir / "edges.csv", sc, tm, rec)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if plots:
-        plot(out_dir / "plots", sc, errs)
+        if tm is None:
+            plot(out_dir / "plots", sc, errs)
+        else:
+            plot_tree(out_dir / "plots", sc, tm, rec)
     return summary
 
 
+def write_edges_csv(path: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
+    """Per edge on the 100 Hz grid: |R̄_k|_I, relative position error, ξ_k (newest from the head)."""
+    pose = "bearings" in sc.info.sensors
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", "edge", "head", "tail", "relative_attitude_error", "relative_position_error", "xi"])
+        for k, (h, tl) in enumerate(sc.oriented, start=1):
+            xs = rec.xi.get(k, [])
+            xt = np.array([x[0] for x in xs])
+            xv = np.array([x[1] for x in xs])
+            idx = np.searchsorted(xt, tm.t, side="right") - 1 if len(xs) else None
+            for n, t in enumerate(tm.t):
+                xi = "" if idx is None or idx[n] < 0 else f"{xv[idx[n]]:.6e}"
+                rp = f"{tm.rel_pos[k][n]:.6e}" if pose else ""
+                w.writerow([f"{t:.3f}", k, h, tl, f"{tm.rel_att[k][n]:.6e}", rp, xi])
+
+
+def plot_tree(out: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
+    """The §4 figures: |R̄_k|_I per edge (Figs. 4.4/4.6), ξ_k (4.5/4.7), position errors (4.8/4.9)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    pose = "bearings" in sc.info.sensors
+
+    def per_edge(series: dict[int, np.ndarray], ylabel: str, name: str, title: str) -> None:
+        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+        for k, (h, tl) in enumerate(sc.oriented, start=1):
+            for ax in (ax1, ax2):
+                ax.plot(tm.t, series[k], lw=1, label=f"edge {k} ({h}→{tl})")
+        ax2.set_yscale("log")
+        ax1.set_ylabel(ylabel)
+        ax2.set_ylabel(ylabel + " (log)")
+        ax2.set_xlabel("t (s)")
+        ax1.set_title(f"{sc.name}: {title}")
+        ax1.legend(fontsize=7, ncol=2)
+        for ax in (ax1, ax2):
+            ax.grid(True, alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / f"{name}.png", dpi=110)
+        plt.close(fig)
+
+    def per_agent(series: dict[int, np.ndarray], ylabel: str, name: str, title: str) -> None:
+        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+        for i in sc.ids:
+            ax1.plot(tm.t, series[i], lw=1, label=f"agent {i}")
+        ax2.plot(tm.t, np.mean([series[i] for i in sc.ids], axis=0), "k", lw=1.2)
+        ax2.set_yscale("log")
+        ax1.set_ylabel(ylabel)
+        ax2.set_ylabel("average over agents (log)")
+        ax2.set_xlabel("t (s)")
+        ax1.set_title(f"{sc.name}: {title}")
+        ax1.legend(fontsize=7, ncol=3)
+        for ax in (ax1, ax2):
+            ax.grid(True, alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / f"{name}.png", dpi=110)
+        plt.close(fig)
+
+    per_edge(tm.rel_att, r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude error per edge")
+    per_agent(tm.att_common, r"$|\tilde R_i \tilde R_c^T|_I$", "attitude_error", "attitude error up to a common rotation")
+    if pose:
+        per_edge(tm.rel_pos, r"$\|\tilde p_h-\tilde p_t\|$", "relative_position_error", "relative position error per edge")
+        per_agent(tm.pos_common, r"$\|\tilde p_i-\mathrm{mean}\,\tilde p\|$", "position_error", "position error up to a common translation")
+    if rec.xi:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        for k, xs in rec.xi.items():
+            a = np.array(xs)
+            ax.plot(a[:, 0], a[:, 1], lw=1, label=f"ξ_{k}")
+        for k, t, _b, after in rec.jumps:
+            ax.plot([t], [after], "kx", ms=6)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(r"$\xi_k$ (rad)")
+        ax.set_title(f"{sc.name}: hybrid variables (x: jumps)")
+        ax.legend(fontsize=7, ncol=4)
+        ax.grid(True, alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / "xi.png", dpi=110)
+        plt.close(fig)
+
+
+def _e(x: float | None) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.2e}"
+
+
 def table(summary: dict[str, Any]) -> str:
-    """The per-agent summary table printed at the end of a run."""
+    """The per-agent (and, for §4, per-edge) summary table printed at the end of a run."""
+    tree = "edges" in summary
     lines = [
         f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {summary['duration_s']:g} s, seed {summary['seed']})",
         f"{'agent':>5} {'role':<8} {'alive':<5} {'att.err':>10} {'pos.err':>10} {'steps':>6} {'rate Hz':>8} {'missed':>6}",
     ]
     for i, a in summary["agents"].items():
         lines.append(
-            f"{i:>5} {a['role']:<8} {'yes' if a['alive_at_end'] else 'NO':<5} {a['attitude_error_final']:>10.2e} "
-            f"{a['position_error_final']:>10.2e} {a['steps']:>6} {a['step_rate_hz']:>8.2f} {a['missed_deadlines']:>6}"
+            f"{i:>5} {a['role']:<8} {'yes' if a['alive_at_end'] else 'NO':<5} {_e(a['attitude_error_final']):>10} "
+            f"{_e(a['position_error_final']):>10} {a['steps']:>6} {a['step_rate_hz']:>8.2f} {a['missed_deadlines']:>6}"
         )
     drops = sum(v.get("dropped", 0) for v in summary["links"].values())
+    if tree:
+        lines.append("(agent errors are up to a common frame; see summary.json errors_up_to)")
+        lines.append(f"{'edge':>5} {'head->tail':<10} {'|R̄_k|_I':>10} {'rel.pos':>10} {'jumps':>6} {'ξ final':>9}")
+        for k, e in summary["edges"].items():
+            xi = e.get("xi_final")
+            lines.append(
+                f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {_e(e.get('relative_attitude_error_final')):>10} "
+                f"{_e(e.get('relative_position_error_final')):>10} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
+            )
+    who = "agents" if tree else "followers"
     lines.append(
-        f"mean over followers (last 1 s): attitude {summary['mean_attitude_error_final']:.2e}, "
-        f"position {summary['mean_position_error_final']:.2e}; links: {len(summary['links'])}, dropped messages: {drops}"
+        f"mean over {who} (last 1 s): attitude {_e(summary['mean_attitude_error_final'])}, "
+        f"position {_e(summary['mean_position_error_final'])}; links: {len(summary['links'])}, dropped messages: {drops}"
     )
     return "\n".join(lines)

@@ -6,13 +6,17 @@ examples and the README for the full format.
 Format (units: seconds, Hz, metres, radians)::
 
     [scenario]  name, description, duration, seed
-    [algorithm] name; [algorithm.gains] per algorithm (see ALGORITHMS)
-    [world]     step (s, <= 0.001), sensor_rate (Hz)
-    [noise]     gyro_var, bearing_var (variances, as the papers state them)
+    [algorithm] name; [algorithm.gains] per algorithm (see ALGORITHMS);
+                [algorithm.params] A, u, gamma, delta, Xi (§4 observers)
+    [world]     step (s, <= 0.001), sensor_rate (Hz);
+                [world.formation] axis, rate: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis)
+    [noise]     gyro_var, bearing_var, velocity_var, rel_att_var (variances, as the papers state them)
     [clock]     rate (Hz), jitter (s, std of tick times), drift_ppm, offset (s): defaults for agents
-    [[agents]]  id, role, p, R, omega = [3 expressions in t], gyro_bias,
-                neighbors (N_i), k_neighbors (k_ij, one per neighbour),
-                [agents.estimate] p, R, Omega; [agents.clock] overrides
+    [graph]     edges = [[head, tail], ...]: the oriented tree of §4, edge k is the k-th
+    [[agents]]  id, role, p (at t = 0), R, omega = [3 expressions in t], v = [3 expressions
+                in t] (inertial velocity), gyro_bias, neighbors (N_i), k_neighbors (k_ij),
+                gains (per-agent overrides, e.g. k_R = k_i^R of §3.3),
+                [agents.estimate] p, R, Omega, xi = {k = ξ_k(0)}; [agents.clock] overrides
 """
 
 from __future__ import annotations
@@ -20,16 +24,16 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from zswarm import so3
+from zswarm import hybrid, so3
 from zswarm.expr import Expr, ExprError, parse
-from zswarm.graph import GraphError, check_leader_follower
+from zswarm.graph import GraphError, check_leader_follower, check_tree
 
 
 class ScenarioError(ValueError):
@@ -41,8 +45,10 @@ class AlgorithmInfo:
     """What the loader knows about an algorithm: its gains and graph assumption."""
 
     gains: Mapping[str, float | None]  # name -> default (None: required)
-    graph: str
+    graph: str  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2)
     description: str
+    sensors: frozenset[str] = frozenset({"bearings"})  # what the world measures for it
+    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P)
 
 
 # The gains of each algorithm, with defaults; every gain must be > 0.
@@ -58,8 +64,58 @@ ALGORITHMS: Mapping[str, AlgorithmInfo] = MappingProxyType(
             "leader_follower",
             "thesis §3.2: filtered attitude observer (3.8)-(3.9) + position observer (3.14)",
         ),
+        "bearing_pose_moving": AlgorithmInfo(
+            MappingProxyType({"k_R": None, "k_p": None}),
+            "leader_follower",
+            "thesis §3.3: attitude observer (3.23) + position observer (3.25), moving agents",
+            frozenset({"bearings", "velocity"}),
+        ),
+        "relative_attitude_continuous": AlgorithmInfo(
+            MappingProxyType({"k_R": None}),
+            "tree",
+            "thesis §4.3.1: continuous observer (4.3) + (4.8) from relative attitudes",
+            frozenset({"rel_att"}),
+            "A",
+        ),
+        "relative_attitude_hybrid": AlgorithmInfo(
+            MappingProxyType({"k_R": None, "k_xi": None}),
+            "tree",
+            "thesis §4.3.2: hybrid observer (4.25)-(4.26) from relative attitudes",
+            frozenset({"rel_att"}),
+            "hybrid",
+        ),
+        "relative_pose_hybrid": AlgorithmInfo(
+            MappingProxyType({"k_R": None, "k_xi": None, "k_p": None}),
+            "tree",
+            "thesis §4.4: hybrid attitude (4.25)-(4.26) + hybrid position observer (4.30)-(4.31)",
+            frozenset({"rel_att", "bearings", "velocity_body"}),
+            "hybrid",
+        ),
     }
 )
+
+
+@dataclass(frozen=True, slots=True)
+class Params:
+    """The set P of §4.3.2.3: A (row-major 3×3), u, γ, δ, Ξ (only A for the continuous observer)."""
+
+    A: tuple[float, ...]
+    u: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    gamma: float = 0.0
+    delta: float = 0.0
+    Xi: tuple[float, ...] = ()
+
+    @property
+    def A_matrix(self) -> np.ndarray:
+        return np.array(self.A, dtype=float).reshape(3, 3)
+
+
+@dataclass(frozen=True, slots=True)
+class Formation:
+    """A rigidly rotating formation: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis) (§3.3.4, §4.5)."""
+
+    axis: tuple[float, float, float]  # unit vector
+    rate: float  # rad/s
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,13 +135,14 @@ class Estimate:
     p_hat: tuple[float, float, float] = (0.0, 0.0, 0.0)
     R_hat: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # row-major
     Omega: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    xi: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of the edges k this agent heads
 
 
 @dataclass(frozen=True, slots=True)
 class AgentSpec:
     id: int
     role: str  # "leader" | "follower"
-    p: tuple[float, float, float]  # inertial position (fixed in §3.2)
+    p: tuple[float, float, float]  # inertial position at t = 0 (fixed in §3.2)
     R: tuple[float, ...]  # initial attitude, row-major 3×3 (body -> inertial)
     omega: tuple[Expr, Expr, Expr]  # body-frame angular velocity ω_i(t), rad/s
     gyro_bias: tuple[float, float, float]
@@ -93,6 +150,8 @@ class AgentSpec:
     k_neighbors: tuple[float, ...]  # k_ij, same order as neighbors
     estimate: Estimate
     clock: ClockSpec
+    velocity: tuple[Expr, Expr, Expr] | None = None  # inertial velocity v_i(t), m/s (None: fixed or formation)
+    gains: Mapping[str, float] = field(default_factory=dict)  # the algorithm's gains for this agent
 
     @property
     def R_matrix(self) -> np.ndarray:
@@ -114,6 +173,28 @@ class Scenario:
     bearing_var: float
     agents: tuple[AgentSpec, ...]
     text: str = field(repr=False)
+    velocity_var: float = 0.0
+    rel_att_var: float = 0.0
+    formation: Formation | None = None
+    params: Params | None = None
+    oriented: tuple[tuple[int, int], ...] = ()  # §4: edge k = oriented[k-1] = (head, tail)
+    oriented_from: str = ""  # "graph.edges" or how the orientation was derived
+    warnings: tuple[str, ...] = ()  # accepted, but worth telling the user (printed by the CLI)
+
+    @property
+    def info(self) -> AlgorithmInfo:
+        return ALGORITHMS[self.algorithm]
+
+    @property
+    def moving(self) -> bool:
+        return self.formation is not None or any(a.velocity is not None for a in self.agents)
+
+    def edge_index(self, a: int, b: int) -> int | None:
+        """Index k (1-based) of the oriented tree edge between ``a`` and ``b``, if any."""
+        for k, (h, t) in enumerate(self.oriented, start=1):
+            if {h, t} == {a, b}:
+                return k
+        return None
 
     def agent(self, i: int) -> AgentSpec:
         for a in self.agents:
@@ -242,14 +323,14 @@ def loads(text: str, path: str = "<string>") -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: TOML syntax: {exc}") from None
 
-    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "agents"}, {"scenario", "algorithm", "agents"})
+    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "agents"}, {"scenario", "algorithm", "agents"})
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
     name = c.string(sc["name"], "scenario.name")
     description = c.string(sc.get("description", ""), "scenario.description")
     duration = c.num(sc["duration"], "scenario.duration", positive=True)
     seed = c.integer(sc.get("seed", 0), "scenario.seed")
 
-    al = c.table(doc["algorithm"], "algorithm", {"name", "gains"}, {"name"})
+    al = c.table(doc["algorithm"], "algorithm", {"name", "gains", "params"}, {"name"})
     algo = c.string(al["name"], "algorithm.name")
     if algo not in ALGORITHMS:
         raise c.err("algorithm.name", f"unknown algorithm (known: {', '.join(ALGORITHMS)})", algo)
@@ -263,14 +344,26 @@ def loads(text: str, path: str = "<string>") -> Scenario:
             gains[k] = default
         else:
             gains[k] = c.num(g[k], f"algorithm.gains.{k}", positive=True)
+    params = _params(c, al.get("params"), info)
 
-    w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate"})
+    w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate", "formation"})
     step = c.num(w.get("step", 0.001), "world.step", positive=True, maxv=0.001)
     sensor_rate = c.num(w.get("sensor_rate", 200.0), "world.sensor_rate", positive=True, maxv=1.0 / step)
+    formation = None
+    if "formation" in w:
+        fm = c.table(w["formation"], "world.formation", {"axis", "rate"}, {"axis", "rate"})
+        axis = np.array(c.vec3(fm["axis"], "world.formation.axis"))
+        if np.linalg.norm(axis) == 0:
+            raise c.err("world.formation.axis", "must be non-zero", fm["axis"])
+        rate = float(c.expr(fm["rate"], "world.formation.rate")(0.0))
+        ax = axis / np.linalg.norm(axis)
+        formation = Formation((float(ax[0]), float(ax[1]), float(ax[2])), rate)
 
-    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var"})
+    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var", "velocity_var", "rel_att_var"})
     gyro_var = c.num(nz.get("gyro_var", 0.0), "noise.gyro_var", nonneg=True)
     bearing_var = c.num(nz.get("bearing_var", 0.0), "noise.bearing_var", nonneg=True)
+    velocity_var = c.num(nz.get("velocity_var", 0.0), "noise.velocity_var", nonneg=True)
+    rel_att_var = c.num(nz.get("rel_att_var", 0.0), "noise.rel_att_var", nonneg=True)
 
     default_clock = _clock(c, doc.get("clock", {}), "clock", ClockSpec())
 
@@ -281,7 +374,7 @@ def loads(text: str, path: str = "<string>") -> Scenario:
     seen: dict[int, str] = {}
     for n, ra in enumerate(raw_agents):
         f = f"agents[{n}]"
-        agents.append(_agent(c, ra, f, default_clock))
+        agents.append(_agent(c, ra, f, default_clock, info, gains))
         if agents[-1].id in seen:
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
@@ -289,17 +382,46 @@ def loads(text: str, path: str = "<string>") -> Scenario:
     if ids != list(range(1, len(ids) + 1)):
         raise c.err("agents", "ids must be 1..n, each once", ids)
     agents.sort(key=lambda a: a.id)
+    if formation is not None:
+        for a in agents:
+            if a.velocity is not None:
+                raise c.err(f"{seen[a.id]}.v", "an agent of a rotating [world.formation] has its velocity set by the formation")
 
+    oriented: tuple[tuple[int, int], ...] = ()
+    oriented_from = ""
+    warnings: list[str] = []
     if info.graph == "leader_follower":
+        if "graph" in doc:
+            raise c.err("graph", f"{algo} uses each follower's in-neighbours (agents[].neighbors), not [graph]")
         try:
-            check_leader_follower(
+            warnings = check_leader_follower(
                 {a.id: a.neighbors for a in agents},
                 {a.id: a.role for a in agents},
                 {a.id: a.p for a in agents},
                 seen,
+                later=_snapshots(agents, formation, duration),
             )
         except GraphError as exc:
             raise ScenarioError(f"{path}: {exc}") from None
+    else:
+        oriented, oriented_from = _tree(c, doc.get("graph"), agents, seen)
+        nbrs = {a.id: tuple(sorted({t for h, t in oriented if h == a.id} | {h for h, t in oriented if t == a.id})) for a in agents}
+        out = []
+        for a in agents:
+            # Every tree neighbour is an in-neighbour: the edges carry messages both ways.
+            if a.neighbors and tuple(sorted(a.neighbors)) != nbrs[a.id]:
+                raise c.err(f"{seen[a.id]}.neighbors", f"disagrees with the tree's neighbours {list(nbrs[a.id])} of agent {a.id}", list(a.neighbors))
+            for k in a.estimate.xi:
+                if not 1 <= k <= len(oriented):
+                    raise c.err(f"{seen[a.id]}.estimate.xi.{k}", f"no edge {k} (edges are 1..{len(oriented)})")
+                head, tail = oriented[k - 1]
+                if head != a.id:
+                    raise c.err(
+                        f"{seen[a.id]}.estimate.xi.{k}",
+                        f"ξ_{k} lives at the head of edge {k} ({head} -> {tail}), agent {head} (Remark 4.4), not agent {a.id}",
+                    )
+            out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
+        agents = out
 
     return Scenario(
         path=path,
@@ -315,7 +437,116 @@ def loads(text: str, path: str = "<string>") -> Scenario:
         bearing_var=bearing_var,
         agents=tuple(agents),
         text=text,
+        velocity_var=velocity_var,
+        rel_att_var=rel_att_var,
+        formation=formation,
+        params=params,
+        oriented=oriented,
+        oriented_from=oriented_from,
+        warnings=tuple(warnings),
     )
+
+
+def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: float, n: int = 200) -> list[dict[int, tuple[float, ...]]]:
+    """Positions at ``n`` times over the run, for the checks of moving agents (empty if all fixed)."""
+    if formation is None and all(a.velocity is None for a in agents):
+        return []
+    ts = np.linspace(0.0, duration, n + 1)[1:]
+    p0 = np.array([a.p for a in agents])
+    if formation is not None:
+        out = [p0 @ so3.Ra(formation.rate * t, np.array(formation.axis)) for t in ts]
+    else:
+        # Midpoint rule on a grid of at most 10 ms, sampled at ts.
+        h = min(0.01, duration / n)
+        grid = np.arange(0.0, duration + h, h)
+        P = p0.copy()
+        out, k = [], 0
+        for t0 in grid[:-1]:
+            tm = np.array([t0 + h / 2])
+            V = np.array([[float(e(tm)[0]) for e in a.velocity] if a.velocity is not None else [0.0, 0.0, 0.0] for a in agents])
+            P = P + h * V
+            while k < len(ts) and ts[k] <= t0 + h + 1e-12:
+                out.append(P.copy())
+                k += 1
+        while len(out) < len(ts):
+            out.append(P.copy())
+    return [{a.id: tuple(row[n_]) for n_, a in enumerate(agents)} for row in out]
+
+
+def _params(c: _Ctx, d: Any, info: AlgorithmInfo) -> Params | None:
+    """``[algorithm.params]``: A for (4.8); the whole set P of Prop. 4.2 for the hybrid observers."""
+    f = "algorithm.params"
+    if not info.params:
+        if d is not None:
+            raise c.err(f, "this algorithm takes no params")
+        return None
+    allowed = {"A"} if info.params == "A" else {"A", "u", "gamma", "delta", "Xi"}
+    d = c.table(d if d is not None else {}, f, allowed, allowed)
+    a = d["A"]
+    if isinstance(a, list) and len(a) == 3 and all(not isinstance(x, list) for x in a):
+        A = np.diag(c.vec3(a, f"{f}.A"))
+    elif isinstance(a, list) and len(a) == 3 and all(isinstance(r, list) and len(r) == 3 for r in a):
+        A = np.array([[c.num(e, f"{f}.A[{x}][{y}]") for y, e in enumerate(r)] for x, r in enumerate(a)])
+    else:
+        raise c.err(f"{f}.A", "must be 3 eigenvalues (a diagonal A) or a 3x3 list of rows", a)
+    try:
+        hybrid.check_A(A, "A")
+    except hybrid.DesignError as exc:
+        raise c.err(f"{f}.{exc.field}", exc.problem) from None
+    if info.params == "A":
+        return Params(tuple(A.ravel().tolist()))
+    u = c.vec3(d["u"], f"{f}.u")
+    gamma = c.num(d["gamma"], f"{f}.gamma", positive=True)
+    delta = c.num(d["delta"], f"{f}.delta", positive=True)
+    xs = d["Xi"]
+    if not isinstance(xs, list) or not xs:
+        raise c.err(f"{f}.Xi", "must be a non-empty list of numbers or expressions like \"0.08*pi\"", xs)
+    Xi = tuple(float(c.expr(x, f"{f}.Xi[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{f}.Xi[{n}]") for n, x in enumerate(xs))
+    try:
+        hybrid.check_parameters(A, np.array(u), gamma, delta, Xi)
+    except hybrid.DesignError as exc:
+        raise c.err(f"{f}.{exc.field}", exc.problem) from None
+    return Params(tuple(A.ravel().tolist()), u, gamma, delta, Xi)
+
+
+def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:
+    """The oriented tree of §4: ``[graph] edges = [[head, tail], ...]`` or derived from neighbours.
+
+    Derived orientation (when ``[graph]`` is absent): each undirected edge
+    ``{a, b}`` listed in ``agents[].neighbors`` gets head ``min(a, b)``; edges
+    are indexed in ascending ``(head, tail)`` order.  Either way the result
+    goes to ``summary.json``.
+    """
+    ids = {a.id for a in agents}
+    if d is not None:
+        g = c.table(d, "graph", {"edges"}, {"edges"})
+        raw = g["edges"]
+        if not isinstance(raw, list) or not raw:
+            raise c.err("graph.edges", "must be a list of [head, tail] pairs", raw)
+        pairs = []
+        for n, e in enumerate(raw):
+            if not isinstance(e, list) or len(e) != 2:
+                raise c.err(f"graph.edges[{n}]", "must be a [head, tail] pair", e)
+            h, t = (c.integer(x, f"graph.edges[{n}]") for x in e)
+            for x in (h, t):
+                if x not in ids:
+                    raise c.err(f"graph.edges[{n}]", f"unknown agent {x}", e)
+            pairs.append((h, t))
+        fld, how = "graph.edges", "graph.edges"
+    else:
+        und = set()
+        for a in agents:
+            for j in a.neighbors:
+                if j not in ids:
+                    raise c.err(f"{seen[a.id]}.neighbors", f"unknown agent {j}", list(a.neighbors))
+                und.add((min(a.id, j), max(a.id, j)))
+        pairs = sorted(und)
+        fld, how = "agents[].neighbors", "derived: head = smaller id, edges in ascending (head, tail) order"
+    try:
+        check_tree(sorted(ids), pairs, fld)
+    except GraphError as exc:
+        raise ScenarioError(f"{c.path}: {exc}") from None
+    return tuple(pairs), how
 
 
 def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
@@ -331,25 +562,32 @@ def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
     return ClockSpec(rate, jitter, drift, offset)
 
 
-def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec) -> AgentSpec:
+def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmInfo, gains: Mapping[str, float]) -> AgentSpec:
     d = c.table(
         d,
         f,
-        {"id", "role", "p", "R", "omega", "gyro_bias", "neighbors", "k_neighbors", "estimate", "clock"},
-        {"id", "role", "p", "omega"},
+        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"},
+        {"id", "p", "omega"} | ({"role"} if info.graph == "leader_follower" else set()),
     )
     aid = c.integer(d["id"], f"{f}.id")
     if aid < 1:
         raise c.err(f"{f}.id", "must be >= 1", aid)
-    role = c.string(d["role"], f"{f}.role")
+    role = c.string(d.get("role", "follower"), f"{f}.role")
     if role not in ("leader", "follower"):
         raise c.err(f"{f}.role", "must be 'leader' or 'follower'", role)
+    if info.graph == "tree" and role != "follower":
+        raise c.err(f"{f}.role", "the §4 observers have no leaders: every agent estimates its attitude (up to a common rotation)", role)
     p = c.vec3(d["p"], f"{f}.p")
     R = c.rotation(d.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.R")
     om = d["omega"]
     if not isinstance(om, list) or len(om) != 3:
         raise c.err(f"{f}.omega", "must be a list of 3 expressions in t", om)
     omega = tuple(c.expr(e, f"{f}.omega[{k}]") for k, e in enumerate(om))
+    velocity = None
+    if "v" in d:
+        if not isinstance(d["v"], list) or len(d["v"]) != 3:
+            raise c.err(f"{f}.v", "must be a list of 3 expressions in t (inertial velocity, m/s)", d["v"])
+        velocity = tuple(c.expr(e, f"{f}.v[{k}]") for k, e in enumerate(d["v"]))
     bias = c.vec3(d.get("gyro_bias", [0, 0, 0]), f"{f}.gyro_bias")
     nb = d.get("neighbors", [])
     if not isinstance(nb, list):
@@ -359,13 +597,28 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec) -> AgentSpec:
     if not isinstance(kn, list) or len(kn) != len(neighbors):
         raise c.err(f"{f}.k_neighbors", f"must list one gain k_ij per neighbour ({len(neighbors)})", kn)
     k_neighbors = tuple(c.num(k, f"{f}.k_neighbors[{n}]", positive=True) for n, k in enumerate(kn))
-    est = c.table(d.get("estimate", {}), f"{f}.estimate", {"p", "R", "Omega"})
+    own = c.table(d.get("gains", {}), f"{f}.gains", set(info.gains))
+    agent_gains = dict(gains)
+    for k, v in own.items():
+        agent_gains[k] = c.num(v, f"{f}.gains.{k}", positive=True)
+    est = c.table(d.get("estimate", {}), f"{f}.estimate", {"p", "R", "Omega", "xi"})
     if role == "leader" and est:
         raise c.err(f"{f}.estimate", "a leader knows its pose and has no estimate")
+    xi: dict[int, float] = {}
+    if "xi" in est:
+        if info.params != "hybrid":
+            raise c.err(f"{f}.estimate.xi", "only the hybrid observers have ξ")
+        if not isinstance(est["xi"], dict):
+            raise c.err(f"{f}.estimate.xi", "must be a table {edge index k = ξ_k(0)}", est["xi"])
+        for k, v in est["xi"].items():
+            if not k.isdigit() or int(k) < 1:
+                raise c.err(f"{f}.estimate.xi.{k}", "keys are edge indices k = 1..m")
+            xi[int(k)] = c.num(v, f"{f}.estimate.xi.{k}")
     estimate = Estimate(
         c.vec3(est.get("p", [0, 0, 0]), f"{f}.estimate.p"),
         c.rotation(est.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.estimate.R"),
         c.vec3(est.get("Omega", [0, 0, 0]), f"{f}.estimate.Omega"),
+        MappingProxyType(xi),
     )
     clock = _clock(c, d.get("clock", {}), f"{f}.clock", default_clock)
-    return AgentSpec(aid, role, p, R, omega, bias, neighbors, k_neighbors, estimate, clock)  # type: ignore[arg-type]
+    return AgentSpec(aid, role, p, R, omega, bias, neighbors, k_neighbors, estimate, clock, velocity, MappingProxyType(agent_gains))  # type: ignore[arg-type]

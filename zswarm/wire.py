@@ -24,14 +24,17 @@ class MessageError(ValueError):
 
 
 # field kinds: "int", "float", "str", (shape,) for float64 arrays,
-# "vecmap" for {int: float64[3]}, "intmap" for {str: int}, "any" (msgpack-native, small)
+# "vecmap" for {int: float64[3]}, "matmap" for {int: float64[3,3]}, "floatmap" for
+# {int: float}, "jumps" for [[edge k, t, ξ before, ξ after], ...], "any" (msgpack-native, small)
 SCHEMAS: Mapping[str, Mapping[str, Any]] = {
-    # world -> agent i
-    "sense": {"gyro": (3,), "bearings": "vecmap", "R": (3, 3), "p": (3,)},
-    # agent j -> agent i along edge j->i: estimates and j's bearing toward i (b_ji^j)
-    "edge": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "b": (3,)},
-    # agent i -> recorder
-    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "vecmap"},
+    # world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij,
+    # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p
+    "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,)},
+    # agent j -> agent i along edge j->i: estimates, j's bearing toward i (b_ji^j),
+    # j's angular rate (to propagate R̂_j to i's tick) and ξ_k when j heads edge k
+    "edge": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "b": (3,), "w": (3,), "xi": "float"},
+    # agent i -> recorder; xi: ξ_k of the edges it heads; jumps since the last est
+    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "vecmap", "xi": "floatmap", "jumps": "jumps"},
     # world -> recorder: ids[k] has attitude R[k], position p[k], true angular velocity w[k]
     "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3)},
     # counters of a process
@@ -41,7 +44,9 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "stop": {"reason": "str"},
     "progress": {"duration": "float"},
 }
-OPTIONAL = {"sense": {"R", "p"}}
+ENVELOPE = ("v", "type", "src", "seq", "t")
+assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
+OPTIONAL = {"sense": {"bearings", "rel_att", "vel", "vel_body", "R", "p"}, "edge": {"b", "w", "xi"}, "est": {"xi", "jumps"}}
 
 
 def _arr(a: np.ndarray) -> list[Any]:
@@ -57,8 +62,12 @@ def encode(mtype: str, src: int, seq: int, t: float, **fields: Any) -> bytes:
         kind = schema[k]
         if isinstance(kind, tuple):
             m[k] = _arr(v)
-        elif kind == "vecmap":
+        elif kind in ("vecmap", "matmap"):
             m[k] = {int(j): _arr(x) for j, x in v.items()}
+        elif kind == "floatmap":
+            m[k] = {int(j): float(x) for j, x in v.items()}
+        elif kind == "jumps":
+            m[k] = [[int(e[0]), float(e[1]), float(e[2]), float(e[3])] for e in v]
         elif kind == "float":
             m[k] = float(v)
         else:
@@ -84,6 +93,10 @@ def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise MessageError(f"{fld}: non-finite values")
     return a
+
+
+def _finite(x: Any) -> bool:
+    return not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
 
 
 def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
@@ -127,6 +140,20 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
             if not isinstance(v, dict) or not all(isinstance(j, int) for j in v):
                 raise MessageError(f"{k}: expected a map of int to vector")
             out[k] = {j: _dec_arr(x, (3,), f"{k}[{j}]") for j, x in v.items()}
+        elif kind == "matmap":
+            if not isinstance(v, dict) or not all(isinstance(j, int) for j in v):
+                raise MessageError(f"{k}: expected a map of int to 3x3 matrix")
+            out[k] = {j: _dec_arr(x, (3, 3), f"{k}[{j}]") for j, x in v.items()}
+        elif kind == "floatmap":
+            if not isinstance(v, dict) or not all(isinstance(j, int) and _finite(x) for j, x in v.items()):
+                raise MessageError(f"{k}: expected a map of int to finite number")
+            out[k] = {j: float(x) for j, x in v.items()}
+        elif kind == "jumps":
+            if not isinstance(v, list) or not all(
+                isinstance(e, list) and len(e) == 4 and isinstance(e[0], int) and not isinstance(e[0], bool) and all(_finite(x) for x in e[1:]) for e in v
+            ):
+                raise MessageError(f"{k}: expected a list of [edge, t, xi_before, xi_after]")
+            out[k] = [(e[0], float(e[1]), float(e[2]), float(e[3])) for e in v]
         elif kind == "float":
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise MessageError(f"{k}: expected a finite number")

@@ -7,9 +7,9 @@ from zswarm import wire
 R = np.eye(3)
 v = np.array([1.0, 2.0, 3.0])
 CASES = {
-    "sense": dict(gyro=v, bearings={1: v, 7: -v}, R=R, p=v),
-    "edge": dict(t_local=1.5, R_hat=R, p_hat=v, b=v),
-    "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={0: v}),
+    "sense": dict(gyro=v, bearings={1: v, 7: -v}, rel_att={2: R, 4: R.T}, vel=v, vel_body=-v, R=R, p=v),
+    "edge": dict(t_local=1.5, R_hat=R, p_hat=v, b=v, w=-v, xi=0.25),
+    "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={0: v}, xi={1: 0.25, 3: -0.5}, jumps=[(1, 0.01, 0.0, 0.25)]),
     "truth": dict(ids=[1, 2], R=np.stack([R, R]), p=np.stack([v, v]), w=np.stack([v, v])),
     "stats": dict(role="agent", counters={"steps": 3, "links": {"1->3": {"delivered": 2}}}),
     "start": dict(epoch=1e9, time_scale=2.0, duration=40.0, seed=1, run="r1"),
@@ -52,7 +52,11 @@ def _raw(**over):
         (_raw(type="nope"), "unknown type"),
         (_raw(seq="x"), "seq"),
         (_raw(t=float("nan")), "t: expected a finite number"),
-        (_raw(b=None), "b: missing"),
+        (_raw(type="est", extra={}, jumps=[[1, 0.0, 0.0]]), "jumps: expected a list"),
+        (_raw(type="est", extra={}, xi={"1": 0.2}), "xi: expected a map"),
+        (_raw(type="sense", gyro=[[3], v.tobytes()], rel_att={2: [[3], v.tobytes()]}), r"rel_att\[2\]: bad shape"),
+        (_raw(p_hat=None), "p_hat: missing"),
+        (_raw(xi="x"), "xi: expected a finite number"),
         (_raw(R_hat=[[3, 3], b"\x00" * 8]), "R_hat: 8 bytes"),
         (_raw(R_hat=[[4, 4], b"\x00" * 128]), "R_hat: shape"),
         (_raw(p_hat=[[3], np.array([np.inf, 0, 0]).tobytes()]), "non-finite"),

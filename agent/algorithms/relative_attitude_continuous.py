@@ -1,0 +1,51 @@
+"""Continuous distributed attitude observer from relative attitudes (thesis §4.3.1).
+
+Boughellaba (2024), (4.3) with the correction (4.8), on an undirected tree:
+
+    Ṙ̂_i = R̂_i [ω_i − k_R R̂_i^T σ_i]^x                                       (4.3)
+    σ_i  = −Σ_{j∈N_i} ψ(A R̂_j R_ij^T R̂_i^T)                                 (4.8)
+
+Theorem 4.1: almost global; the undesired equilibria (R̄_k = U D_β U^T) are
+unstable but are equilibria, so a start on them stays there in exact
+arithmetic.  Discretisation as in :mod:`bearing_pose_fixed`: predict
+``R̂⁻ = R̂ exp(dt [ω]^x)``, evaluate σ at R̂⁻, correct ``R̂⁺ = exp(−dt k_R [σ]^x) R̂⁻``.
+
+Symbols -> names: R̂_i ``R_hat``, ω_i ``omega``, k_R ``k_R``, A ``A``,
+R_ij ``EdgeData.R_ij``, R̂_j ``EdgeData.R_hat_j``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from agent.algorithms.relative_attitude_terms import EdgeData, continuous_correction
+from zswarm.so3 import Mat3, Vec3, exp
+
+
+@dataclass(frozen=True, slots=True)
+class Gains:
+    k_R: float
+    A: Mat3
+
+
+@dataclass(frozen=True, slots=True)
+class State:
+    R_hat: Mat3
+
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    omega: Vec3  # body-frame angular velocity measurement, rad/s
+    edges: tuple[EdgeData, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Outputs:
+    sigma: Vec3  # σ_i of (4.8), inertial frame
+
+
+def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
+    """Advance (4.3)+(4.8) by ``dt`` seconds."""
+    R_pred = state.R_hat @ exp(dt * inputs.omega)
+    sigma = continuous_correction(R_pred, inputs.edges, gains.A)
+    return State(exp(-dt * gains.k_R * sigma) @ R_pred), Outputs(sigma)

@@ -1,0 +1,72 @@
+"""Hybrid distributed pose observer: relative attitudes and bearings (thesis §4.4).
+
+Boughellaba (2024): the hybrid attitude observer (4.25)–(4.26)
+(:mod:`relative_attitude_hybrid`) cascaded with the position observer
+
+    ṗ̂_i = R̂_i v_i^i − k_p Σ_{j∈N_i} R̂_i (P_{b_ij^i} R̂_i^T p̂_i − R_ij P_{b_ji^j} R̂_j^T p̂_j)
+           − k_R [σ_i]^x p̂_i                                               (4.30), flows
+    p̂_i⁺ = p̂_i                                                             (4.31), jumps
+
+with the body-frame velocity v_i^i and bearings b_ij^i (measured) and
+b_ji^j, R̂_j, p̂_j (received from j).  Poses are estimated up to a common
+rotation and translation (Remark 4.5): p̃_i = R̃_i p̂_i − p_i converges to a
+common constant.
+
+Discretisation: with ``E = exp(−dt k_R [σ]^x)`` (the attitude correction of
+the step), ``p̂⁺ = E (p̂ + dt (R̂⁻ v_i^i − k_p Σ …))``: the ``−k_R[σ]^x p̂`` term is
+taken exactly, so ``R̃ p̂`` is unchanged by the attitude correction, as in the
+derivation of (4.33) where p̃'s dynamics do not depend on the attitude
+estimates.
+
+Symbols -> names: p̂_i ``p_hat``, v_i^i ``v_body``, k_p ``k_p``; the rest as in
+:mod:`relative_attitude_hybrid`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from agent.algorithms import relative_attitude_hybrid as att
+from agent.algorithms.relative_attitude_hybrid import Outputs
+from agent.algorithms.relative_attitude_terms import EdgeData, relative_position_rate
+from zswarm.so3 import Mat3, Vec3, exp
+
+__all__ = ["Gains", "State", "Inputs", "Outputs", "step"]
+
+
+@dataclass(frozen=True, slots=True)
+class Gains:
+    k_R: float
+    k_xi: float
+    k_p: float
+    A: Mat3
+    u: Vec3
+    gamma: float
+    delta: float
+    Xi: tuple[float, ...]
+
+    def attitude(self) -> att.Gains:
+        return att.Gains(self.k_R, self.k_xi, self.A, self.u, self.gamma, self.delta, self.Xi)
+
+
+@dataclass(frozen=True, slots=True)
+class State:
+    R_hat: Mat3
+    p_hat: Vec3
+    xi: Mapping[int, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    omega: Vec3  # body-frame angular velocity, rad/s
+    v_body: Vec3  # body-frame linear velocity v_i^i, m/s
+    edges: tuple[EdgeData, ...]
+
+
+def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
+    """Advance (4.25)–(4.26) and (4.30)–(4.31) by ``dt`` seconds."""
+    a, out, R_pred = att.attitude_step(att.State(state.R_hat, state.xi), att.Inputs(inputs.omega, inputs.edges), dt, gains.attitude())
+    rate = R_pred @ inputs.v_body - gains.k_p * relative_position_rate(R_pred, state.p_hat, inputs.edges)
+    p_next = exp(-dt * gains.k_R * out.sigma) @ (state.p_hat + dt * rate)
+    return State(a.R_hat, p_next, a.xi), out

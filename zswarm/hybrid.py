@@ -1,0 +1,227 @@
+"""The synergistic potential of the thesis' hybrid schemes and its parameter design.
+
+Boughellaba (2024) §4.3.2.3 (also §5.5), after Wang & Tayebi (2022):
+
+    U(R̄, ξ) = tr(A (I − R̄ Ra(ξ, u))) + (γ/2) ξ²                        (4.23)
+    ψ(R̄^T ∇_R̄ U) = Ra(ξ, u) ψ(A R̄ Ra(ξ, u))                          Prop. 4.1
+    ∇_ξ U = γ ξ + 2 u^T ψ(A R̄ Ra(ξ, u))                                Prop. 4.1
+
+Condition 4.1 asks for δ > 0 and a finite Ξ such that at every undesired
+critical point (ξ = 0, Pa(A R̄) = 0, R̄ ≠ I, i.e. R̄ = Ra(π, q_β) for an
+eigenvector q_β of A) ``U(R̄, 0) − min_{ξ∈Ξ} U(R̄, ξ) > δ``.  Proposition 4.2
+gives (u, Δ*) and the bounds on γ and δ that guarantee it; :func:`design`
+computes them and :func:`condition_gaps` evaluates the condition itself.
+
+Symbols -> names: A ``A`` (3×3, symmetric), u ``u``, γ ``gamma``, δ ``delta``,
+Ξ ``Xi``, ξ ``xi``, Δ* ``Delta_star``, λ_i/q_i eigenpairs of A (ascending).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from zswarm.so3 import Mat3, Ra, Vec3, psi
+
+# The published designs take γ and δ at 95 % of their Prop. 4.2 bounds:
+# 0.95·4·5/π² = 1.9251 (§4.5, §5.6); 0.95·(4Δ*/π² − γ)ξ_L²/2 = 0.0030 (Ξ = {0.08π})
+# and 0.3848 (Ξ = {0.9π}).
+DEFAULT_MARGIN = 0.95
+# λ2 within this relative distance of λ1λ3/(λ3 − λ1) counts as the second case of
+# Prop. 4.2.  The cases meet continuously there; the thesis' A = diag(5, 8.57, 12)
+# has λ2 = 8.57 ≈ 60/7 = 8.5714 and uses the second case (u_1 = 0, Δ* = 5).
+CASE_BOUNDARY_RTOL = 1e-3
+
+
+class DesignError(ValueError):
+    """Parameters that break Prop. 4.2 or Condition 4.1; ``field`` names the culprit."""
+
+    def __init__(self, field: str, problem: str) -> None:
+        super().__init__(f"{field}: {problem}")
+        self.field = field
+        self.problem = problem
+
+
+def potential(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, xi: float) -> float:
+    """``U(R̄, ξ)`` of (4.23)."""
+    return float(np.trace(A @ (np.eye(3) - R_bar @ Ra(xi, u)))) + 0.5 * gamma * xi * xi
+
+
+def grad_R(A: Mat3, u: Vec3, R_bar: Mat3, xi: float) -> Vec3:
+    """``ψ(R̄^T ∇_R̄ U) = Ra(ξ,u) ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1): the body-frame gradient, g_k."""
+    Q = Ra(xi, u)
+    return Q @ psi(A @ R_bar @ Q)
+
+
+def grad_xi(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, xi: float) -> float:
+    """``∇_ξ U = γ ξ + 2 u^T ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1)."""
+    return gamma * xi + 2.0 * float(u @ psi(A @ R_bar @ Ra(xi, u)))
+
+
+def best_xi(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, Xi: Sequence[float]) -> tuple[float, float]:
+    """``(ξ*, U(R̄, ξ*))`` with ``ξ* = argmin_{ξ∈Ξ} U(R̄, ξ)`` (first of equal minima)."""
+    best, u_best = Xi[0], potential(A, u, gamma, R_bar, Xi[0])
+    for x in Xi[1:]:
+        v = potential(A, u, gamma, R_bar, x)
+        if v < u_best:
+            best, u_best = x, v
+    return best, u_best
+
+
+@dataclass(frozen=True, slots=True)
+class Design:
+    """The outcome of Prop. 4.2 for given A and Ξ (and optional γ, δ)."""
+
+    case: int  # 1: λ1 = λ2; 2: λ2 ≥ λ1λ3/(λ3−λ1); 3: otherwise
+    eigenvalues: tuple[float, float, float]  # λ1 ≤ λ2 ≤ λ3
+    eigenvectors: NDArray[np.float64]  # columns q_1, q_2, q_3
+    alpha: tuple[float, float, float]  # u = Σ α_i q_i, α_i ≥ 0
+    u: NDArray[np.float64]
+    Delta_star: float
+    gamma_max: float  # γ < 4Δ*/π²
+    gamma: float
+    delta_max: float  # δ < (4Δ*/π² − γ) ξ_L²/2
+    delta: float
+    Xi: tuple[float, ...]
+    gaps: tuple[float, float, float]  # Condition 4.1 gap at R̄ = Ra(π, q_β), β = 1, 2, 3
+
+    @property
+    def condition_holds(self) -> bool:
+        return all(g > self.delta for g in self.gaps)
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "case": self.case,
+            "eigenvalues": list(self.eigenvalues),
+            "alpha": list(self.alpha),
+            "u": self.u.tolist(),
+            "Delta_star": self.Delta_star,
+            "gamma_max": self.gamma_max,
+            "gamma": self.gamma,
+            "delta_max": self.delta_max,
+            "delta": self.delta,
+            "Xi": list(self.Xi),
+            "condition_4_1_gaps": list(self.gaps),
+            "condition_4_1_holds": self.condition_holds,
+        }
+
+
+def eig_sorted(A: Mat3) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Eigenvalues ascending and eigenvectors (columns) of a symmetric A."""
+    lam, Q = np.linalg.eigh(0.5 * (A + A.T))
+    return lam, Q
+
+
+def check_A(A: Mat3, fld: str = "A", distinct: bool = True) -> None:
+    """Assumption 4.4: A symmetric positive definite with three distinct eigenvalues."""
+    if A.shape != (3, 3) or not np.all(np.isfinite(A)):
+        raise DesignError(fld, f"must be a finite 3x3 matrix (got {A.tolist()})")
+    if not np.allclose(A, A.T, atol=1e-12, rtol=1e-9):
+        raise DesignError(fld, f"must be symmetric (Assumption 4.4) (got {A.tolist()})")
+    lam, _ = eig_sorted(A)
+    if lam[0] <= 0:
+        raise DesignError(fld, f"must be positive definite (Assumption 4.4) (got eigenvalues {lam.tolist()})")
+    if distinct and (lam[1] - lam[0] < 1e-9 * lam[2] or lam[2] - lam[1] < 1e-9 * lam[2]):
+        raise DesignError(fld, f"needs three distinct eigenvalues (Assumption 4.4) (got {lam.tolist()})")
+
+
+def condition_gaps(A: Mat3, u: Vec3, gamma: float, Xi: Sequence[float]) -> tuple[float, float, float]:
+    """``U(R̄, 0) − min_{ξ∈Ξ} U(R̄, ξ)`` at the three undesired critical attitudes ``R̄ = Ra(π, q_β)``.
+
+    Condition 4.1 holds for δ iff every gap exceeds δ (Prop. 4.1 puts every
+    undesired critical point at ξ = 0 with R̄ a rotation by π about an
+    eigenvector of A).
+    """
+    _, Q = eig_sorted(A)
+    gaps = []
+    for b in range(3):
+        R_bar = Ra(math.pi, Q[:, b])
+        gaps.append(potential(A, u, gamma, R_bar, 0.0) - best_xi(A, u, gamma, R_bar, list(Xi))[1])
+    return (gaps[0], gaps[1], gaps[2])
+
+
+def design(
+    A: Mat3,
+    Xi: Sequence[float],
+    gamma: float | None = None,
+    delta: float | None = None,
+    margin: float = DEFAULT_MARGIN,
+) -> Design:
+    """Prop. 4.2: u, Δ*, and the bounds on γ and δ for ``A`` and ``Ξ``.
+
+    ``gamma``/``delta`` default to ``margin`` times their bounds.  Raises
+    :class:`DesignError` naming ``A``, ``Xi``, ``gamma`` or ``delta`` if a
+    bound of (4.24) fails.
+    """
+    A = np.asarray(A, dtype=float)
+    check_A(A, "A", distinct=False)
+    lam, Q = eig_sorted(A)
+    l1, l2, l3 = (float(x) for x in lam)
+    if not l2 < l3 * (1 - 1e-12):
+        raise DesignError("A", f"Prop. 4.2 needs λ1 ≤ λ2 < λ3 (got {lam.tolist()})")
+    if not Xi:
+        raise DesignError("Xi", "must hold at least one value")
+    for x in Xi:
+        if not (0 < abs(x) <= math.pi + 1e-12):
+            raise DesignError("Xi", f"every |ξ| must lie in (0, π] (Prop. 4.2) (got {x})")
+    boundary = l1 * l3 / (l3 - l1)
+    if abs(l2 - l1) <= 1e-12 * l3:
+        case = 1
+        a2 = (0.0, 0.0, 1.0 - l2 / l3)
+        a2 = (1.0 - a2[2], 0.0, a2[2])  # α_1² + α_3² = 1 (q_1, q_2 span one eigenspace)
+        Dstar = l1 * (1.0 - l2 / l3)
+    elif l2 >= boundary * (1 - CASE_BOUNDARY_RTOL):
+        case = 2
+        a2 = (0.0, l2 / (l2 + l3), l3 / (l2 + l3))
+        Dstar = l1
+    else:
+        case = 3
+        s = 2.0 * (l1 * l2 + l1 * l3 + l2 * l3)  # Σ_l Σ_{k≠l} λ_l λ_k
+        prods = (l2 * l3, l1 * l3, l1 * l2)  # Π_{l≠i} λ_l
+        a2 = tuple(1.0 - 4.0 * pr / s for pr in prods)  # type: ignore[assignment]
+        Dstar = 4.0 * l1 * l2 * l3 / s
+    alpha = tuple(math.sqrt(max(0.0, x)) for x in a2)
+    u = Q @ np.array(alpha)
+    u = u / np.linalg.norm(u)
+    gamma_max = 4.0 * Dstar / math.pi**2
+    g = margin * gamma_max if gamma is None else float(gamma)
+    if not 0 < g < gamma_max:
+        raise DesignError("gamma", f"Prop. 4.2 needs 0 < γ < 4Δ*/π² = {gamma_max:.6g} (got {g:g})")
+    xi_L = max(abs(x) for x in Xi)
+    delta_max = (gamma_max - g) * xi_L**2 / 2.0
+    d = margin * delta_max if delta is None else float(delta)
+    if not 0 < d < delta_max:
+        raise DesignError("delta", f"Prop. 4.2 needs 0 < δ < (4Δ*/π² − γ) ξ_L²/2 = {delta_max:.6g} (got {d:g})")
+    gaps = condition_gaps(A, u, g, Xi)
+    return Design(case, (l1, l2, l3), Q, (alpha[0], alpha[1], alpha[2]), u, Dstar, gamma_max, g, delta_max, d, tuple(float(x) for x in Xi), gaps)
+
+
+def check_parameters(A: Mat3, u: Vec3, gamma: float, delta: float, Xi: Sequence[float], u_tol: float = 1e-2) -> Design:
+    """Check user-given (A, u, γ, δ, Ξ) against Prop. 4.2 and Condition 4.1.
+
+    ``u`` must be a unit vector equal, up to the sign of each eigen-component,
+    to Prop. 4.2's ``u`` within ``u_tol`` per component (the thesis prints u to
+    4 decimals).  Raises :class:`DesignError` naming the parameter whose bound
+    fails.
+    """
+    A = np.asarray(A, dtype=float)
+    u = np.asarray(u, dtype=float)
+    check_A(A, "A", distinct=True)
+    d = design(A, Xi, gamma, delta)
+    if abs(float(np.linalg.norm(u)) - 1.0) > 1e-3:
+        raise DesignError("u", f"must be a unit vector (got norm {np.linalg.norm(u):.6g})")
+    got = np.abs(d.eigenvectors.T @ u)
+    if np.max(np.abs(got - np.array(d.alpha))) > u_tol:
+        raise DesignError(
+            "u",
+            f"is not Prop. 4.2's u for this A: eigen-components |α| = {np.round(got, 4).tolist()}, "
+            f"Prop. 4.2 (case {d.case}) gives {np.round(d.alpha, 4).tolist()}, i.e. u = {np.round(d.u, 4).tolist()}",
+        )
+    gaps = condition_gaps(A, u, d.gamma, Xi)
+    if not all(g > d.delta for g in gaps):
+        raise DesignError("delta", f"Condition 4.1 fails: gaps U(R̄,0) − min_Ξ U(R̄,ξ) at the undesired critical points are {[round(g, 6) for g in gaps]}, not all > δ = {d.delta:g}")
+    return Design(d.case, d.eigenvalues, d.eigenvectors, d.alpha, u, d.Delta_star, d.gamma_max, d.gamma, d.delta_max, d.delta, d.Xi, gaps)
