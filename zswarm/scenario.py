@@ -506,7 +506,8 @@ def _params(c: _Ctx, d: Any, info: AlgorithmInfo) -> Params | None:
         hybrid.check_parameters(A, np.array(u), gamma, delta, Xi)
     except hybrid.DesignError as exc:
         raise c.err(f"{f}.{exc.field}", exc.problem) from None
-    return Params(tuple(A.ravel().tolist()), u, gamma, delta, Xi)
+    un = np.array(u) / np.linalg.norm(u)  # printed to 4 decimals in the thesis; Prop. 4.1 needs |u| = 1
+    return Params(tuple(A.ravel().tolist()), (float(un[0]), float(un[1]), float(un[2])), gamma, delta, Xi)
 
 
 def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:
