@@ -32,7 +32,8 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,)},
     # agent j -> agent i along edge j->i: estimates, j's bearing toward i (b_ji^j),
     # j's angular rate (to propagate R̂_j to i's tick) and ξ_k when j heads edge k
-    "edge": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "b": (3,), "w": (3,), "xi": "float"},
+    # j's inertial velocity (vel) lets i bring p̂_j to its tick when agents move
+    "edge": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "b": (3,), "w": (3,), "xi": "float", "vel": (3,)},
     # agent i -> recorder; xi: ξ_k of the edges it heads; jumps since the last est
     "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "vecmap", "xi": "floatmap", "jumps": "jumps"},
     # world -> recorder: ids[k] has attitude R[k], position p[k], true angular velocity w[k]
@@ -46,7 +47,7 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
 }
 ENVELOPE = ("v", "type", "src", "seq", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
-OPTIONAL = {"sense": {"bearings", "rel_att", "vel", "vel_body", "R", "p"}, "edge": {"b", "w", "xi"}, "est": {"xi", "jumps"}}
+OPTIONAL = {"sense": {"bearings", "rel_att", "vel", "vel_body", "R", "p"}, "edge": {"b", "w", "xi", "vel"}, "est": {"xi", "jumps"}}
 
 
 def _arr(a: np.ndarray) -> list[Any]:

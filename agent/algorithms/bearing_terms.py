@@ -32,6 +32,9 @@ class NeighborData:
     p_hat_j: Vec3
     b_nbr: Vec3
     b_own: Vec3
+    # i's bearing at the step's end for the projection of (3.14)/(3.25), when it
+    # differs from b_own (moving agents: b_own is then paired with j's sample time)
+    b_pos: Vec3 | None = None
 
 
 def bearing_correction(R_hat: Mat3, nbrs: tuple[NeighborData, ...]) -> Vec3:
@@ -53,7 +56,7 @@ def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple
     """
     acc = np.zeros(3)
     for n in nbrs:
-        g = R_hat @ n.b_own
+        g = R_hat @ (n.b_own if n.b_pos is None else n.b_pos)
         g = g / np.sqrt(g @ g)
         d = p_hat - n.p_hat_j
         acc = acc + (d - g * (g @ d))

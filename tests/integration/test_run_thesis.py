@@ -1,0 +1,104 @@
+"""``zswarm run`` on the §3.3 and §4 scenarios, against the issue's thresholds and ``sim``.
+
+Agreement is judged on convergence times (the first time after which an
+error stays below a threshold): the engines run the same objects on the same
+sensor samples, but over Zenoh agents tick asynchronously and messages are
+0.1–10 ms old, which shifts transients by a fraction of a second.  Measured
+(2 cores): §4.5 settle times 13.7–15.2 s on run vs 13.0–14.5 s on sim;
+±25 % fails for a broken engine (a missed jump or stale ξ changes them by
+tens of seconds or prevents convergence).  Final floors are only required
+to be below the thresholds on both: over Zenoh the noise-free floors are set
+by message timing (§3.3: 1e-3 on run vs 1e-5 on sim, see README).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections import defaultdict
+
+import numpy as np
+import pytest
+
+from tests.conftest import TOPO
+from tests.integration.conftest import zswarm
+from zswarm.report import make_report
+from zswarm.scenario import load
+from zswarm.sim import simulate
+
+pytestmark = pytest.mark.integration
+
+
+def run(procs, tmp_path, name):
+    sc = load(TOPO / f"{name}.toml")
+    out = tmp_path / "run"
+    p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    code = p.wait(sc.duration * 3 + 90)
+    procs.adopt(out)
+    assert code == 0, (tmp_path / "launcher.log").read_text()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert all(c["dropped"] == 0 for c in s["links"].values()), s["links"]
+    sim_out = tmp_path / "sim"
+    sim_out.mkdir()
+    simulate(sc, sim_out, sc.duration, sc.seed)
+    ss = make_report(sim_out, sc, "sim", sc.duration, 0.0, sc.seed, plots=False)
+    return sc, out, s, sim_out, ss
+
+
+def follower_means(path):
+    """Mean over followers of (attitude, position) error in 0.1 s bins: (t, att, pos) arrays."""
+    bins = defaultdict(list)
+    for r in csv.DictReader(open(path / "errors.csv")):
+        if int(r["agent"]) > 2:
+            bins[round(float(r["t"]), 1)].append((float(r["attitude_error"]), float(r["position_error"])))
+    t = np.array(sorted(bins))
+    return t, np.array([np.mean([a for a, _ in bins[x]]) for x in t]), np.array([np.mean([p for _, p in bins[x]]) for x in t])
+
+
+def settles(t, v, thr):
+    above = np.nonzero(v >= thr)[0]
+    return t[0] if len(above) == 0 else (t[above[-1] + 1] if above[-1] + 1 < len(t) else math.inf)
+
+
+def edge_series(path, col):
+    out = defaultdict(list)
+    for r in csv.DictReader(open(path / "edges.csv")):
+        out[int(r["edge"])].append((float(r["t"]), float(r[col])))
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def test_moving5_run(procs, tmp_path):
+    sc, out, s, sim_out, ss = run(procs, tmp_path, "thesis-3.3-moving5")
+    t, att, pos = follower_means(out)
+    assert np.max(att[t >= 5.0]) < 1e-2  # attitude < 1e-2 by 5 s
+    assert pos[t >= 29.9][0] < 0.1 and s["mean_position_error_final"] < 0.1  # position < 0.1 by 30 s
+    ts, atts, poss = follower_means(sim_out)
+    assert np.max(atts[ts >= 5.0]) < 1e-2
+    t_run, t_sim = settles(t, pos, 0.2), settles(ts, poss, 0.2)
+    assert t_run == pytest.approx(t_sim, rel=0.25), (t_run, t_sim)
+
+
+@pytest.mark.parametrize("name", ["thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"])
+def test_hybrid_run(procs, tmp_path, name):
+    sc, out, s, sim_out, ss = run(procs, tmp_path, name)
+    for k, e in s["edges"].items():
+        first = e["jump_log"][0]
+        assert first["t"] < 0.1 and first["xi_before"] == 0.0 and first["xi_after"] == pytest.approx(0.08 * math.pi), (k, e["jump_log"])
+        assert e["jumps"] == e["jumps_reported_by_head"] <= 3, (k, e["jump_log"])  # finitely many (1 on sim)
+    ra, ras = edge_series(out, "relative_attitude_error"), edge_series(sim_out, "relative_attitude_error")
+    for k in ra:
+        assert np.max(ra[k][ra[k][:, 0] >= 25.0, 1]) < 1e-2, k  # every |R̄_k|_I < 1e-2 by 25 s
+        t_run = settles(ra[k][:, 0], ra[k][:, 1], 1e-2)
+        t_sim = settles(ras[k][:, 0], ras[k][:, 1], 1e-2)
+        assert t_run == pytest.approx(t_sim, rel=0.25), (k, t_run, t_sim)
+    if "pose" in name:
+        assert s["max_relative_position_error_final"] < 0.1 and ss["max_relative_position_error_final"] < 0.1
+        rp, rps = edge_series(out, "relative_position_error"), edge_series(sim_out, "relative_position_error")
+        worst = np.max([rp[k][:, 1] for k in rp], axis=0)
+        worst_s = np.max([rps[k][:, 1] for k in rps], axis=0)
+        t_run, t_sim = settles(rp[1][:, 0], worst, 0.3), settles(rps[1][:, 0], worst_s, 0.3)
+        assert t_run == pytest.approx(t_sim, rel=0.25), (t_run, t_sim)
+    for f in ("edges.csv", "plots/relative_attitude_error.png", "plots/xi.png"):
+        assert (out / f).exists(), f
