@@ -27,6 +27,7 @@ from zswarm import keys, so3, wire
 from zswarm.bus import Bus
 from zswarm.clock import AgentClock
 from zswarm.scenario import Scenario
+from zswarm.so3 import exp
 
 log = logging.getLogger("zswarm.agent")
 
@@ -65,6 +66,9 @@ class LinkCounter:
         return d
 
 
+VEL_BODY = -1  # key of the body-frame velocity among an Inbox's body vectors
+
+
 class Inbox:
     """Newest decoded message per source key, with per-link counters and malformed counts."""
 
@@ -75,8 +79,9 @@ class Inbox:
         # (acquisition world time, value) of recent sensor packets' gyro and inertial
         # velocity, for integrating them over a step
         self.rates: dict[str, deque[tuple[float, np.ndarray]]] = {"gyro": deque(maxlen=64), "vel": deque(maxlen=64)}
-        # (acquisition world time, body-frame bearings) of recent sensor packets
-        self.bearings: deque[tuple[float, dict[int, np.ndarray]]] = deque(maxlen=64)
+        # (acquisition world time, body-frame bearings {j: b_ij^i} and velocity
+        # {VEL_BODY: v_i^i}, gyro) of recent sensor packets
+        self.bearings: deque[tuple[float, dict[int, np.ndarray], np.ndarray]] = deque(maxlen=64)
         self.links: dict[str, LinkCounter] = {}
         self.malformed = 0
         self._logged: set[str] = set()
@@ -108,8 +113,11 @@ class Inbox:
                         for name, q in self.rates.items():
                             if name in msg:
                                 q.append((msg["t"], msg[name]))
-                        if "bearings" in msg:
-                            self.bearings.append((msg["t"], msg["bearings"]))
+                        if "bearings" in msg or "vel_body" in msg:
+                            vecs = dict(msg.get("bearings", {}))
+                            if "vel_body" in msg:
+                                vecs[VEL_BODY] = msg["vel_body"]
+                            self.bearings.append((msg["t"], vecs, msg["gyro"]))
 
         return on_message
 
@@ -121,29 +129,37 @@ class Inbox:
         with self._lock:
             return list(self.rates[name])
 
-    def bearing_at(self, j: int, t: float) -> np.ndarray | None:
-        """This agent's body-frame bearing toward j at world time ``t``.
+    def bearing_at(self, j: int, t: float, max_ahead: float = 0.05, unit: bool = True) -> np.ndarray | None:
+        """This agent's body-frame bearing toward j at world time ``t`` (or, for
+        ``j = VEL_BODY`` and ``unit=False``, its body-frame velocity).
 
-        Linear interpolation between the two sensor samples around ``t`` (or
-        extrapolation from the last two, for at most one sample gap past the
-        newest), renormalised: the body turns ≤ 0.03 rad between 200 Hz
-        samples, so the error is ≈ 1e-4 rad.  None if ``t`` is outside that.
+        From the two sensor samples around ``t`` (or the newest two, up to
+        ``max_ahead`` s past the newest): the older one is turned into the
+        newer one's body frame with the gyro, so what is left between them is
+        the bearing's own (translational) change, slow next to the body's
+        rotation; that is interpolated or extrapolated linearly and the result
+        turned to the body frame at ``t``.  A plain linear extrapolation of
+        body-frame vectors holds only for a sample gap (5 ms), and over Zenoh
+        the newest sample is often older than that.  None outside the history.
         """
         with self._lock:
-            hist = [(ts, b[j]) for ts, b in self.bearings if j in b]
+            hist = [(ts, b[j], w) for ts, b, w in self.bearings if j in b]
         if len(hist) < 2:
             return None
         pairs = list(zip(hist, hist[1:], strict=False))
-        (t0, b0), (t1, b1) = pairs[-1]
-        if not t1 < t <= t1 + (t1 - t0):
-            for (t0, b0), (t1, b1) in pairs:
+        (t0, b0, _), (t1, b1, w1) = pairs[-1]
+        if not t1 < t <= t1 + max_ahead:
+            for (t0, b0, _), (t1, b1, w1) in pairs:
                 if t0 <= t <= t1:
                     break
             else:
                 return None
-        s = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
-        v = (1 - s) * b0 + s * b1
-        return v / np.sqrt(v @ v)
+        if t1 <= t0:
+            return None
+        b0_in_1 = exp(-(t1 - t0) * w1) @ b0
+        s_ = (t - t0) / (t1 - t0)
+        v = exp(-(t - t1) * w1) @ ((1 - s_) * b0_in_1 + s_ * b1)
+        return v / np.sqrt(v @ v) if unit else v
 
     def counters(self) -> dict[str, Any]:
         with self._lock:
@@ -245,6 +261,7 @@ class AgentNode:
         self.t_last: float | None = None
         self.last_local: float | None = None
         self.substeps = 0  # extra sub-steps taken for late ticks
+        self._t_world = 0.0  # world time of the tick being computed
         self.compute_s = 0.0
         self.compute_max = 0.0
 
@@ -253,6 +270,7 @@ class AgentNode:
     def tick(self, t_world: float) -> None:
         """One step at world time ``t_world`` (the agent reads its own clock from it)."""
         t_local = self.clock.local(t_world)
+        self._t_world = t_world
         sense = self.inbox.get(self.sense_link)
         if sense is None:
             return  # nothing measured yet: no step, nothing to publish
@@ -277,7 +295,7 @@ class AgentNode:
             align = so3.exp(-(t_local - self.clock.local(sense["t"])) * sense["gyro"])
             if dt > 0:
                 omega = interval_mean_rate(self._samples("gyro"), t_local - dt, t_local)
-                inputs = self._tree_inputs(sense, omega, align, t_local) if self.tree else self._bearing_inputs(sense, omega, align, t_local, dt)
+                inputs = self._tree_inputs(sense, omega, align, t_local, dt) if self.tree else self._bearing_inputs(sense, omega, align, t_local, dt)
                 # A late tick (a stalled process, a missed deadline) would take one
                 # long explicit step: k_R σ dt and k_ξ γ dt of order 1 overshoot and can
                 # throw ξ into the jump set.  Sub-steps of at most two periods keep the
@@ -314,6 +332,9 @@ class AgentNode:
                 continue
             if "vel" in sense:
                 fields["vel"] = sense["vel"]
+            elif "vel_body" in sense:
+                # ṗ̂_j ≈ R̂_j v_j^j during flows (4.30): lets i bring p̂_j to its tick.
+                fields["vel"] = R_hat @ (align @ sense["vel_body"])
             if self.tree:
                 fields["w"] = sense["gyro"]
                 k, head = self.edge_of[i]
@@ -379,6 +400,9 @@ class AgentNode:
             # the gyro; p̂_j is brought to this tick with j's measured velocity.
             # Pairing with the newest bearing instead left a 4e-3 attitude floor
             # over Zenoh (5–10 ms ages × 0.5 rad/s).
+            b_t = self.inbox.bearing_at(j, self._t_world)
+            if b_t is not None:
+                b_now = b_t
             t_j = self.clock.local(m["t"])
             tau = t_local - t_j
             b_then = self.inbox.bearing_at(j, m["t"])
@@ -393,7 +417,7 @@ class AgentNode:
             return self.algo.Inputs(omega, v, tuple(nbrs))
         return self.algo.Inputs(omega, tuple(nbrs))
 
-    def _tree_inputs(self, sense: dict[str, Any], omega: np.ndarray, align: np.ndarray, t_local: float) -> Any:
+    def _tree_inputs(self, sense: dict[str, Any], omega: np.ndarray, align: np.ndarray, t_local: float, dt: float) -> Any:
         """Inputs of the §4 observers, every quantity brought to this tick.
 
         The measured ``R_ij = R_i^T R_j`` is from time t_s and j's estimate from
@@ -417,17 +441,30 @@ class AgentNode:
             w_j = m["w"]
             tau_j = t_local - self.clock.local(m["t"])
             b_own = bearings.get(j)
+            if b_own is not None:
+                b_t = self.inbox.bearing_at(j, self._t_world) if self.sc.moving else None
+                b_own = align @ b_own if b_t is None else b_t
             b_nbr = m.get("b")
+            R_ij = align @ R_m @ so3.exp(tau_s * w_j)
+            if b_nbr is not None:
+                b_nbr = so3.exp(-tau_j * w_j) @ b_nbr
+                b_then = self.inbox.bearing_at(j, m["t"]) if (self.sc.moving and b_own is not None) else None
+                if b_then is not None:
+                    # j's bearing is from its tick t_j; the inertial bearing b_ji = −b_ij
+                    # has turned since (0.5 rad/s in §4.5): our own bearing's change
+                    # over [t_j, t], in j's frame, corrects it.
+                    w_bar = interval_mean_rate(self._samples("gyro"), t_local - tau_j, t_local)
+                    b_nbr = b_nbr - R_ij.T @ (b_own - so3.exp(-tau_j * w_bar) @ b_then)
             edges.append(
                 EdgeData(
                     k,
                     head,
-                    align @ R_m @ so3.exp(tau_s * w_j),
+                    R_ij,
                     m["R_hat"] @ so3.exp(tau_j * w_j),
                     float(m.get("xi", 0.0)),
-                    None if b_own is None else align @ b_own,
-                    None if b_nbr is None else so3.exp(-tau_j * w_j) @ b_nbr,
-                    m["p_hat"],
+                    b_own,
+                    b_nbr,
+                    m["p_hat"] + tau_j * m["vel"] if "vel" in m else m["p_hat"],
                 )
             )
         if not self.heard_all:
@@ -440,7 +477,13 @@ class AgentNode:
             else:
                 self.heard_all = True
         if "vel_body" in sense:
-            return self.algo.Inputs(omega, align @ sense["vel_body"], tuple(edges))
+            # (4.30) integrates R̂_i v_i^i ≈ R̃_i^T v_i over the step: take v_i^i at the
+            # step's midpoint, turned to this tick's body frame (a midpoint rule).
+            # The newest sample instead runs ahead of a rotating formation's
+            # velocity by v̇·dt/2 ≈ 7 mm/s in §4.5, a ≈ 0.05–0.09 m bias on p̃.
+            v = self.inbox.bearing_at(VEL_BODY, self._t_world - dt / 2, unit=False)
+            v = align @ sense["vel_body"] if v is None else so3.exp(-(dt / 2) * omega) @ v
+            return self.algo.Inputs(omega, v, tuple(edges))
         return self.algo.Inputs(omega, tuple(edges))
 
     # ------------------------------------------------------------------ reporting
