@@ -437,45 +437,35 @@ def plot_tree(out: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
     out.mkdir(parents=True, exist_ok=True)
     pose = "bearings" in sc.info.sensors
 
-    def per_edge(series: dict[int, np.ndarray], ylabel: str, name: str, title: str) -> None:
+    def figure(series: dict[int, np.ndarray], ylabel: str, name: str, title: str, per_edge: bool) -> None:
+        """Top: one curve per edge or agent; bottom, log scale: the same per edge, or the agents' average."""
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-        for k, (h, tl) in enumerate(sc.oriented, start=1):
-            for ax in (ax1, ax2):
-                ax.plot(tm.t, series[k], lw=1, label=f"edge {k} ({h}→{tl})")
+        if per_edge:
+            for k, (h, tl) in enumerate(sc.oriented, start=1):
+                for ax in (ax1, ax2):
+                    ax.plot(tm.t, series[k], lw=1, label=f"edge {k} ({h}→{tl})")
+            ax2.set_ylabel(ylabel + " (log)")
+        else:
+            for i in sc.ids:
+                ax1.plot(tm.t, series[i], lw=1, label=f"agent {i}")
+            ax2.plot(tm.t, np.mean([series[i] for i in sc.ids], axis=0), "k", lw=1.2)
+            ax2.set_ylabel("average over agents (log)")
         ax2.set_yscale("log")
         ax1.set_ylabel(ylabel)
-        ax2.set_ylabel(ylabel + " (log)")
         ax2.set_xlabel("t (s)")
         ax1.set_title(f"{sc.name}: {title}")
-        ax1.legend(fontsize=7, ncol=2)
+        ax1.legend(fontsize=7, ncol=2 if per_edge else 3)
         for ax in (ax1, ax2):
             ax.grid(True, alpha=0.3)
         fig.tight_layout()
         fig.savefig(out / f"{name}.png", dpi=110)
         plt.close(fig)
 
-    def per_agent(series: dict[int, np.ndarray], ylabel: str, name: str, title: str) -> None:
-        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-        for i in sc.ids:
-            ax1.plot(tm.t, series[i], lw=1, label=f"agent {i}")
-        ax2.plot(tm.t, np.mean([series[i] for i in sc.ids], axis=0), "k", lw=1.2)
-        ax2.set_yscale("log")
-        ax1.set_ylabel(ylabel)
-        ax2.set_ylabel("average over agents (log)")
-        ax2.set_xlabel("t (s)")
-        ax1.set_title(f"{sc.name}: {title}")
-        ax1.legend(fontsize=7, ncol=3)
-        for ax in (ax1, ax2):
-            ax.grid(True, alpha=0.3)
-        fig.tight_layout()
-        fig.savefig(out / f"{name}.png", dpi=110)
-        plt.close(fig)
-
-    per_edge(tm.rel_att, r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude error per edge")
-    per_agent(tm.att_common, r"$|\tilde R_i \tilde R_c^T|_I$", "attitude_error", "attitude error up to a common rotation")
+    figure(tm.rel_att, r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude error per edge", True)
+    figure(tm.att_common, r"$|\tilde R_i \tilde R_c^T|_I$", "attitude_error", "attitude error up to a common rotation", False)
     if pose:
-        per_edge(tm.rel_pos, r"$\|\tilde p_h-\tilde p_t\|$", "relative_position_error", "relative position error per edge")
-        per_agent(tm.pos_common, r"$\|\tilde p_i-\mathrm{mean}\,\tilde p\|$", "position_error", "position error up to a common translation")
+        figure(tm.rel_pos, r"$\|\tilde p_h-\tilde p_t\|$", "relative_position_error", "relative position error per edge", True)
+        figure(tm.pos_common, r"$\|\tilde p_i-\mathrm{mean}\,\tilde p\|$", "position_error", "position error up to a common translation", False)
     if rec.xi:
         fig, ax = plt.subplots(figsize=(7, 3.5))
         for k, xs in rec.xi.items():

@@ -30,9 +30,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from agent.algorithms.relative_attitude_continuous import Inputs
 from agent.algorithms.relative_attitude_terms import EdgeData, hybrid_correction, relative_error
 from zswarm import hybrid
 from zswarm.so3 import Mat3, Vec3, exp
+
+__all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,12 +53,6 @@ class Gains:
 class State:
     R_hat: Mat3
     xi: Mapping[int, float] = field(default_factory=dict)  # ξ_k of the edges this agent heads
-
-
-@dataclass(frozen=True, slots=True)
-class Inputs:
-    omega: Vec3  # body-frame angular velocity measurement, rad/s
-    edges: tuple[EdgeData, ...]
 
 
 @dataclass(frozen=True, slots=True)
