@@ -173,8 +173,8 @@ def _path(adj: Mapping[int, Sequence[int]], a: int, b: int) -> list[int]:
                 prev[y] = x
                 queue.append(y)
     out: list[int] = []
-    x: int | None = b
-    while x is not None:
-        out.append(x)
-        x = prev[x]
+    node: int | None = b
+    while node is not None:
+        out.append(node)
+        node = prev[node]
     return out[::-1]

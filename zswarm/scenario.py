@@ -411,14 +411,14 @@ def loads(text: str, path: str = "<string>") -> Scenario:
             # Every tree neighbour is an in-neighbour: the edges carry messages both ways.
             if a.neighbors and tuple(sorted(a.neighbors)) != nbrs[a.id]:
                 raise c.err(f"{seen[a.id]}.neighbors", f"disagrees with the tree's neighbours {list(nbrs[a.id])} of agent {a.id}", list(a.neighbors))
-            for k in a.estimate.xi:
-                if not 1 <= k <= len(oriented):
-                    raise c.err(f"{seen[a.id]}.estimate.xi.{k}", f"no edge {k} (edges are 1..{len(oriented)})")
-                head, tail = oriented[k - 1]
+            for ek in a.estimate.xi:
+                if not 1 <= ek <= len(oriented):
+                    raise c.err(f"{seen[a.id]}.estimate.xi.{ek}", f"no edge {ek} (edges are 1..{len(oriented)})")
+                head, tail = oriented[ek - 1]
                 if head != a.id:
                     raise c.err(
-                        f"{seen[a.id]}.estimate.xi.{k}",
-                        f"ξ_{k} lives at the head of edge {k} ({head} -> {tail}), agent {head} (Remark 4.4), not agent {a.id}",
+                        f"{seen[a.id]}.estimate.xi.{ek}",
+                        f"ξ_{ek} lives at the head of edge {ek} ({head} -> {tail}), agent {head} (Remark 4.4), not agent {a.id}",
                     )
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
