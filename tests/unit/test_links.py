@@ -1,0 +1,94 @@
+"""Link models (zswarm/links.py) against their distributions.
+
+Statistical checks use N = 20 000 messages and 4-sigma bands (a false
+failure about once in 16 000 runs; the seeds are fixed anyway, so these are
+deterministic).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from zswarm.links import LinkModel, LinkSpec
+
+N = 20_000
+
+
+def releases(spec, name="1->3", seed=1, dt=0.01):
+    m = LinkModel(spec, name, seed)
+    return m, [m.admit(k * dt) for k in range(N)]
+
+
+def test_zero_spec_is_the_identity_and_draws_nothing():
+    m, rel = releases(LinkSpec())
+    assert rel == [k * 0.01 for k in range(N)]
+    assert m.rng.bit_generator.state == LinkModel(LinkSpec(), "1->3", 1).rng.bit_generator.state
+
+
+@pytest.mark.parametrize("p", [0.05, 0.3, 0.5])
+def test_bernoulli_drop_ratio(p):
+    m, rel = releases(LinkSpec(drop=p))
+    lost = sum(r is None for r in rel) / N
+    assert abs(lost - p) < 4 * math.sqrt(p * (1 - p) / N)
+    assert m.dropped == sum(r is None for r in rel)
+
+
+def test_gilbert_elliott_loss_and_burst_length():
+    spec = LinkSpec(ge_p_gb=0.02, ge_p_bg=0.2, ge_loss_good=0.0, ge_loss_bad=1.0)
+    _, rel = releases(spec)
+    lost = np.array([r is None for r in rel])
+    assert spec.stationary_loss == pytest.approx(0.02 / 0.22)
+    assert lost.mean() == pytest.approx(spec.stationary_loss, abs=0.02)  # bursts: fewer independent samples, wider band
+    runs, n = [], 0
+    for x in lost:
+        if x:
+            n += 1
+        elif n:
+            runs.append(n)
+            n = 0
+    assert np.mean(runs) == pytest.approx(1 / 0.2, rel=0.15)  # mean burst 1/p_bg messages
+
+
+def test_constant_delay_and_fifo():
+    _, rel = releases(LinkSpec(delay_ms=50.0))
+    assert all(r == pytest.approx(k * 0.01 + 0.05) for k, r in enumerate(rel))
+
+
+@pytest.mark.parametrize("kind", ["normal", "exponential"])
+def test_jitter_never_negative_and_fifo_unless_reordering(kind):
+    _, rel = releases(LinkSpec(delay_ms=5.0, jitter_ms=20.0, jitter=kind))
+    d = np.array(rel) - 0.01 * np.arange(N)
+    assert d.min() >= 0
+    assert np.all(np.diff(rel) >= 0)  # FIFO: nothing overtakes
+    _, rel2 = releases(LinkSpec(delay_ms=5.0, jitter_ms=20.0, jitter=kind, reorder=True))
+    d2 = np.array(rel2) - 0.01 * np.arange(N)
+    assert d2.min() >= 0
+    assert np.any(np.diff(rel2) < 0)  # with reordering some do
+    if kind == "exponential":
+        assert d2.mean() == pytest.approx(0.005 + 0.020, rel=0.05)
+    else:
+        assert np.median(d2) == pytest.approx(0.005, abs=0.001)
+
+
+def test_seeded_per_link_and_reproducible():
+    a = releases(LinkSpec(drop=0.3, jitter_ms=5.0), name="1->3")[1]
+    b = releases(LinkSpec(drop=0.3, jitter_ms=5.0), name="1->3")[1]
+    c = releases(LinkSpec(drop=0.3, jitter_ms=5.0), name="2->3")[1]
+    assert a == b and a != c
+
+
+@pytest.mark.parametrize(
+    "spec, field",
+    [
+        (LinkSpec(delay_ms=-1.0), "delay_ms"),
+        (LinkSpec(jitter_ms=float("nan")), "jitter_ms"),
+        (LinkSpec(drop=1.5), "drop"),
+        (LinkSpec(ge_p_gb=-0.1), "ge_p_gb"),
+        (LinkSpec(ge_p_gb=0.1, ge_p_bg=0.0), "ge_p_bg"),
+        (LinkSpec(jitter="uniform"), "jitter"),
+    ],
+)
+def test_bad_specs_are_named(spec, field):
+    assert [f for f, _ in spec.check()] == [field]
+    assert LinkSpec().check() == []
