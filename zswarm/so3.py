@@ -110,9 +110,10 @@ def log(R: Mat3) -> Vec3:
     from the symmetric part ``(R + I)/2 = v v^T`` instead.
     """
     c = (float(np.trace(R)) - 1.0) * 0.5
-    c = min(1.0, max(-1.0, c))
-    theta = math.acos(c)
     s = psi(R)  # = sin(theta) * v
+    # atan2, not acos: near theta = pi, acos(c) loses half the digits (an error
+    # of 1e-8 rad from c = -1 + 1e-16), while |s| = sin(theta) is accurate there.
+    theta = math.atan2(math.sqrt(float(s @ s)), c)
     if theta < 1e-6:
         return s * (1.0 + theta * theta / 6.0)
     if theta < math.pi - 1e-4:
