@@ -9,6 +9,7 @@ all the math happens in :meth:`tick`.
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import logging
 import math
 import threading
@@ -26,6 +27,7 @@ from agent.algorithms.relative_attitude_terms import EdgeData
 from zswarm import keys, so3, wire
 from zswarm.bus import Bus
 from zswarm.clock import AgentClock
+from zswarm.links import LinkModel
 from zswarm.scenario import Scenario
 from zswarm.so3 import exp
 
@@ -72,9 +74,14 @@ VEL_BODY = -1  # key of the body-frame velocity among an Inbox's body vectors
 class Inbox:
     """Newest decoded message per source key, with per-link counters and malformed counts."""
 
-    def __init__(self, log_name: str, now: Callable[[], float]) -> None:
+    def __init__(self, log_name: str, now: Callable[[], float], link_model: Callable[[str], LinkModel] | None = None) -> None:
         self._lock = threading.Lock()
         self.now = now  # the receiver's own clock, stamps every arrival as "rx"
+        # Link emulation (zswarm/links.py): each arrival is lost or held until its release time.
+        self._link_model = link_model
+        self.models: dict[str, LinkModel] = {}
+        self._held: list[tuple[float, int, str, str, dict[str, Any]]] = []
+        self._held_n = 0
         self.latest: dict[str, dict[str, Any]] = {}
         # (acquisition world time, value) of recent sensor packets' gyro and inertial
         # velocity, for integrating them over a step
@@ -102,24 +109,50 @@ class Inbox:
                 if first:
                     self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
                 return
-            msg["rx"] = rx = self.now()
-            sent = msg["t_local"] if "t_local" in msg else msg["t"]
+            rx = self.now()
             with self._lock:
-                self.links.setdefault(link, LinkCounter()).see(msg["seq"], rx - sent)
-                prev = self.latest.get(link)
-                if prev is None or msg["seq"] >= prev["seq"]:
-                    self.latest[link] = msg
-                    if expect == "sense":
-                        for name, q in self.rates.items():
-                            if name in msg:
-                                q.append((msg["t"], msg[name]))
-                        if "bearings" in msg or "vel_body" in msg:
-                            vecs = dict(msg.get("bearings", {}))
-                            if "vel_body" in msg:
-                                vecs[VEL_BODY] = msg["vel_body"]
-                            self.bearings.append((msg["t"], vecs, msg["gyro"]))
+                if self._link_model is not None:
+                    model = self.models.get(link)
+                    if model is None:
+                        model = self.models[link] = self._link_model(link)
+                    release = model.admit(rx)
+                    if release is None:
+                        return  # lost on the emulated link (counted by the model)
+                    if release > rx:
+                        heapq.heappush(self._held, (release, self._held_n, link, expect, msg))
+                        self._held_n += 1
+                        return
+                self._deliver(link, expect, msg, rx)
 
         return on_message
+
+    def _deliver(self, link: str, expect: str, msg: dict[str, Any], rx: float) -> None:
+        """Store a message that has reached this agent (caller holds the lock)."""
+        msg["rx"] = rx
+        sent = msg["t_local"] if "t_local" in msg else msg["t"]
+        self.links.setdefault(link, LinkCounter()).see(msg["seq"], rx - sent)
+        prev = self.latest.get(link)
+        if prev is None or msg["seq"] >= prev["seq"]:
+            self.latest[link] = msg
+            if expect == "sense":
+                for name, q in self.rates.items():
+                    if name in msg:
+                        q.append((msg["t"], msg[name]))
+                if "bearings" in msg or "vel_body" in msg:
+                    vecs = dict(msg.get("bearings", {}))
+                    if "vel_body" in msg:
+                        vecs[VEL_BODY] = msg["vel_body"]
+                    self.bearings.append((msg["t"], vecs, msg["gyro"]))
+
+    def release_due(self) -> None:
+        """Deliver every held message whose release time has come (the agent calls this each tick)."""
+        if not self._held:
+            return
+        now = self.now()
+        with self._lock:
+            while self._held and self._held[0][0] <= now:
+                release, _, link, expect, msg = heapq.heappop(self._held)
+                self._deliver(link, expect, msg, release)
 
     def get(self, link: str) -> dict[str, Any] | None:
         return self.latest.get(link)
@@ -163,7 +196,11 @@ class Inbox:
 
     def counters(self) -> dict[str, Any]:
         with self._lock:
-            return {"links": {k: v.as_dict() for k, v in self.links.items()}, "malformed": self.malformed}
+            links = {k: v.as_dict() for k, v in self.links.items()}
+            for k, m in self.models.items():
+                if m.spec.active:
+                    links.setdefault(k, {"delivered": 0, "dropped": 0, "reordered": 0}).update(m.counters())
+            return {"links": links, "malformed": self.malformed}
 
 
 def interval_mean_rate(samples: list[tuple[float, np.ndarray]], t0: float, t1: float) -> np.ndarray:
@@ -244,7 +281,11 @@ class AgentNode:
         self.jump_count: dict[int, int] = {k: 0 for k, head in self.edge_of.values() if head}
         self.clock = AgentClock(self.spec.clock, seed=(seed * 1000003 + agent_id) % (1 << 63))
         self.out = scenario.out_neighbors(agent_id)
-        self.inbox = Inbox(f"zswarm.agent.{agent_id}", lambda: self.clock.local(now()))
+        self.inbox = Inbox(
+            f"zswarm.agent.{agent_id}",
+            lambda: self.clock.local(now()),
+            (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
+        )
         sense_link = f"world->{agent_id}"
         bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link))
         if self.spec.neighbors:
@@ -271,6 +312,7 @@ class AgentNode:
         """One step at world time ``t_world`` (the agent reads its own clock from it)."""
         t_local = self.clock.local(t_world)
         self._t_world = t_world
+        self.inbox.release_due()
         sense = self.inbox.get(self.sense_link)
         if sense is None:
             return  # nothing measured yet: no step, nothing to publish

@@ -34,6 +34,7 @@ import numpy as np
 from zswarm import hybrid, so3
 from zswarm.expr import Expr, ExprError, parse
 from zswarm.graph import GraphError, check_leader_follower, check_tree
+from zswarm.links import JITTER_KINDS, LinkSpec
 
 
 class ScenarioError(ValueError):
@@ -180,6 +181,21 @@ class Scenario:
     oriented: tuple[tuple[int, int], ...] = ()  # §4: edge k = oriented[k-1] = (head, tail)
     oriented_from: str = ""  # "graph.edges" or how the orientation was derived
     warnings: tuple[str, ...] = ()  # accepted, but worth telling the user (printed by the CLI)
+    links: LinkSpec = LinkSpec()  # [links]: every link's model
+    link_overrides: Mapping[str, LinkSpec] = field(default_factory=dict)  # [links.per_link."j->i"]
+
+    def link_spec(self, name: str) -> LinkSpec:
+        """The model of link ``name`` ("world->3", "1->3")."""
+        return self.link_overrides.get(name, self.links)
+
+    @property
+    def links_active(self) -> bool:
+        return self.links.active or any(s.active for s in self.link_overrides.values())
+
+    @property
+    def link_names(self) -> tuple[str, ...]:
+        """Every link: world -> each agent, and each communication edge j -> i."""
+        return tuple(f"world->{i}" for i in self.ids) + tuple(f"{j}->{i}" for j, i in self.edges)
 
     @property
     def info(self) -> AlgorithmInfo:
@@ -323,7 +339,7 @@ def loads(text: str, path: str = "<string>") -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: TOML syntax: {exc}") from None
 
-    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "agents"}, {"scenario", "algorithm", "agents"})
+    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents"}, {"scenario", "algorithm", "agents"})
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
     name = c.string(sc["name"], "scenario.name")
     description = c.string(sc.get("description", ""), "scenario.description")
@@ -423,6 +439,8 @@ def loads(text: str, path: str = "<string>") -> Scenario:
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
 
+    links, link_overrides = _links(c, doc.get("links", {}), {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors})
+
     return Scenario(
         path=path,
         name=name,
@@ -444,7 +462,44 @@ def loads(text: str, path: str = "<string>") -> Scenario:
         oriented=oriented,
         oriented_from=oriented_from,
         warnings=tuple(warnings),
+        links=links,
+        link_overrides=MappingProxyType(link_overrides),
     )
+
+
+_LINK_FIELDS = ("delay_ms", "jitter_ms", "jitter", "reorder", "drop", "ge_p_gb", "ge_p_bg", "ge_loss_good", "ge_loss_bad")
+
+
+def _link_spec(c: _Ctx, d: Any, f: str, base: LinkSpec, extra: set[str] = frozenset()) -> LinkSpec:  # type: ignore[assignment]
+    d = c.table(d, f, set(_LINK_FIELDS) | extra)
+    kw: dict[str, Any] = {}
+    for k in _LINK_FIELDS:
+        if k not in d:
+            kw[k] = getattr(base, k)
+        elif k == "jitter":
+            kw[k] = c.string(d[k], f"{f}.jitter")
+            if kw[k] not in JITTER_KINDS:
+                raise c.err(f"{f}.jitter", f"must be one of {', '.join(JITTER_KINDS)}", d[k])
+        elif k == "reorder":
+            if not isinstance(d[k], bool):
+                raise c.err(f"{f}.reorder", "must be true or false", d[k])
+            kw[k] = d[k]
+        else:
+            kw[k] = c.num(d[k], f"{f}.{k}")
+    spec = LinkSpec(**kw)
+    for fld, problem in spec.check():
+        raise ScenarioError(f"{c.path}: {f}.{fld}: {problem}")
+    return spec
+
+
+def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, dict[str, LinkSpec]]:
+    """``[links]`` defaults for every link and ``[links.per_link."j->i"]`` overrides."""
+    default = _link_spec(c, d, "links", LinkSpec(), {"per_link"})
+    over: dict[str, LinkSpec] = {}
+    per = c.table(d.get("per_link", {}) if isinstance(d, dict) else {}, "links.per_link", names)
+    for name, sub in per.items():
+        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', default)
+    return default, over
 
 
 def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: float, n: int = 200) -> list[dict[int, tuple[float, ...]]]:
