@@ -2,9 +2,10 @@
 
 Errors are those of the thesis figures: attitude error ``|R_i R̂_i^T|_I`` and
 position error ``||p_i − p̂_i||`` (§3, Figs. 3.4–3.17), evaluated at each
-estimate's world time against the truth at that same time (the truth sample
-before it, propagated with the true ω over the < 1/sensor_rate gap: error
-O(ω̇ Δt²) ≈ 3e-5 rad).  "final" is the mean over the last second of the run.
+estimate's world time against the truth at that same time (the attitude of
+the truth sample before it, propagated with the true ω over the
+< 1/sensor_rate gap: error O(ω̇ Δt²) ≈ 3e-5 rad; positions interpolated
+linearly between samples).  "final" is the mean over the last second of the run.
 
 The §4 observers estimate up to a common rotation (and translation), so for
 them (Figs. 4.4–4.9), on a 100 Hz grid using each agent's newest estimate:
@@ -127,16 +128,16 @@ def errors(rec: Recording) -> dict[int, np.ndarray]:
         a = col[i]
         rows = []
         for t, R_hat, p_hat in samples:
-            k = int(np.searchsorted(rec.truth_t, t, side="right")) - 1
-            if k < 0:
+            tr = _truth_at(rec, t, a)
+            if tr is None:
                 continue
-            R = rec.truth_R[k, a] @ so3.exp((t - rec.truth_t[k]) * rec.truth_w[k, a])
-            rows.append((t, so3.attitude_norm(R @ R_hat.T), float(np.linalg.norm(rec.truth_p[k, a] - p_hat))))
+            rows.append((t, so3.attitude_norm(tr[0] @ R_hat.T), float(np.linalg.norm(tr[1] - p_hat))))
         out[i] = np.array(rows).reshape(-1, 3)
     return out
 
 
 def _truth_at(rec: Recording, t: float, a: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Truth (R, p) of column ``a`` at time ``t`` (None before the first sample)."""
     k = int(np.searchsorted(rec.truth_t, t, side="right")) - 1
     if k < 0:
         return None
@@ -221,8 +222,7 @@ def _first_below(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
 
 
 def final_mean(rows: np.ndarray, t_end: float, col: int, window: float = 1.0) -> float:
-    sel = rows[rows[:, 0] >= t_end - window]
-    return float(np.mean(sel[:, col])) if len(sel) else float("nan")
+    return _final(rows[:, 0], rows[:, col], t_end, window)
 
 
 def summarize(

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeGuard
 
 import msgpack
 import numpy as np
@@ -96,7 +96,7 @@ def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
     return a
 
 
-def _finite(x: Any) -> bool:
+def _finite(x: Any) -> TypeGuard[int | float]:
     return not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
 
 
@@ -125,7 +125,7 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
         if isinstance(m.get(k), bool) or not isinstance(m.get(k), int):
             raise MessageError(f"{k}: expected an integer")
     t = m.get("t")
-    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+    if not _finite(t):
         raise MessageError("t: expected a finite number")
     out: dict[str, Any] = {"type": mtype, "src": m["src"], "seq": m["seq"], "t": float(t)}
     optional = OPTIONAL.get(mtype, set())
@@ -156,7 +156,7 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
                 raise MessageError(f"{k}: expected a list of [edge, t, xi_before, xi_after]")
             out[k] = [(e[0], float(e[1]), float(e[2]), float(e[3])) for e in v]
         elif kind == "float":
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            if not _finite(v):
                 raise MessageError(f"{k}: expected a finite number")
             out[k] = float(v)
         elif kind == "int":
