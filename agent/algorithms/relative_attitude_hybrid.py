@@ -92,22 +92,21 @@ def flow_xi(R_bar: Mat3, xi: float, g: Gains) -> float:
 def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs, Mat3]:
     """One step of (4.25)–(4.26); also returns the predicted attitude R̂⁻ the step used."""
     R_pred = state.R_hat @ exp(dt * inputs.omega)
+    R_bars = {e.k: relative_error(R_pred, e) for e in inputs.edges}  # R̄ does not depend on ξ
     xi = dict(state.xi)
     jumps = []
     for e in inputs.edges:
-        if e.head:
-            R_bar = relative_error(R_pred, e)
-            if jump_set(R_bar, xi[e.k], gains):
-                new = jump_map(R_bar, xi[e.k], gains)
-                jumps.append((e.k, xi[e.k], new))
-                xi[e.k] = new
+        if e.head and jump_set(R_bars[e.k], xi[e.k], gains):
+            new = jump_map(R_bars[e.k], xi[e.k], gains)
+            jumps.append((e.k, xi[e.k], new))
+            xi[e.k] = new
     all_xi = {e.k: (xi[e.k] if e.head else e.xi) for e in inputs.edges}
-    sigma = hybrid_correction(R_pred, inputs.edges, all_xi, gains.A, gains.u)
+    sigma = hybrid_correction(R_bars, inputs.edges, all_xi, gains.A, gains.u)
     U = 0.0
     nxt = dict(xi)
     for e in inputs.edges:
         if e.head:
-            R_bar = relative_error(R_pred, e)
+            R_bar = R_bars[e.k]
             U += hybrid.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k])
             nxt[e.k] = xi[e.k] + dt * flow_xi(R_bar, xi[e.k], gains)
     R_next = exp(-dt * gains.k_R * sigma) @ R_pred

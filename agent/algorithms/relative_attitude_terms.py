@@ -65,11 +65,11 @@ def continuous_correction(R_hat: Mat3, edges: tuple[EdgeData, ...], A: Mat3) -> 
     return s
 
 
-def hybrid_correction(R_hat: Mat3, edges: tuple[EdgeData, ...], xi: Mapping[int, float], A: Mat3, u: Vec3) -> Vec3:
-    """``σ_i`` of (4.25) (READING-NOTES form); ``xi[k]`` for every edge of i."""
+def hybrid_correction(R_bars: Mapping[int, Mat3], edges: tuple[EdgeData, ...], xi: Mapping[int, float], A: Mat3, u: Vec3) -> Vec3:
+    """``σ_i`` of (4.25) (READING-NOTES form); ``R_bars[k]`` (:func:`relative_error`) and ``xi[k]`` for every edge of i."""
     s = np.zeros(3)
     for e in edges:
-        R_bar = relative_error(R_hat, e)
+        R_bar = R_bars[e.k]
         g = hybrid.grad_R(A, u, R_bar, xi[e.k])
         s = s - g if e.head else s + R_bar @ g
     return s
