@@ -303,6 +303,7 @@ class AgentNode:
         self.last_local: float | None = None
         self.substeps = 0  # extra sub-steps taken for late ticks
         self._t_world = 0.0  # world time of the tick being computed
+        self._tick_cache: dict[Any, Any] = {}
         self.compute_s = 0.0
         self.compute_max = 0.0
 
@@ -312,6 +313,7 @@ class AgentNode:
         """One step at world time ``t_world`` (the agent reads its own clock from it)."""
         t_local = self.clock.local(t_world)
         self._t_world = t_world
+        self._tick_cache = {}  # per-tick results used by several neighbours
         self.inbox.release_due()
         sense = self.inbox.get(self.sense_link)
         if sense is None:
@@ -367,7 +369,7 @@ class AgentNode:
                 if self.sc.moving and not self.leader:
                     # Rotation alone misses how far the bearing itself turned since the
                     # sample (translation: 0.5 rad/s in §3.3.4); extrapolate it instead.
-                    b_t = self.inbox.bearing_at(i, t_world)
+                    b_t = self._bearing_now(i)
                     if b_t is not None:
                         fields["b"] = b_t
             elif not self.tree:
@@ -421,7 +423,18 @@ class AgentNode:
         self.last_local = t_local
 
     def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
-        return [(self.clock.local(t), w) for t, w in self.inbox.samples(name)]
+        """Recent samples of a rate ("gyro", "vel") on this agent's clock; once per tick."""
+        cache = self._tick_cache
+        if name not in cache:
+            cache[name] = [(self.clock.local(t), w) for t, w in self.inbox.samples(name)]
+        return cache[name]  # type: ignore[no-any-return]
+
+    def _bearing_now(self, j: int) -> np.ndarray | None:
+        """Our bearing toward j at this tick (sensor history), for moving agents; once per tick."""
+        key = ("b", j)
+        if key not in self._tick_cache:
+            self._tick_cache[key] = self.inbox.bearing_at(j, self._t_world)
+        return self._tick_cache[key]  # type: ignore[no-any-return]
 
     def _bearing_inputs(self, sense: dict[str, Any], omega: np.ndarray, align: np.ndarray, t_local: float, dt: float) -> Any:
         """Inputs of the §3 observers: per in-neighbour j its (R̂_j, p̂_j, b_ji^j) and our b_ij^i."""
@@ -442,7 +455,7 @@ class AgentNode:
             # the gyro; p̂_j is brought to this tick with j's measured velocity.
             # Pairing with the newest bearing instead left a 4e-3 attitude floor
             # over Zenoh (5–10 ms ages × 0.5 rad/s).
-            b_t = self.inbox.bearing_at(j, self._t_world)
+            b_t = self._bearing_now(j)
             if b_t is not None:
                 b_now = b_t
             t_j = self.clock.local(m["t"])
@@ -484,7 +497,7 @@ class AgentNode:
             tau_j = t_local - self.clock.local(m["t"])
             b_own = bearings.get(j)
             if b_own is not None:
-                b_t = self.inbox.bearing_at(j, self._t_world) if self.sc.moving else None
+                b_t = self._bearing_now(j) if self.sc.moving else None
                 b_own = align @ b_own if b_t is None else b_t
             b_nbr = m.get("b")
             R_ij = align @ R_m @ so3.exp(tau_s * w_j)
