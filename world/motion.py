@@ -100,6 +100,3 @@ class PrescribedMotion:
         elif self.velocity_exprs is not None:
             self.p = self.p + np.einsum("k,kaj->aj", h, self._v_expr(mids))
         self.t = t
-
-
-PrescribedAttitudes = PrescribedMotion  # the §3.2 name

@@ -193,24 +193,12 @@ class Scenario:
         return self.links.active or any(s.active for s in self.link_overrides.values())
 
     @property
-    def link_names(self) -> tuple[str, ...]:
-        """Every link: world -> each agent, and each communication edge j -> i."""
-        return tuple(f"world->{i}" for i in self.ids) + tuple(f"{j}->{i}" for j, i in self.edges)
-
-    @property
     def info(self) -> AlgorithmInfo:
         return ALGORITHMS[self.algorithm]
 
     @property
     def moving(self) -> bool:
         return self.formation is not None or any(a.velocity is not None for a in self.agents)
-
-    def edge_index(self, a: int, b: int) -> int | None:
-        """Index k (1-based) of the oriented tree edge between ``a`` and ``b``, if any."""
-        for k, (h, t) in enumerate(self.oriented, start=1):
-            if {h, t} == {a, b}:
-                return k
-        return None
 
     def agent(self, i: int) -> AgentSpec:
         for a in self.agents:
