@@ -251,6 +251,9 @@ class AgentNode:
 
     def __init__(self, scenario: Scenario, agent_id: int, bus: Bus, run: str, seed: int, now: Callable[[], float]) -> None:
         self.sc = scenario
+        self.moving = scenario.moving  # a property of the scenario: computed once, read every tick
+        self.stale = scenario.stale
+        self.stale_terms: dict[int, int] = {}  # per in-neighbour: terms evaluated on a message older than max_age
         self.id = agent_id
         self.spec = scenario.agent(agent_id)
         self.run = run
@@ -366,7 +369,7 @@ class AgentNode:
             b = bearings.get(i)
             if b is not None:
                 fields["b"] = align @ b
-                if self.sc.moving and not self.leader:
+                if self.moving and not self.leader:
                     # Rotation alone misses how far the bearing itself turned since the
                     # sample (translation: 0.5 rad/s in §3.3.4); extrapolate it instead.
                     b_t = self._bearing_now(i)
@@ -422,6 +425,14 @@ class AgentNode:
         self.state, _ = self.algo.step(self.state, empty, t_local - t0, self.gains)
         self.last_local = t_local
 
+    def _stale_drop(self, j: int, m: dict[str, Any], t_local: float) -> bool:
+        """Apply the stale-data policy to j's newest message: count it if older than
+        ``max_age``, and say whether to leave j's terms out ("drop")."""
+        if t_local - self.clock.local(m["t"]) <= self.stale.max_age:
+            return False
+        self.stale_terms[j] = self.stale_terms.get(j, 0) + 1
+        return self.stale.policy == "drop"
+
     def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
         """Recent samples of a rate ("gyro", "vel") on this agent's clock; once per tick."""
         cache = self._tick_cache
@@ -445,8 +456,10 @@ class AgentNode:
             b_own = bearings.get(j)
             if m is None or b_own is None or "b" not in m:
                 continue  # no data from j yet: its term is left out of the sums
+            if self._stale_drop(j, m, t_local):
+                continue
             b_now = align @ b_own
-            if not self.sc.moving:
+            if not self.moving:
                 nbrs.append(NeighborData(k, m["R_hat"], m["p_hat"], m["b"], b_now))
                 continue
             # Moving agents: inertial bearings turn (0.5 rad/s in §3.3.4), so j's
@@ -493,17 +506,19 @@ class AgentNode:
             R_m = rel.get(j)
             if m is None or R_m is None or "w" not in m or (self.hybrid and not head and "xi" not in m):
                 continue  # nothing from j yet: the edge's terms are left out
+            if self._stale_drop(j, m, t_local):
+                continue
             w_j = m["w"]
             tau_j = t_local - self.clock.local(m["t"])
             b_own = bearings.get(j)
             if b_own is not None:
-                b_t = self._bearing_now(j) if self.sc.moving else None
+                b_t = self._bearing_now(j) if self.moving else None
                 b_own = align @ b_own if b_t is None else b_t
             b_nbr = m.get("b")
             R_ij = align @ R_m @ so3.exp(tau_s * w_j)
             if b_nbr is not None:
                 b_nbr = so3.exp(-tau_j * w_j) @ b_nbr
-                b_then = self.inbox.bearing_at(j, m["t"]) if (self.sc.moving and b_own is not None) else None
+                b_then = self.inbox.bearing_at(j, m["t"]) if (self.moving and b_own is not None) else None
                 if b_then is not None:
                     # j's bearing is from its tick t_j; the inertial bearing b_ji = −b_ij
                     # has turned since (0.5 rad/s in §4.5): our own bearing's change
@@ -556,6 +571,8 @@ class AgentNode:
                 "compute_mean_us": 1e6 * self.compute_s / self.steps if self.steps else 0.0,
                 "compute_max_us": 1e6 * self.compute_max,
                 "sent": {f"{self.id}->{i}": self.seq for i in self.out},
+                "stale_policy": f"{self.stale.policy} after {self.stale.max_age:g} s",
+                "stale_terms": {f"{j}->{self.id}": n for j, n in sorted(self.stale_terms.items())},
             }
         )
         if self.jump_count:

@@ -27,6 +27,7 @@ class World:
 
     def __init__(self, scenario: Scenario, bus: Bus, run: str, seed: int) -> None:
         self.sc = scenario
+        self.moving = scenario.moving
         self.run = run
         f = scenario.formation
         self.motion = PrescribedMotion(
@@ -70,7 +71,7 @@ class World:
         self.motion.advance_to(t)
         R, p = self.motion.R, self.motion.p
         W = self.motion.omega(t)
-        V = self.motion.velocity() if self.sc.moving else None
+        V = self.motion.velocity() if self.moving else None
         seq = self.seq
         self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
         for i in self.ids:

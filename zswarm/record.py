@@ -34,8 +34,17 @@ class Recorder:
     a file cut short by a crash is readable up to the last flush.
     """
 
-    def __init__(self, bus: Bus, run: str, path: Path, now_ns: Callable[[], int] | None = None, metadata: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        run: str,
+        path: Path,
+        now_ns: Callable[[], int] | None = None,
+        metadata: dict[str, str] | None = None,
+        skip: tuple[str, ...] = (),
+    ) -> None:
         self.run = run
+        self.skip = skip  # stream prefixes not written (e.g. "sense/", "edge/" for a lean recording)
         self.path = Path(path)
         self.now_ns = now_ns or time.time_ns
         self._buf: list[tuple[str, bytes, int]] = []
@@ -55,8 +64,11 @@ class Recorder:
 
     def _on_data(self, key: str, payload: bytes) -> None:
         t = self.now_ns()
+        stream = keys.stream_of(self.run, key)
+        if self.skip and stream.startswith(self.skip):
+            return
         with self._lock:
-            self._buf.append((keys.stream_of(self.run, key), payload, t))
+            self._buf.append((stream, payload, t))
         if key.endswith("/ctl/stop"):
             self.stopped.set()
 

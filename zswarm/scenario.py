@@ -41,6 +41,20 @@ class ScenarioError(ValueError):
     """A scenario file that cannot be used; the message names file, field and problem."""
 
 
+STALE_POLICIES = ("hold", "drop")
+
+
+@dataclass(frozen=True, slots=True)
+class StalePolicy:
+    """What an agent does with a neighbour's message older than ``max_age`` seconds
+    (its stamp against the agent's clock): ``"hold"`` uses it as if fresh,
+    ``"drop"`` leaves that neighbour's terms out of the step until a fresher one
+    arrives.  Either way such terms are counted (``stale_terms`` in the stats)."""
+
+    max_age: float = 0.2  # s
+    policy: str = "hold"
+
+
 @dataclass(frozen=True, slots=True)
 class AlgorithmInfo:
     """What the loader knows about an algorithm: its gains and graph assumption."""
@@ -50,6 +64,11 @@ class AlgorithmInfo:
     description: str
     sensors: frozenset[str] = frozenset({"bearings"})  # what the world measures for it
     params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P)
+    # Default stale-data policy.  §3.2 holds: with fixed positions what a neighbour
+    # sends (R̂_j b_ji^j and p̂_j) estimates constants, so an old value is as good as
+    # the neighbour's estimate was.  The others drop: a neighbour's R̂_j, p̂_j are
+    # brought to the tick with its last ω_j, v_j, an extrapolation that degrades with age.
+    stale: StalePolicy = StalePolicy(0.2, "drop")
 
 
 # The gains of each algorithm, with defaults; every gain must be > 0.
@@ -59,11 +78,13 @@ ALGORITHMS: Mapping[str, AlgorithmInfo] = MappingProxyType(
             MappingProxyType({"k_R": None, "k_p": None}),
             "leader_follower",
             "thesis §3.2: attitude observer (3.3) + position observer (3.14)",
+            stale=StalePolicy(0.2, "hold"),
         ),
         "bearing_pose_fixed_filtered": AlgorithmInfo(
             MappingProxyType({"k_Omega": None, "k_p": None}),
             "leader_follower",
             "thesis §3.2: filtered attitude observer (3.8)-(3.9) + position observer (3.14)",
+            stale=StalePolicy(0.2, "hold"),
         ),
         "bearing_pose_moving": AlgorithmInfo(
             MappingProxyType({"k_R": None, "k_p": None}),
@@ -181,16 +202,20 @@ class Scenario:
     oriented: tuple[tuple[int, int], ...] = ()  # §4: edge k = oriented[k-1] = (head, tail)
     oriented_from: str = ""  # "graph.edges" or how the orientation was derived
     warnings: tuple[str, ...] = ()  # accepted, but worth telling the user (printed by the CLI)
-    links: LinkSpec = LinkSpec()  # [links]: every link's model
+    links: LinkSpec = LinkSpec()  # [links]: the agent→agent edges' model
+    sensor_links: LinkSpec = LinkSpec()  # [links.sensors]: the world→agent sensor links' model
     link_overrides: Mapping[str, LinkSpec] = field(default_factory=dict)  # [links.per_link."j->i"]
+    stale: StalePolicy = StalePolicy()  # [algorithm.stale]
 
     def link_spec(self, name: str) -> LinkSpec:
         """The model of link ``name`` ("world->3", "1->3")."""
-        return self.link_overrides.get(name, self.links)
+        if name in self.link_overrides:
+            return self.link_overrides[name]
+        return self.sensor_links if name.startswith("world->") else self.links
 
     @property
     def links_active(self) -> bool:
-        return self.links.active or any(s.active for s in self.link_overrides.values())
+        return self.links.active or self.sensor_links.active or any(s.active for s in self.link_overrides.values())
 
     @property
     def info(self) -> AlgorithmInfo:
@@ -334,7 +359,7 @@ def loads(text: str, path: str = "<string>") -> Scenario:
     duration = c.num(sc["duration"], "scenario.duration", positive=True)
     seed = c.integer(sc.get("seed", 0), "scenario.seed")
 
-    al = c.table(doc["algorithm"], "algorithm", {"name", "gains", "params"}, {"name"})
+    al = c.table(doc["algorithm"], "algorithm", {"name", "gains", "params", "stale"}, {"name"})
     algo = c.string(al["name"], "algorithm.name")
     if algo not in ALGORITHMS:
         raise c.err("algorithm.name", f"unknown algorithm (known: {', '.join(ALGORITHMS)})", algo)
@@ -349,6 +374,13 @@ def loads(text: str, path: str = "<string>") -> Scenario:
         else:
             gains[k] = c.num(g[k], f"algorithm.gains.{k}", positive=True)
     params = _params(c, al.get("params"), info)
+    st = c.table(al.get("stale", {}), "algorithm.stale", {"max_age", "policy"})
+    stale = StalePolicy(
+        c.num(st.get("max_age", info.stale.max_age), "algorithm.stale.max_age", positive=True),
+        c.string(st.get("policy", info.stale.policy), "algorithm.stale.policy"),
+    )
+    if stale.policy not in STALE_POLICIES:
+        raise c.err("algorithm.stale.policy", f"must be one of {', '.join(STALE_POLICIES)}", stale.policy)
 
     w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate", "formation"})
     step = c.num(w.get("step", 0.001), "world.step", positive=True, maxv=0.001)
@@ -427,7 +459,7 @@ def loads(text: str, path: str = "<string>") -> Scenario:
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
 
-    links, link_overrides = _links(c, doc.get("links", {}), {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors})
+    links, sensor_links, link_overrides = _links(c, doc.get("links", {}), {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors})
 
     return Scenario(
         path=path,
@@ -451,7 +483,9 @@ def loads(text: str, path: str = "<string>") -> Scenario:
         oriented_from=oriented_from,
         warnings=tuple(warnings),
         links=links,
+        sensor_links=sensor_links,
         link_overrides=MappingProxyType(link_overrides),
+        stale=stale,
     )
 
 
@@ -480,14 +514,17 @@ def _link_spec(c: _Ctx, d: Any, f: str, base: LinkSpec, extra: set[str] = frozen
     return spec
 
 
-def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, dict[str, LinkSpec]]:
-    """``[links]`` defaults for every link and ``[links.per_link."j->i"]`` overrides."""
-    default = _link_spec(c, d, "links", LinkSpec(), {"per_link"})
+def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, LinkSpec, dict[str, LinkSpec]]:
+    """``[links]``: defaults of the agent→agent edges; ``[links.sensors]``: defaults of the
+    world→agent sensor links (zero unless set: on-board sensors); ``[links.per_link."j->i"]``
+    and ``[links.per_link."world->i"]``: one link each, on top of its kind's defaults."""
+    edges = _link_spec(c, d, "links", LinkSpec(), {"per_link", "sensors"})
+    sensors = _link_spec(c, d.get("sensors", {}), "links.sensors", LinkSpec())
     over: dict[str, LinkSpec] = {}
-    per = c.table(d.get("per_link", {}) if isinstance(d, dict) else {}, "links.per_link", names)
+    per = c.table(d.get("per_link", {}), "links.per_link", names)
     for name, sub in per.items():
-        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', default)
-    return default, over
+        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', sensors if name.startswith("world->") else edges)
+    return edges, sensors, over
 
 
 def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: float, n: int = 200) -> list[dict[int, tuple[float, ...]]]:

@@ -18,7 +18,11 @@ def sim_with(tmp_path, links_toml, duration=5.0):
 
 
 def test_drop_and_delay_are_applied_exactly(tmp_path):
-    s = sim_with(tmp_path, '[links]\ndelay_ms = 50\ndrop = 0.3\n[links.per_link."1->3"]\ndrop = 0.0\n')
+    s = sim_with(
+        tmp_path,
+        '[links]\ndelay_ms = 50\ndrop = 0.3\n[links.sensors]\ndelay_ms = 50\ndrop = 0.3\n[links.per_link."1->3"]\ndrop = 0.0\n',
+    )
+    assert len(s["links"]) == 22  # 8 sensor links, 14 edges
     for name, c in s["links"].items():
         p = 0.0 if name == "1->3" else 0.3
         assert abs(c["link_dropped"] / c["offered"] - p) <= 3 * math.sqrt(p * (1 - p) / c["offered"]) + 1e-12, (name, c)
@@ -37,3 +41,12 @@ def test_all_zero_links_reproduce_the_run_without_links(tmp_path):
     sim_with(tmp_path / "a", "", duration=3.0)
     sim_with(tmp_path / "b", "[links]\ndelay_ms = 0\ndrop = 0\njitter_ms = 0\n", duration=3.0)
     assert (tmp_path / "a" / "errors.csv").read_text() == (tmp_path / "b" / "errors.csv").read_text()
+
+
+def test_links_defaults_are_for_edges_and_sensors_have_their_own(tmp_path):
+    s = sim_with(tmp_path, "[links]\ndrop = 0.3\n", duration=2.0)
+    for name, c in s["links"].items():
+        if name.startswith("world->"):
+            assert "offered" not in c and c["dropped"] == 0, (name, c)  # no model on the sensor links
+        else:
+            assert c["link_dropped"] > 0, (name, c)
