@@ -7,6 +7,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from zswarm import keys, procutil
 
@@ -16,6 +17,25 @@ def _common_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds (default: the scenario's)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
     p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        dest="overrides",
+        help="override a scenario field, e.g. --set links.delay_ms=50 --set 'links.per_link.\"1->3\".drop=0.5' (repeatable; VALUE is TOML)",
+    )
+
+
+def _load(args: argparse.Namespace) -> Any:
+    """The scenario of ``args.topology`` with the ``--set`` overrides (exit 2 on any error)."""
+    from zswarm.scenario import ScenarioError, parse_override
+
+    try:
+        overrides = [parse_override(o) for o in args.overrides]
+    except ScenarioError as exc:
+        procutil.fail_usage(str(exc))
+    return procutil.load_or_exit(args.topology, overrides)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -69,24 +89,23 @@ def main(argv: list[str] | None = None) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from zswarm import launch
 
-    sc = procutil.load_or_exit(args.topology)
+    sc = _load(args)
     _warn(sc)
     return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet)
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    import shutil
 
     from zswarm import report
     from zswarm.launch import results_dir
     from zswarm.sim import simulate
 
-    sc = procutil.load_or_exit(args.topology)
+    sc = _load(args)
     _warn(sc)
     duration = sc.duration if args.duration is None else args.duration
     seed = sc.seed if args.seed is None else args.seed
     out = results_dir(args.out, sc.name)
-    shutil.copyfile(args.topology, out / "scenario.toml")
+    (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
     tty = sys.stderr.isatty()
 
     def progress(t: float) -> None:
@@ -164,9 +183,8 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from zswarm import report
+    from zswarm import report, wire
     from zswarm.record import read
-    from zswarm import wire
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
     rec_path = args.results / "recording.mcap"
@@ -243,7 +261,9 @@ def cmd_design_hybrid(args: argparse.Namespace) -> int:
         return 0
     lam = d.eigenvalues
     case_text = {1: "λ1 = λ2", 2: "λ2 ≥ λ1λ3/(λ3−λ1)", 3: "λ1 < λ2 < λ1λ3/(λ3−λ1)"}[d.case]
-    print(f"A: eigenvalues λ = {lam[0]:g}, {lam[1]:g}, {lam[2]:g}; Prop. 4.2 case {d.case} ({case_text}; λ1λ3/(λ3−λ1) = {lam[0] * lam[2] / (lam[2] - lam[0]):.6g})")
+    print(
+        f"A: eigenvalues λ = {lam[0]:g}, {lam[1]:g}, {lam[2]:g}; Prop. 4.2 case {d.case} ({case_text}; λ1λ3/(λ3−λ1) = {lam[0] * lam[2] / (lam[2] - lam[0]):.6g})"
+    )
     print(f"u       = [{', '.join(f'{x:.4f}' for x in d.u)}]   (α = [{', '.join(f'{a:.4f}' for a in d.alpha)}] on the eigenvectors of A)")
     print(f"Δ*      = {d.Delta_star:.6g}")
     print(f"γ       = {d.gamma:.6g}   (bound: γ < 4Δ*/π² = {d.gamma_max:.6g})")

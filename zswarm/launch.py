@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -116,13 +115,24 @@ class Launch:
             c.log.close()
 
 
-def run(topology: str, sc: Scenario, out_base: Path | None, duration: float | None, time_scale: float, seed: int | None, quiet: bool = False, startup_timeout: float = 60.0) -> int:
+def run(
+    topology: str,
+    sc: Scenario,
+    out_base: Path | None,
+    duration: float | None,
+    time_scale: float,
+    seed: int | None,
+    quiet: bool = False,
+    startup_timeout: float = 60.0,
+) -> int:
     """Run the scenario over real processes; return the exit code for the CLI."""
     duration = sc.duration if duration is None else duration
     seed = sc.seed if seed is None else seed
     out = results_dir(out_base, sc.name)
     (out / "logs").mkdir(exist_ok=True)
-    shutil.copyfile(topology, out / "scenario.toml")
+    # Every process reads the scenario as run (with any --set applied) from the results folder.
+    (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
+    topology = str(out / "scenario.toml")
     run_id = keys.check_run_id(f"r{os.getpid()}-{int(time.time())}")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     la = Launch(sc, topology, out, duration, time_scale, seed, quiet)
@@ -158,16 +168,32 @@ def run(topology: str, sc: Scenario, out_base: Path | None, duration: float | No
             la.spawn("recorder", "recorder", 0, [py, "-m", "zswarm", "record", topology, "--out", str(out), "--no-report", *common])
             for i in sc.ids:
                 la.spawn(f"agent-{i}", "agent", i, [py, "-m", "agent", "--topology", topology, "--id", str(i), *common])
-            la.spawn("world", "world", 0, [py, "-m", "world", "--topology", topology, "--duration", str(duration), "--time-scale", str(time_scale), "--wait-for-recorder", *common])
+            la.spawn(
+                "world",
+                "world",
+                0,
+                [py, "-m", "world", "--topology", topology, "--duration", str(duration), "--time-scale", str(time_scale), "--wait-for-recorder", *common],
+            )
             (out / "processes.json").write_text(
-                json.dumps({"router": {"pid": os.getpid(), "endpoint": endpoint}, "run_id": run_id, "children": [{"name": c.name, "role": c.role, "id": c.ident, "pid": c.proc.pid} for c in la.children]}, indent=2)
+                json.dumps(
+                    {
+                        "router": {"pid": os.getpid(), "endpoint": endpoint},
+                        "run_id": run_id,
+                        "children": [{"name": c.name, "role": c.role, "id": c.ident, "pid": c.proc.pid} for c in la.children],
+                    },
+                    indent=2,
+                )
             )
             need = {(c.role, c.ident) for c in la.children}
             deadline = time.monotonic() + startup_timeout
             while not need <= alive:
                 dead = [c.name for c in la.children if c.proc.poll() is not None]
                 if dead or interrupted.is_set() or time.monotonic() > deadline:
-                    why = f"exited during start-up: {', '.join(dead)}" if dead else ("interrupted" if interrupted.is_set() else f"not alive after {startup_timeout:.0f} s: {sorted(need - alive)}")
+                    why = (
+                        f"exited during start-up: {', '.join(dead)}"
+                        if dead
+                        else ("interrupted" if interrupted.is_set() else f"not alive after {startup_timeout:.0f} s: {sorted(need - alive)}")
+                    )
                     say(f"zswarm run: {why} (logs in {out / 'logs'})")
                     la.stop_all(graceful=False)
                     return 1
@@ -208,4 +234,3 @@ def run(topology: str, sc: Scenario, out_base: Path | None, duration: float | No
     print(report.table(summary))
     print(f"results: {out}")
     return 130 if interrupted.is_set() else 0
-

@@ -7,9 +7,10 @@ import logging
 import signal
 import sys
 import threading
+from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from zswarm.scenario import Scenario, ScenarioError, load
+from zswarm.scenario import Override, Scenario, ScenarioError, load
 
 EXIT_USAGE = 2
 
@@ -41,10 +42,10 @@ def fail_usage(msg: str) -> NoReturn:
     sys.exit(EXIT_USAGE)
 
 
-def load_or_exit(path: str) -> Scenario:
+def load_or_exit(path: str, overrides: Sequence[Override] = ()) -> Scenario:
     """Load a scenario or exit 2 with its one-line ``file: field: problem``."""
     try:
-        return load(path)
+        return load(path, overrides)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(EXIT_USAGE)

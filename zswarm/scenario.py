@@ -17,13 +17,20 @@ Format (units: seconds, Hz, metres, radians)::
                 in t] (inertial velocity), gyro_bias, neighbors (N_i), k_neighbors (k_ij),
                 gains (per-agent overrides, e.g. k_R = k_i^R of §3.3),
                 [agents.estimate] p, R, Omega, xi = {k = ξ_k(0)}; [agents.clock] overrides
+    [links]     delay_ms, jitter_ms, jitter, reorder, drop, ge_*: agent→agent edges;
+                [links.sensors] the same for world→agent links; [links.per_link."j->i"] one link
+
+Any field can be overridden from the command line, ``--set links.delay_ms=50``
+(:func:`parse_override`, :func:`loads` ``overrides``); an error in an
+overridden field names the flag instead of the file.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
@@ -254,19 +261,29 @@ class Scenario:
 class _Ctx:
     """Carries the file name so every error names file and field."""
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, overridden: Mapping[str, str] | None = None) -> None:
         self.path = path
+        self.overridden = overridden or {}  # field path -> the flag that set it
+
+    def where(self, fld: str) -> str:
+        """The file, or the flag when ``fld`` (or a table holding it) was set on the command line."""
+        for f, flag in self.overridden.items():
+            # The field itself, inside it, or a table the override reached into (an unknown key).
+            if fld == f or fld.startswith((f + ".", f + "[")) or f.startswith((fld + ".", fld + "[")):
+                return flag
+        return self.path
 
     def err(self, fld: str, problem: str, got: Any = ...) -> ScenarioError:
         tail = "" if got is ... else f" (got {got!r})"
-        return ScenarioError(f"{self.path}: {fld}: {problem}{tail}")
+        return ScenarioError(f"{self.where(fld)}: {fld}: {problem}{tail}")
 
     def table(self, d: Any, fld: str, allowed: set[str], required: set[str] = frozenset()) -> dict[str, Any]:  # type: ignore[assignment]
         if not isinstance(d, dict):
             raise self.err(fld, "must be a table", d)
         for k in d:
             if k not in allowed:
-                raise self.err(f"{fld}.{k}" if fld else k, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+                key = k if re.fullmatch(r"[A-Za-z0-9_]+", k) else f'"{k}"'
+                raise self.err(f"{fld}.{key}" if fld else key, f"unknown key (allowed: {', '.join(sorted(allowed))})")
         for k in sorted(required):
             if k not in d:
                 raise self.err(f"{fld}.{k}" if fld else k, "missing")
@@ -328,29 +345,136 @@ class _Ctx:
 # --------------------------------------------------------------------------- loading
 
 
-def load(path: str | Path) -> Scenario:
-    """Load and validate a scenario file.
+def load(path: str | Path, overrides: Sequence[Override] = ()) -> Scenario:
+    """Load and validate a scenario file, with command-line ``overrides`` applied.
 
     Raises
     ------
     ScenarioError
-        With ``file: field: problem (got X)`` for anything wrong.
+        With ``file: field: problem (got X)`` for anything wrong (``--set …:
+        field: problem`` when an override is at fault).
     """
     p = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise ScenarioError(f"{p}: cannot read file ({exc.strerror})") from None
-    return loads(text, p)
+    return loads(text, p, overrides)
 
 
-def loads(text: str, path: str = "<string>") -> Scenario:
-    """Parse and validate scenario TOML ``text``; ``path`` is used in errors."""
-    c = _Ctx(path)
+@dataclass(frozen=True, slots=True)
+class Override:
+    """One ``--set FIELD=VALUE``: ``keys`` is the path into the TOML document
+    (table keys and array indices), ``field`` its canonical spelling."""
+
+    flag: str  # as given, e.g. "--set links.delay_ms=50"
+    field: str  # e.g. 'links.per_link."1->3".drop', "agents[2].clock.rate"
+    keys: tuple[str | int, ...]
+    value: Any
+
+
+_SEGMENT = re.compile(r'"(?P<q>[^"]*)"|(?P<k>[A-Za-z0-9_>-]+)|\[(?P<i>\d+)\]')
+
+
+def _field_name(keys: Sequence[str | int]) -> str:
+    out = ""
+    for k in keys:
+        if isinstance(k, int):
+            out += f"[{k}]"
+        else:
+            part = k if re.fullmatch(r"[A-Za-z0-9_]+", k) else f'"{k}"'
+            out += f".{part}" if out else part
+    return out
+
+
+def parse_field(text: str, flag: str = "--set") -> tuple[str | int, ...]:
+    """``links.per_link."1->3".drop`` or ``agents[2].clock.rate`` -> the key path."""
+    keys: list[str | int] = []
+    pos = 0
+    while pos < len(text):
+        if keys and not text.startswith("[", pos):
+            if not text.startswith(".", pos):
+                raise ScenarioError(f"{flag}: {text}: cannot parse the field name at {text[pos:]!r}")
+            pos += 1
+        m = _SEGMENT.match(text, pos)
+        if m is None or m.end() == pos:
+            raise ScenarioError(f"{flag}: {text}: cannot parse the field name at {text[pos:]!r}")
+        keys.append(int(m["i"]) if m["i"] is not None else (m["q"] if m["q"] is not None else m["k"]))
+        pos = m.end()
+    if not keys or isinstance(keys[0], int):
+        raise ScenarioError(f"{flag}: {text!r}: expected FIELD=VALUE, e.g. links.delay_ms=50")
+    return tuple(keys)
+
+
+def parse_value(raw: str) -> Any:
+    """A TOML value (``50``, ``0.3``, ``true``, ``[1, 0, 0]``, ``"0.1*pi"``); anything
+    that is not valid TOML is taken as a string (``exponential``)."""
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        return raw
+
+
+def parse_override(text: str, flag: str = "--set") -> Override:
+    """``FIELD=VALUE`` as given to ``--set`` (or one value of ``--vary``)."""
+    name, eq, raw = text.partition("=")
+    if not eq or not name.strip():
+        raise ScenarioError(f"{flag}: {text!r}: expected FIELD=VALUE, e.g. links.delay_ms=50")
+    keys = parse_field(name.strip(), flag)
+    return Override(f"{flag} {text}", _field_name(keys), keys, parse_value(raw.strip()))
+
+
+def _apply(doc: dict[str, Any], o: Override) -> None:
+    node: Any = doc
+    for n, k in enumerate(o.keys[:-1]):
+        here = _field_name(o.keys[: n + 1])
+        nxt = o.keys[n + 1]
+        if isinstance(k, int):
+            if not isinstance(node, list):
+                raise ScenarioError(f"{o.flag}: {here}: not an array")
+            if not 0 <= k < len(node):
+                raise ScenarioError(f"{o.flag}: {here}: no such element (the array has {len(node)})")
+            node = node[k]
+        else:
+            if not isinstance(node, dict):
+                raise ScenarioError(f"{o.flag}: {here}: not a table")
+            if k not in node:
+                node[k] = [] if isinstance(nxt, int) else {}
+            node = node[k]
+    last = o.keys[-1]
+    if isinstance(last, int):
+        if not isinstance(node, list) or not 0 <= last < len(node):
+            raise ScenarioError(f"{o.flag}: {o.field}: no such element")
+        node[last] = o.value
+    elif not isinstance(node, dict):
+        raise ScenarioError(f"{o.flag}: {_field_name(o.keys[:-1])}: not a table")
+    else:
+        node[last] = o.value
+
+
+def render(doc: dict[str, Any], source: str, overrides: Sequence[Override]) -> str:
+    """The TOML text of a scenario with overrides applied (comments are not kept)."""
+    import tomli_w
+
+    head = f"# {source}, with " + ", ".join(o.flag for o in overrides) + "\n" if overrides else ""
+    return head + tomli_w.dumps(doc)
+
+
+def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ()) -> Scenario:
+    """Parse and validate scenario TOML ``text``; ``path`` is used in errors.
+
+    With ``overrides``, the scenario's ``text`` is the TOML of the result (what
+    a results folder stores as ``scenario.toml``).
+    """
+    c = _Ctx(path, {o.field: o.flag for o in overrides})
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: TOML syntax: {exc}") from None
+    if overrides:
+        for o in overrides:
+            _apply(doc, o)
+        text = render(doc, path, overrides)
 
     c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents"}, {"scenario", "algorithm", "agents"})
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
@@ -459,7 +583,9 @@ def loads(text: str, path: str = "<string>") -> Scenario:
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
 
-    links, sensor_links, link_overrides = _links(c, doc.get("links", {}), {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors})
+    links, sensor_links, link_overrides = _links(
+        c, doc.get("links", {}), {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors}
+    )
 
     return Scenario(
         path=path,
@@ -510,7 +636,7 @@ def _link_spec(c: _Ctx, d: Any, f: str, base: LinkSpec, extra: set[str] = frozen
             kw[k] = c.num(d[k], f"{f}.{k}")
     spec = LinkSpec(**kw)
     for fld, problem in spec.check():
-        raise ScenarioError(f"{c.path}: {f}.{fld}: {problem}")
+        raise c.err(f"{f}.{fld}", problem)
     return spec
 
 
@@ -580,7 +706,7 @@ def _params(c: _Ctx, d: Any, info: AlgorithmInfo) -> Params | None:
     delta = c.num(d["delta"], f"{f}.delta", positive=True)
     xs = d["Xi"]
     if not isinstance(xs, list) or not xs:
-        raise c.err(f"{f}.Xi", "must be a non-empty list of numbers or expressions like \"0.08*pi\"", xs)
+        raise c.err(f"{f}.Xi", 'must be a non-empty list of numbers or expressions like "0.08*pi"', xs)
     Xi = tuple(float(c.expr(x, f"{f}.Xi[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{f}.Xi[{n}]") for n, x in enumerate(xs))
     try:
         hybrid.check_parameters(A, np.array(u), gamma, delta, Xi)
