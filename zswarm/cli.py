@@ -50,6 +50,39 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("sim", help="run the same world and agents in one process on a virtual clock")
     _common_run_args(s)
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    s.add_argument("--lean", action="store_true", help="leave sensor and edge messages out of the recording (a quarter of the size)")
+    s.add_argument("--quiet", action="store_true", help="print nothing but errors")
+
+    sw = sub.add_parser(
+        "sweep",
+        help="run a scenario over a grid of field values (repeated with different seeds) and plot the results",
+        description="Runs every combination of the --vary values, --repeats times each (seed, seed+1, ...), "
+        "each as its own zswarm sim/run process; writes sweep.csv (a row per run) and plots.  Interrupted and "
+        "started again with the same arguments and --out, it resumes where it stopped.",
+    )
+    sw.add_argument("topology", help="scenario TOML file")
+    sw.add_argument(
+        "--vary",
+        action="append",
+        required=True,
+        metavar="FIELD=V1,V2,...",
+        help="a field and its values, e.g. links.delay_ms=0,50,100 or links.drop=0:0.5:0.1 (START:STOP:STEP); repeatable",
+    )
+    sw.add_argument("--repeats", type=procutil.positive_int, default=1, help="runs per grid point, seeds differing (default 1)")
+    sw.add_argument("--engine", choices=("sim", "run"), default="sim", help="zswarm sim (default) or zswarm run (real processes over Zenoh)")
+    sw.add_argument("--jobs", type=procutil.positive_int, default=None, help="runs at a time (default: the number of cores for sim, 1 for run)")
+    sw.add_argument("--out", type=Path, default=None, help="sweep folder (default sweeps/<scenario>-<timestamp>/); the same folder resumes")
+    sw.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help="a fixed override for every run (repeatable)")
+    sw.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds per run (default: the scenario's)")
+    sw.add_argument("--seed", type=int, default=None, help="seed of repeat 0 (default: the scenario's); repeat r uses seed + r")
+    sw.add_argument(
+        "--thresholds",
+        default=None,
+        metavar="ATT,POS",
+        help="convergence thresholds on the mean attitude error |R̃|_I and position error in m (default 0.01,0.1)",
+    )
+    sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run is killed and recorded as failed")
+    sw.add_argument("--keep-recordings", action="store_true", help="keep each run's recording.mcap (deleted by default; summaries and CSVs stay)")
 
     ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
     procutil.add_zenoh_args(ro, default_mode="router")
@@ -82,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
     return cmds[args.cmd](args)
 
 
@@ -113,16 +146,98 @@ def cmd_sim(args: argparse.Namespace) -> int:
             print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
-    simulate(sc, out, duration, seed, progress=progress)
+    simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean)
     wall = time.perf_counter() - t0
-    if tty:
+    if tty and not args.quiet:
         print(file=sys.stderr)
     summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots)
     summary["wall_time_s"] = wall
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(report.table(summary))
-    print(f"simulated {duration:g} s in {wall:.1f} s of wall time; results: {out}")
+    if not args.quiet:
+        print(report.table(summary))
+        print(f"simulated {duration:g} s in {wall:.1f} s of wall time; results: {out}")
     return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    import os
+    import threading
+
+    from zswarm import sweep
+    from zswarm.launch import results_dir
+    from zswarm.scenario import ScenarioError, parse_override
+
+    thresholds = (0.01, 0.1)
+    if args.thresholds is not None:
+        parts = args.thresholds.split(",")
+        if len(parts) != 2:
+            procutil.fail_usage(f"--thresholds: give ATT,POS, e.g. 0.01,0.1 (got {args.thresholds!r})")
+        a, p_ = (_number(x, "--thresholds") for x in parts)
+        if not (a > 0 and p_ > 0):
+            procutil.fail_usage(f"--thresholds: both must be > 0 (got {args.thresholds!r})")
+        thresholds = (a, p_)
+    try:
+        sets = [parse_override(o) for o in args.overrides]
+        varies = [sweep.parse_vary(v) for v in args.vary]
+    except ScenarioError as exc:
+        procutil.fail_usage(str(exc))
+    seen: set[str] = set()
+    for v in varies:
+        if v.field in seen:
+            procutil.fail_usage(f"--vary {v.field}: field: given twice")
+        seen.add(v.field)
+        if v.field in {o.field for o in sets}:
+            procutil.fail_usage(f"--vary {v.field}: field: also fixed by --set")
+    sc = procutil.load_or_exit(args.topology, sets)
+    duration = sc.duration if args.duration is None else args.duration
+    seed = sc.seed if args.seed is None else args.seed
+    try:
+        jobs = sweep.plan(args.topology, sc, sets, varies, args.repeats, seed)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return procutil.EXIT_USAGE
+    out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("sweeps"))
+    out.mkdir(parents=True, exist_ok=True)
+    spec = sweep.definition(
+        args.topology,
+        sc,
+        {
+            "vary": {v.field: list(v.values) for v in varies},
+            "set": [o.flag for o in sets],
+            "repeats": args.repeats,
+            "engine": args.engine,
+            "duration_s": duration,
+            "seed": seed,
+            "thresholds": list(thresholds),
+        },
+    )
+    spec_path = out / "sweep.json"
+    if spec_path.exists():
+        old = json.loads(spec_path.read_text())
+        diff = sorted(k for k in set(old) | set(spec) if k != "topology" and old.get(k) != spec.get(k))
+        if diff:
+            procutil.fail_usage(f"--out {out}: holds a different sweep (differs in: {', '.join(diff)}); use another --out to start a new one")
+    else:
+        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+    n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine == "sim" else 1)
+    timeout = args.timeout or (max(120.0, 10.0 * duration) if args.engine == "sim" else duration + 180.0)
+    stop = threading.Event()
+    procutil.stop_on_signals_into(stop)
+    n_points = len(jobs) // args.repeats
+    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {n_jobs} at a time; {out}", file=sys.stderr)
+    t0 = time.monotonic()
+    ok, failed, interrupted = sweep.run_sweep(
+        args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
+    )
+    wall = time.monotonic() - t0
+    rows = sweep.load_rows(out / "sweep.csv")
+    if interrupted:
+        print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
+        return 130
+    plots = sweep.plot_sweep(out, rows, [v.field for v in varies], duration)
+    n_failed = sum(1 for r in rows if r["status"] == "failed")
+    print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")
+    return 0 if n_failed == 0 else 1
 
 
 def cmd_router(args: argparse.Namespace) -> int:

@@ -31,16 +31,16 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def results_dir(base: Path | None, name: str) -> Path:
-    if base is not None:
-        base.mkdir(parents=True, exist_ok=True)
-        return base
+def results_dir(out: Path | None, name: str, base: Path = Path("runs")) -> Path:
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        return out
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    d = Path("runs") / f"{name}-{stamp}"
+    d = base / f"{name}-{stamp}"
     n = 1
     while d.exists():
         n += 1
-        d = Path("runs") / f"{name}-{stamp}-{n}"
+        d = base / f"{name}-{stamp}-{n}"
     d.mkdir(parents=True)
     return d
 

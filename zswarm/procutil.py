@@ -68,6 +68,22 @@ def stop_on_signals() -> threading.Event:
     return stop
 
 
+def stop_on_signals_into(stop: threading.Event) -> None:
+    """SIGINT and SIGTERM set ``stop`` (the owner winds down and reaps its children)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+
+
+def positive_int(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1 (got {s})")
+    return v
+
+
 def positive_float(s: str) -> float:
     try:
         v = float(s)

@@ -221,6 +221,70 @@ def _first_below(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
     return float(t[above[-1] + 1])
 
 
+# Default thresholds of the convergence times (summary.json "convergence", zswarm sweep):
+# |R̃|_I = (1 − cos θ)/2 below 1e-2 is θ < 11.5°; 0.1 m is 4 % of the §3.2 agents'
+# typical 2.5 m spacing.  The §3.2 scenario crosses them at 11 s and 29 s (seed 1, sim).
+THRESHOLDS = (1e-2, 0.1)
+GRID_S = 0.1  # convergence is judged on this grid (newest estimate of each agent at each point)
+
+
+def mean_error_series(sc: Scenario, errs: dict[int, np.ndarray], tm: TreeMetrics | None, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, attitude, position)``: the error the convergence time is judged on, on a 0.1 s grid.
+
+    Leader–follower schemes: the mean over followers of each one's newest
+    estimate error at each grid time (agents tick on their own clocks; NaN
+    until every follower has an estimate).  §4 schemes: the mean over edges
+    of |R̄_k|_I and of the relative position error (the thesis' measures).
+    """
+    t = np.round(np.arange(0.0, duration + 1e-9, GRID_S), 6)
+    if tm is not None:
+        idx = np.clip(np.searchsorted(tm.t, t, side="right") - 1, 0, len(tm.t) - 1)
+        att = np.mean([v[idx] for v in tm.rel_att.values()], axis=0)
+        pos = np.mean([v[idx] for v in tm.rel_pos.values()], axis=0) if tm.rel_pos and "bearings" in sc.info.sensors else np.full(len(t), np.nan)
+        return t, att, pos
+    cols_a, cols_p = [], []
+    for a in sc.agents:
+        if a.role != "follower":
+            continue
+        rows = errs.get(a.id, np.zeros((0, 3)))
+        idx = np.searchsorted(rows[:, 0], t + 1e-9, side="right") - 1
+        ok = idx >= 0
+        ea, ep = np.full(len(t), np.nan), np.full(len(t), np.nan)
+        ea[ok], ep[ok] = rows[idx[ok], 1], rows[idx[ok], 2]
+        cols_a.append(ea)
+        cols_p.append(ep)
+    if not cols_a:
+        return t, np.zeros(len(t)), np.zeros(len(t))
+    return t, np.mean(cols_a, axis=0), np.mean(cols_p, axis=0)
+
+
+def convergence_time(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
+    """First time after which ``v`` stays below ``thr``; None if it is not below at the end.
+
+    NaN (no estimate yet) counts as not converged.
+    """
+    bad = np.nonzero(~(v < thr))[0]
+    if len(bad) == 0:
+        return float(t[0])
+    if bad[-1] + 1 >= len(t):
+        return None
+    return float(t[bad[-1] + 1])
+
+
+def convergence(sc: Scenario, errs: dict[int, np.ndarray], tm: TreeMetrics | None, duration: float, thresholds: tuple[float, float] = THRESHOLDS) -> dict[str, Any]:
+    t, att, pos = mean_error_series(sc, errs, tm, duration)
+    out: dict[str, Any] = {
+        "measure": "mean over edges of |R̄_k|_I and relative position error" if tm is not None else "mean over followers",
+        "grid_s": GRID_S,
+        "attitude_threshold": thresholds[0],
+        "attitude_s": convergence_time(t, att, thresholds[0]),
+    }
+    if np.any(np.isfinite(pos)):
+        out["position_threshold"] = thresholds[1]
+        out["position_s"] = convergence_time(t, pos, thresholds[1])
+    return out
+
+
 def final_mean(rows: np.ndarray, t_end: float, col: int, window: float = 1.0) -> float:
     return _final(rows[:, 0], rows[:, col], t_end, window)
 
@@ -235,6 +299,7 @@ def summarize(
     seed: int,
     exit_codes: dict[str, int | None] | None = None,
     tm: TreeMetrics | None = None,
+    thresholds: tuple[float, float] = THRESHOLDS,
 ) -> dict[str, Any]:
     """The summary.json content (see README, "Results folder")."""
     t_end = duration
@@ -264,6 +329,7 @@ def summarize(
             "missed_deadlines": int(st.get("missed_deadlines", 0)),
             "compute_mean_us": float(st.get("compute_mean_us", 0.0)),
             "malformed_received": int(st.get("malformed", 0)),
+            "stale_terms": int(sum(st.get("stale_terms", {}).values())),
         }
         for link, c in st.get("links", {}).items():
             links[link] = {"sent": sent.get(link, 0), **c}
@@ -272,7 +338,8 @@ def summarize(
     followers = [agents[str(a.id)] for a in sc.agents if a.role == "follower"]
     extra: dict[str, Any] = {}
     if sc.info.graph == "tree":
-        extra = _tree_summary(sc, rec, agents, t_end, tree_metrics(sc, rec) if tm is None else tm)
+        tm = tree_metrics(sc, rec) if tm is None else tm
+        extra = _tree_summary(sc, rec, agents, t_end, tm)
     return extra | {
         "scenario": sc.name,
         "algorithm": sc.algorithm,
@@ -287,6 +354,8 @@ def summarize(
         "mean_position_error_final": _nanmean([f["position_error_final"] for f in followers]),
         "mean_over": "followers" if sc.info.graph != "tree" else "agents (up to a common frame)",
         "final_window_s": 1.0,
+        "convergence": convergence(sc, errs, tm, duration, thresholds),
+        "stale_policy": {"policy": sc.stale.policy, "max_age_s": sc.stale.max_age},
         "world": rec.stats.get(("world", 0), {}),
         "recorded_messages": rec.counts,
         "malformed_in_recording": rec.malformed,
@@ -392,12 +461,13 @@ def make_report(
     seed: int,
     exit_codes: dict[str, int | None] | None = None,
     plots: bool = True,
+    thresholds: tuple[float, float] = THRESHOLDS,
 ) -> dict[str, Any]:
     """Read ``out_dir/recording.mcap``; write errors.csv, summary.json and plots; return the summary."""
     rec = load_recording(out_dir / "recording.mcap")
     errs = errors(rec)
     tm = tree_metrics(sc, rec) if sc.info.graph == "tree" else None
-    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm)
+    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds)
     write_errors_csv(out_dir / "errors.csv", errs)
     if tm is not None:
         write_edges_csv(out_dir / "edges.csv", sc, tm, rec)

@@ -1,0 +1,514 @@
+"""``zswarm sweep``: run a scenario over a grid of field values, repeated with different seeds.
+
+Each run is its own ``zswarm sim`` (or ``zswarm run``) process writing a
+results folder under ``<out>/runs/<run id>/``; a crash or a timeout is a
+failed row, and the sweep goes on.  ``sweep.csv`` gets one row per finished
+run, appended and flushed as each run ends, so a sweep that is interrupted
+(Ctrl-C, a killed terminal, a reboot) and started again with the same
+arguments and ``--out`` skips the runs it already has.  ``sweep.json`` holds
+the sweep's definition; a restart with a different one is refused.
+
+Per run: the varied values, the seed, final mean errors, convergence times
+(first time after which the mean error stays below a threshold, judged on a
+0.1 s grid: :func:`zswarm.report.convergence_time`), message counts of the
+agent→agent edges and of the sensor links.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zswarm import report
+from zswarm.scenario import Override, Scenario, ScenarioError, load, parse_field, parse_override
+
+COLUMNS_RESULT = (
+    "status",
+    "error",
+    "final_attitude_error",
+    "final_position_error",
+    "conv_attitude_s",
+    "conv_position_s",
+    "edge_sent",
+    "edge_delivered",
+    "edge_dropped",
+    "edge_drop_ratio",
+    "edge_latency_p50_ms",
+    "sensor_dropped",
+    "stale_terms",
+    "missed_deadlines",
+    "wall_s",
+)
+
+
+@dataclass(frozen=True)
+class Vary:
+    field: str  # canonical spelling
+    values: tuple[str, ...]  # as given (TOML values)
+
+
+@dataclass(frozen=True)
+class Job:
+    run_id: str
+    point: int
+    repeat: int
+    seed: int
+    values: tuple[str, ...]  # one per Vary
+    overrides: tuple[Override, ...]
+
+
+def split_values(text: str) -> list[str]:
+    """``0,50,100`` -> 3 values; ``0:200:50`` -> 0,50,100,150,200; commas inside
+    brackets or quotes do not split (``[1,0,0],[0,1,0]``)."""
+    if ":" in text and not any(ch in text for ch in "[]\"'") and text.count(":") == 2:
+        try:
+            a, b, c = (float(x) for x in text.split(":"))
+        except ValueError:
+            pass
+        else:
+            if c <= 0 or b < a:
+                raise ValueError(f"range {text!r}: expected START:STOP:STEP with STEP > 0 and STOP >= START")
+            n = int(math.floor((b - a) / c + 1e-9)) + 1
+            return [_num(a + k * c) for k in range(n)]
+    out, depth, quote, cur = [], 0, "", ""
+    for ch in text:
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            out.append(cur.strip())
+            cur = ""
+            continue
+        cur += ch
+    out.append(cur.strip())
+    if any(v == "" for v in out):
+        raise ValueError(f"empty value in {text!r}")
+    return out
+
+
+def _num(x: float) -> str:
+    r = round(x, 9)
+    return str(int(r)) if r == int(r) else repr(r)
+
+
+def parse_vary(text: str) -> Vary:
+    name, eq, vals = text.partition("=")
+    if not eq or not name.strip():
+        raise ScenarioError(f"--vary {text}: expected FIELD=v1,v2,... (e.g. links.delay_ms=0,50,100)")
+    parse_field(name.strip(), f"--vary {text}")
+    try:
+        values = tuple(split_values(vals))
+    except ValueError as exc:
+        raise ScenarioError(f"--vary {text}: {exc}") from None
+    # The canonical field name, as errors spell it.
+    return Vary(parse_override(f"{name.strip()}={values[0]}", "--vary").field, values)
+
+
+def plan(topology: str, sc: Scenario, sets: Sequence[Override], varies: Sequence[Vary], repeats: int, seed: int) -> list[Job]:
+    """Every run of the sweep; each grid point's scenario is loaded once here, so a bad
+    value fails before anything runs (exit 2 with ``--vary FIELD=v: field: problem``)."""
+    jobs = []
+    for point, combo in enumerate(itertools.product(*(v.values for v in varies))):
+        ovs = tuple(sets) + tuple(parse_override(f"{v.field}={x}", "--vary") for v, x in zip(varies, combo, strict=True))
+        load(topology, ovs)
+        for r in range(repeats):
+            jobs.append(Job(f"p{point:03d}-r{r}", point, r, seed + r, tuple(combo), ovs))
+    return jobs
+
+
+def definition(topology: str, sc: Scenario, args: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "topology": topology,
+        "scenario_sha256": hashlib.sha256(Path(topology).read_bytes()).hexdigest(),
+        "scenario": sc.name,
+        **args,
+    }
+
+
+def _column(v: Vary) -> str:
+    return v.field
+
+
+def read_done(path: Path) -> dict[str, dict[str, str]]:
+    """Rows of an existing sweep.csv by run id (a torn last line is ignored)."""
+    if not path.exists():
+        return {}
+    done = {}
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            if row.get("run_id") and row.get("status") in ("ok", "failed"):
+                done[row["run_id"]] = row
+    return done
+
+
+def _median(xs: list[float]) -> float | None:
+    return float(np.median(xs)) if xs else None
+
+
+def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple[float, float]) -> dict[str, Any]:
+    """The sweep.csv columns of one finished run, from its summary.json and errors/edges CSV."""
+    s = json.loads((folder / "summary.json").read_text())
+    t, att, pos = _series(folder, sc, duration)
+    edges = {k: v for k, v in s["links"].items() if not k.startswith("world->")}
+    sensors = {k: v for k, v in s["links"].items() if k.startswith("world->")}
+    sent = sum(int(v.get("sent", 0)) for v in edges.values())
+    dropped = sum(int(v.get("dropped", 0)) for v in edges.values())
+    return {
+        "final_attitude_error": s.get("mean_attitude_error_final"),
+        "final_position_error": s.get("mean_position_error_final"),
+        "conv_attitude_s": report.convergence_time(t, att, thresholds[0]),
+        "conv_position_s": report.convergence_time(t, pos, thresholds[1]) if np.any(np.isfinite(pos)) else None,
+        "edge_sent": sent,
+        "edge_delivered": sum(int(v.get("delivered", 0)) for v in edges.values()),
+        "edge_dropped": dropped,
+        "edge_drop_ratio": dropped / sent if sent else None,
+        "edge_latency_p50_ms": _median([float(v["latency_p50_ms"]) for v in edges.values() if "latency_p50_ms" in v]),
+        "sensor_dropped": sum(int(v.get("dropped", 0)) for v in sensors.values()),
+        "stale_terms": sum(int(a.get("stale_terms", 0)) for a in s["agents"].values()),
+        "missed_deadlines": sum(int(a.get("missed_deadlines", 0)) for a in s["agents"].values()),
+    }
+
+
+def _series(folder: Path, sc: Scenario, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The convergence measure of :func:`zswarm.report.mean_error_series`, from the run's CSVs."""
+    t = np.round(np.arange(0.0, duration + 1e-9, report.GRID_S), 6)
+    if sc.info.graph == "tree":
+        d = np.genfromtxt(folder / "edges.csv", delimiter=",", names=True)
+        cols_a, cols_p = [], []
+        for k in range(1, len(sc.oriented) + 1):
+            e = d[d["edge"] == k]
+            idx = np.clip(np.searchsorted(e["t"], t + 1e-9, side="right") - 1, 0, len(e) - 1)
+            cols_a.append(e["relative_attitude_error"][idx])
+            cols_p.append(e["relative_position_error"][idx])
+        return t, np.mean(cols_a, axis=0), np.mean(cols_p, axis=0)
+    d = np.loadtxt(folder / "errors.csv", delimiter=",", skiprows=1, ndmin=2)
+    errs = {int(i): d[d[:, 1] == i][:, [0, 2, 3]] for i in np.unique(d[:, 1])}
+    return report.mean_error_series(sc, errs, None, duration)
+
+
+class Progress:
+    """A one-line progress bar on a terminal; a line per finished run otherwise."""
+
+    def __init__(self, total: int, already: int, stream: Any = sys.stderr) -> None:
+        self.total, self.done, self.failed = total, already, 0
+        self.start_done = already
+        self.t0 = time.monotonic()
+        self.stream = stream
+        self.tty = stream.isatty()
+
+    def update(self, job: Job | None = None, status: str = "") -> None:
+        el = time.monotonic() - self.t0
+        new = self.done - self.start_done
+        eta = el / new * (self.total - self.done) if new else float("nan")
+        width = 30
+        fill = int(width * self.done / self.total) if self.total else width
+        bar = "#" * fill + "-" * (width - fill)
+        text = f"[{bar}] {self.done}/{self.total} runs, {self.failed} failed, {_hms(el)} elapsed" + (f", ~{_hms(eta)} left" if new else "")
+        if self.tty:
+            print("\r" + text, end="", file=self.stream, flush=True)
+        elif job is not None:
+            print(f"{text}  ({job.run_id}: {status})", file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.tty:
+            print(file=self.stream, flush=True)
+
+
+def _hms(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    s = int(round(s))
+    return f"{s // 60}:{s % 60:02d}"
+
+
+def _cmd(engine: str, topology: str, job: Job, folder: Path, duration: float) -> list[str]:
+    py = sys.executable
+    sets = [a for o in job.overrides for a in ("--set", o.flag.split(" ", 1)[1])]
+    common = [topology, *sets, "--seed", str(job.seed), "--duration", repr(duration), "--out", str(folder)]
+    if engine == "sim":
+        return [py, "-m", "zswarm", "sim", *common, "--no-plots", "--lean", "--quiet"]
+    return [py, "-m", "zswarm", "run", *common, "--quiet"]
+
+
+def _last_error(log: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    for ln in reversed(lines):
+        if "error" in ln.lower() or "Error" in ln:
+            return ln[-300:]
+    return lines[-1][-300:] if lines else ""
+
+
+def run_sweep(
+    topology: str,
+    sc: Scenario,
+    jobs: list[Job],
+    varies: Sequence[Vary],
+    out: Path,
+    engine: str,
+    n_jobs: int,
+    duration: float,
+    thresholds: tuple[float, float],
+    timeout: float,
+    keep_recordings: bool,
+    stop: Callable[[], bool] = lambda: False,
+) -> tuple[int, int, bool]:
+    """Run what is not in sweep.csv yet; return (ok, failed, interrupted)."""
+    csv_path = out / "sweep.csv"
+    done = read_done(csv_path)
+    todo = [j for j in jobs if j.run_id not in done]
+    header = ["run_id", "point", "repeat", "seed", *(_column(v) for v in varies), *COLUMNS_RESULT]
+    new_file = not csv_path.exists() or csv_path.stat().st_size == 0
+    if not new_file:
+        _repair_tail(csv_path)
+    f = open(csv_path, "a", newline="")  # noqa: SIM115 - closed below
+    w = csv.DictWriter(f, fieldnames=header)
+    if new_file:
+        w.writeheader()
+        f.flush()
+    prog = Progress(len(jobs), len(jobs) - len(todo))
+    prog.failed = sum(1 for r in done.values() if r["status"] == "failed")
+    prog.update()
+    running: dict[str, tuple[Job, subprocess.Popen[bytes], float, Path]] = {}
+    ok = failed = 0
+    queue = list(todo)
+    interrupted = False
+    try:
+        while queue or running:
+            if stop():
+                interrupted = True
+                break
+            while queue and len(running) < n_jobs:
+                job = queue.pop(0)
+                folder = out / "runs" / job.run_id
+                if folder.exists():
+                    shutil.rmtree(folder)  # a run cut short by an interruption starts over
+                folder.mkdir(parents=True)
+                log = open(folder / "log.txt", "wb")  # noqa: SIM115 - the child owns it; closed when reaped
+                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+                log.close()
+                running[job.run_id] = (job, proc, time.monotonic(), folder)
+            time.sleep(0.05)
+            for rid, (job, proc, t0, folder) in list(running.items()):
+                rc = proc.poll()
+                timed_out = rc is None and time.monotonic() - t0 > timeout
+                if rc is None and not timed_out:
+                    continue
+                if timed_out:
+                    _kill(proc)
+                wall = time.monotonic() - t0
+                del running[rid]
+                row: dict[str, Any] = {"run_id": job.run_id, "point": job.point, "repeat": job.repeat, "seed": job.seed}
+                row.update({_column(v): x for v, x in zip(varies, job.values, strict=True)})
+                try:
+                    if timed_out:
+                        raise RuntimeError(f"timed out after {timeout:g} s")
+                    if rc != 0:
+                        raise RuntimeError(f"exit code {rc}: {_last_error(folder / 'log.txt')}")
+                    row.update(summarize_run(folder, sc, duration, thresholds))
+                    row["status"], row["error"] = "ok", ""
+                    ok += 1
+                except Exception as exc:  # noqa: BLE001 - any failure of one run is recorded, the sweep goes on
+                    row["status"], row["error"] = "failed", str(exc)[:400]
+                    failed += 1
+                    prog.failed += 1
+                row["wall_s"] = round(wall, 2)
+                w.writerow({k: _fmt(v) for k, v in row.items()})
+                f.flush()
+                os.fsync(f.fileno())
+                if not keep_recordings:
+                    (folder / "recording.mcap").unlink(missing_ok=True)
+                prog.done += 1
+                prog.update(job, row["status"])
+    finally:
+        for _job, proc, _t0, _folder in running.values():
+            _kill(proc)
+        f.close()
+        prog.close()
+    return ok, failed, interrupted
+
+
+def _repair_tail(path: Path) -> None:
+    """Drop a torn last line (a kill during a write) so appended rows stay well-formed."""
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        path.write_bytes(data[: data.rfind(b"\n") + 1])
+
+
+def _kill(proc: subprocess.Popen[bytes]) -> None:
+    """Stop a run's process group (its own session) and reap it, by PID."""
+    for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGKILL, 5.0)):
+        if proc.poll() is not None:
+            break
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(wait)
+        except subprocess.TimeoutExpired:
+            continue
+    if proc.poll() is None:
+        proc.wait()
+
+
+def _fmt(v: Any) -> Any:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return v
+
+
+# --------------------------------------------------------------------------- plots
+
+METRICS = (
+    ("final_attitude_error", "final attitude error |R̃|_I", True),
+    ("final_position_error", "final position error (m)", True),
+    ("conv_attitude_s", "attitude convergence time (s)", False),
+    ("conv_position_s", "position convergence time (s)", False),
+)
+
+
+def _float(x: str) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _key(x: str) -> Any:
+    v = _float(x)
+    return (0, v, "") if math.isfinite(v) else (1, 0.0, x)
+
+
+def load_rows(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], duration: float) -> list[Path]:
+    """``sweep_<field>.png`` per varied field (each metric against it, mean ± min/max over
+    repeats, one line per value of the other field when there are two) and, for two
+    fields, ``sweep_heatmap.png``.  A run that never converged counts as ``duration``
+    in the means and is marked; failed runs are left out."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if r["status"] == "ok"]
+    written: list[Path] = []
+    if not ok:
+        return written
+
+    def val(r: dict[str, str], m: str) -> float:
+        v = _float(r[m])
+        return duration if (m.startswith("conv_") and not math.isfinite(v)) else v
+
+    for fi, fld in enumerate(fields):
+        others = [f for n, f in enumerate(fields) if n != fi]
+        groups: dict[str, list[dict[str, str]]] = {}
+        for r in ok:
+            groups.setdefault(" ".join(f"{o}={r[o]}" for o in others), []).append(r)
+        fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+        for ax, (m, label, log) in zip(axes.ravel(), METRICS, strict=True):
+            for gname, grs in sorted(groups.items(), key=lambda kv: [_key(kv[1][0][o]) for o in others]):
+                xs = sorted({r[fld] for r in grs}, key=_key)
+                mean, lo, hi, never = [], [], [], []
+                for x in xs:
+                    v = np.array([val(r, m) for r in grs if r[fld] == x])
+                    v = v[np.isfinite(v)]
+                    mean.append(v.mean() if len(v) else np.nan)
+                    lo.append(v.min() if len(v) else np.nan)
+                    hi.append(v.max() if len(v) else np.nan)
+                    never.append(m.startswith("conv_") and any(not math.isfinite(_float(r[m])) for r in grs if r[fld] == x))
+                xv = np.array([_float(x) for x in xs])
+                if not np.all(np.isfinite(xv)):
+                    xv = np.arange(len(xs), dtype=float)
+                    ax.set_xticks(xv, xs)
+                mean_a, lo_a, hi_a = np.array(mean), np.array(lo), np.array(hi)
+                line = ax.errorbar(xv, mean_a, yerr=[mean_a - lo_a, hi_a - mean_a], marker="o", ms=3, capsize=2, lw=1, label=gname or None)
+                nv = np.array(never)
+                if nv.any():
+                    ax.plot(xv[nv], mean_a[nv], "x", ms=8, color=line[0].get_color())
+            if log:
+                ax.set_yscale("log")
+            if m.startswith("conv_"):
+                ax.axhline(duration, color="0.6", lw=0.8, ls=":")
+            ax.set_xlabel(fld)
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        h, lab = axes[0, 0].get_legend_handles_labels()
+        if lab and len(lab) <= 12:
+            fig.legend(h, lab, loc="upper center", ncol=min(6, len(lab)), fontsize=8)
+        fig.suptitle(f"mean and min–max over repeats; x: a repeat that never converged (counted as {duration:g} s)", fontsize=9, y=0.005, va="bottom")
+        fig.tight_layout(rect=(0, 0.02, 1, 0.93 if lab else 1))
+        p = out / f"sweep_{_safe(fld)}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        written.append(p)
+
+    if len(fields) == 2:
+        fx, fy = fields
+        xs = sorted({r[fx] for r in ok}, key=_key)
+        ys = sorted({r[fy] for r in ok}, key=_key)
+        fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+        for ax, (m, label, log) in zip(axes, (METRICS[1], METRICS[2], METRICS[3]), strict=True):
+            Z = np.full((len(ys), len(xs)), np.nan)
+            nev = np.zeros_like(Z, dtype=bool)
+            for a, y in enumerate(ys):
+                for b, x in enumerate(xs):
+                    rs = [r for r in ok if r[fx] == x and r[fy] == y]
+                    v = np.array([val(r, m) for r in rs])
+                    v = v[np.isfinite(v)]
+                    if len(v):
+                        Z[a, b] = v.mean()
+                    nev[a, b] = m.startswith("conv_") and any(not math.isfinite(_float(r[m])) for r in rs)
+                    
+            norm = matplotlib.colors.LogNorm() if log and np.nanmin(Z) > 0 else None
+            im = ax.imshow(Z, origin="lower", aspect="auto", norm=norm, cmap="viridis")
+            for a in range(len(ys)):
+                for b in range(len(xs)):
+                    if math.isfinite(Z[a, b]):
+                        txt = f"{Z[a, b]:.2g}" if log else f"{Z[a, b]:.0f}"
+                        ax.text(b, a, txt + ("*" if nev[a, b] else ""), ha="center", va="center", fontsize=7, color="w")
+            ax.set_xticks(range(len(xs)), xs)
+            ax.set_yticks(range(len(ys)), ys)
+            ax.set_xlabel(fx)
+            ax.set_ylabel(fy)
+            ax.set_title(label, fontsize=10)
+            fig.colorbar(im, ax=ax)
+        fig.suptitle(f"mean over repeats; *: some repeat never converged (counted as {duration:g} s)", fontsize=9, y=0.005, va="bottom")
+        fig.tight_layout(rect=(0, 0.03, 1, 1))
+        p = out / "sweep_heatmap.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        written.append(p)
+    return written
+
+
+def _safe(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in name)
