@@ -45,13 +45,15 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "stop": {"reason": "str"},
     "progress": {"duration": "float"},
 }
+_F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
 OPTIONAL = {"sense": {"bearings", "rel_att", "vel", "vel_body", "R", "p"}, "edge": {"b", "w", "xi", "vel"}, "est": {"xi", "jumps"}}
 
 
 def _arr(a: np.ndarray) -> list[Any]:
-    a = np.ascontiguousarray(a, dtype="<f8")
+    if type(a) is not np.ndarray or a.dtype != _F8 or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype="<f8")
     return [list(a.shape), a.tobytes()]
 
 
@@ -76,7 +78,16 @@ def encode(mtype: str, src: int, seq: int, t: float, **fields: Any) -> bytes:
     return msgpack.packb(m, use_bin_type=True)
 
 
+_FAST = {(3,): ([3], 24), (3, 3): ([3, 3], 72)}  # the shapes of most fields: a shorter path
+
+
 def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
+    fast = _FAST.get(shape)
+    if fast is not None and type(v) is list and len(v) == 2 and v[0] == fast[0] and type(v[1]) is bytes and len(v[1]) == fast[1]:
+        a = np.frombuffer(v[1], dtype="<f8").reshape(shape)
+        if not all(map(math.isfinite, a.ravel().tolist())):
+            raise MessageError(f"{fld}: non-finite values")
+        return a
     if not (type(v) in (list, tuple) and len(v) == 2 and type(v[1]) is bytes and type(v[0]) in (list, tuple)):
         raise MessageError(f"{fld}: expected [shape, bytes]")
     shp = tuple(v[0])
