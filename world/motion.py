@@ -93,8 +93,11 @@ class PrescribedMotion:
         h = np.array(hs)
         mids = self.t + np.cumsum(h) - h / 2
         W = self.omega(mids)
+        # One Rodrigues call for every step and agent (same numbers as step by step).
+        n = W.shape[1]
+        E = exp_batch((h[:, None, None] * W).reshape(-1, 3)).reshape(h.size, n, 3, 3)
         for k in range(h.size):
-            self.R = self.R @ exp_batch(h[k] * W[k])
+            self.R = self.R @ E[k]
         if self.formation is not None:
             self.p = self.positions_at(t)
         elif self.velocity_exprs is not None:

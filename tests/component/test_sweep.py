@@ -1,0 +1,113 @@
+"""``zswarm sweep`` end to end on the sim engine (real CLI, real child processes)."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.conftest import ROOT, TOPO
+
+FIXED8 = str(TOPO / "thesis-3.2-fixed8.toml")
+
+
+def sweep(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "zswarm", "sweep", FIXED8, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+def rows(out):
+    with open(out / "sweep.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--vary", "links.dealy_ms=0,50"], "--vary links.dealy_ms=0: links.dealy_ms: unknown key"),
+        (["--vary", "links.drop=0,1.5"], "--vary links.drop=1.5: links.drop: must be a probability in [0, 1]"),
+        (["--vary", "links.delay_ms=-10,0"], "--vary links.delay_ms=-10: links.delay_ms: must be >= 0"),
+        (["--vary", "links.drop=0", "--vary", "links.drop=0.1"], "--vary links.drop: field: given twice"),
+        (["--vary", "links.drop=0", "--set", "links.delay_ms=-1"], "--set links.delay_ms=-1: links.delay_ms: must be >= 0"),
+        (["--vary", "links.drop=0", "--thresholds", "0.1"], "--thresholds: give ATT,POS"),
+    ],
+)
+def test_bad_sweeps_exit_2_naming_flag_and_field(tmp_path, args, message):
+    p = sweep(*args, "--out", str(tmp_path / "s"))
+    assert p.returncode == 2, p.stderr
+    assert message in p.stderr
+    assert not (tmp_path / "s" / "sweep.csv").exists()
+
+
+def test_sweep_writes_rows_plots_and_resumes(tmp_path):
+    out = tmp_path / "s"
+    args = ["--vary", "links.delay_ms=0,100", "--vary", "links.drop=0,0.3", "--repeats", "2", "--duration", "1.5", "--out", str(out)]
+    p = sweep(*args)
+    assert p.returncode == 0, p.stderr
+    rs = rows(out)
+    assert len(rs) == 8 and all(r["status"] == "ok" for r in rs)
+    assert sorted(r["run_id"] for r in rs) == sorted(f"p{k:03d}-r{r}" for k in range(4) for r in range(2))
+    for r in rs:
+        assert int(r["seed"]) == 1 + int(r["repeat"])  # seeds differ per repeat
+        drop, sent = float(r["links.drop"]), int(r["edge_sent"])
+        if drop == 0:
+            assert int(r["edge_dropped"]) == 0
+        else:
+            assert abs(float(r["edge_drop_ratio"]) - drop) < 0.1
+        if float(r["links.delay_ms"]) == 100:
+            assert float(r["edge_latency_p50_ms"]) == pytest.approx(100.0, abs=1e-6)
+        assert sent > 0 and float(r["final_attitude_error"]) > 0
+    # With lossy links the two seeds lose different messages.
+    lossy = [r for r in rs if r["links.drop"] == "0.3" and r["links.delay_ms"] == "0"]
+    assert lossy[0]["edge_dropped"] != lossy[1]["edge_dropped"]
+    for name in ("sweep_links.delay_ms.png", "sweep_links.drop.png", "sweep_heatmap.png"):
+        assert (out / name).stat().st_size > 10_000
+    assert not list(out.glob("runs/*/recording.mcap"))  # deleted unless --keep-recordings
+
+    again = sweep(*args)  # everything is done: nothing runs again
+    assert again.returncode == 0, again.stderr
+    assert "(0 run now" in again.stdout
+    assert len(rows(out)) == 8
+
+    other = sweep("--vary", "links.drop=0,0.2", "--duration", "1.5", "--out", str(out))
+    assert other.returncode == 2 and "holds a different sweep (differs in: vary)" in other.stderr
+
+
+def test_interrupted_sweep_resumes_where_it_stopped(tmp_path):
+    out = tmp_path / "s"
+    args = [sys.executable, "-m", "zswarm", "sweep", FIXED8, "--vary", "links.drop=0,0.1,0.2,0.3,0.4", "--duration", "2", "--jobs", "1", "--out", str(out)]
+    proc = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if (out / "sweep.csv").exists() and len(rows(out)) >= 1:
+                break
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "the same command resumes" in err
+    first = rows(out)
+    assert 1 <= len(first) < 5
+    p = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    final = rows(out)
+    assert sorted(r["run_id"] for r in final) == [f"p{k:03d}-r0" for k in range(5)]  # each run once
+    assert final[: len(first)] == first  # what was done is kept as it was
+
+
+def test_failed_runs_are_recorded_and_the_sweep_goes_on(tmp_path):
+    out = tmp_path / "s"
+    # 0.05 s is too short for any run: each one is killed and recorded as failed.
+    p = sweep("--vary", "links.drop=0,0.1,0.2", "--duration", "1", "--timeout", "0.05", "--out", str(out))
+    assert p.returncode == 1, p.stderr
+    rs = rows(out)
+    assert len(rs) == 3
+    assert all(r["status"] == "failed" and "timed out after 0.05 s" in r["error"] for r in rs)
+    assert "3 failed in all" in p.stdout
