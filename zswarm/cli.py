@@ -52,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     s.add_argument("--lean", action="store_true", help="leave sensor and edge messages out of the recording (a quarter of the size)")
     s.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    s.add_argument("--no-recording", action="store_true", help="write no recording.mcap (the report is made from memory; zswarm sweep uses this)")
 
     sw = sub.add_parser(
         "sweep",
@@ -146,11 +147,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
             print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
-    simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean)
+    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording)
     wall = time.perf_counter() - t0
     if tty and not args.quiet:
         print(file=sys.stderr)
-    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots)
+    messages = recorded if isinstance(recorded, list) else None
+    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages)
     summary["wall_time_s"] = wall
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if not args.quiet:

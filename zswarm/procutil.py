@@ -38,7 +38,7 @@ def add_run_args(p: argparse.ArgumentParser) -> None:
 
 
 def fail_usage(msg: str) -> NoReturn:
-    print(f"{sys.argv[0]}: error: {msg}", file=sys.stderr)
+    print(f"error: {msg}", file=sys.stderr)
     sys.exit(EXIT_USAGE)
 
 

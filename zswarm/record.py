@@ -38,22 +38,25 @@ class Recorder:
         self,
         bus: Bus,
         run: str,
-        path: Path,
+        path: Path | None,
         now_ns: Callable[[], int] | None = None,
         metadata: dict[str, str] | None = None,
         skip: tuple[str, ...] = (),
     ) -> None:
         self.run = run
         self.skip = skip  # stream prefixes not written (e.g. "sense/", "edge/" for a lean recording)
-        self.path = Path(path)
+        # path None: keep the messages in memory (``messages``) instead of writing a file.
+        self.path = None if path is None else Path(path)
+        self.messages: list[tuple[str, bytes, int]] = []
         self.now_ns = now_ns or time.time_ns
         self._buf: list[tuple[str, bytes, int]] = []
         self._lock = threading.Lock()
-        self._f = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        self._w = Writer(self._f, compression=CompressionType.ZSTD, chunk_size=4 << 20)
-        self._w.start(profile="zswarm", library="zswarm")
-        if metadata:
-            self._w.add_metadata("zswarm", metadata)
+        self._f = None if self.path is None else open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._w = None if self._f is None else Writer(self._f, compression=CompressionType.ZSTD, chunk_size=4 << 20)
+        if self._w is not None:
+            self._w.start(profile="zswarm", library="zswarm")
+            if metadata:
+                self._w.add_metadata("zswarm", metadata)
         self._channels: dict[str, int] = {}
         self.count = 0
         self.alive: dict[str, bool] = {}
@@ -84,6 +87,10 @@ class Recorder:
             buf, self._buf = self._buf, []
             if self._closed:
                 return
+            if self._w is None:
+                self.messages.extend(buf)
+                self.count += len(buf)
+                return
             for topic, payload, t in buf:
                 ch = self._channels.get(topic)
                 if ch is None:
@@ -99,8 +106,9 @@ class Recorder:
             if self._closed:
                 return
             self._closed = True
-            self._w.finish()
-            self._f.close()
+            if self._w is not None and self._f is not None:
+                self._w.finish()
+                self._f.close()
 
 
 def read(path: str | Path) -> Iterator[tuple[str, bytes, int]]:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import csv
 import json
 from collections import defaultdict
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -55,7 +56,8 @@ class Recording:
     jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (k, t, before, after)
 
 
-def load_recording(path: Path) -> Recording:
+def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
+    """Decode a recording file, or the messages of an in-memory recording."""
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
     xi: dict[int, list[tuple[float, float]]] = defaultdict(list)
@@ -66,7 +68,7 @@ def load_recording(path: Path) -> Recording:
     stop_seen = False
     counts: dict[str, int] = defaultdict(int)
     malformed = 0
-    for topic, payload, _t in read(path):
+    for topic, payload, _t in read(path) if isinstance(path, (str, Path)) else path:
         counts[topic.split("/")[0]] += 1
         if topic == ALIVE_CHANNEL:
             alive.append(unpack(payload))
@@ -97,7 +99,7 @@ def load_recording(path: Path) -> Recording:
         elif m["type"] == "stop":
             stop_seen = True
     if not truth:
-        raise ValueError(f"{path}: the recording holds no ground truth")
+        raise ValueError(f"{path if isinstance(path, (str, Path)) else 'recording'}: the recording holds no ground truth")
     truth.sort(key=lambda m: m["t"])
     ids = truth[0]["ids"]
     return Recording(
@@ -479,9 +481,11 @@ def make_report(
     exit_codes: dict[str, int | None] | None = None,
     plots: bool = True,
     thresholds: tuple[float, float] = THRESHOLDS,
+    messages: Iterable[tuple[str, bytes, int]] | None = None,
 ) -> dict[str, Any]:
-    """Read ``out_dir/recording.mcap``; write errors.csv, summary.json and plots; return the summary."""
-    rec = load_recording(out_dir / "recording.mcap")
+    """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
+    write errors.csv, summary.json and plots; return the summary."""
+    rec = load_recording(out_dir / "recording.mcap" if messages is None else messages)
     errs = errors(rec)
     tm = tree_metrics(sc, rec) if sc.info.graph == "tree" else None
     summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds)

@@ -30,13 +30,16 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     kill: dict[int, float] | None = None,
     lean: bool = False,
-) -> Path:
+    record: bool = True,
+) -> Path | list[tuple[str, bytes, int]]:
     """Run ``scenario`` for ``duration`` s of world time; return the recording path.
 
     ``kill`` maps agent ids to world times at which that agent stops (as if
     its process died): its token is withdrawn and it never ticks again.
     ``lean`` leaves the sensor and edge messages out of the recording (a
     quarter of the size; the report needs only truth, estimates and stats).
+    ``record=False`` writes no file and returns the recorded messages
+    (``(channel, payload, log_time_ns)``, what :func:`zswarm.record.read` yields).
     """
     bus = MemoryBus()
     t_now = [0.0]
@@ -44,7 +47,7 @@ def simulate(
     recorder = Recorder(
         bus,
         run,
-        rec_path,
+        rec_path if record else None,
         now_ns=lambda: int(round(t_now[0] * 1e9)),
         metadata={"engine": "sim", "scenario": scenario.name},
         skip=LEAN_SKIP if lean else (),
@@ -104,4 +107,4 @@ def simulate(
     bus.declare_token(keys.alive(run, "recorder", 0))
     recorder.close()
     bus.close()
-    return rec_path
+    return rec_path if record else recorder.messages

@@ -241,12 +241,13 @@ def _hms(s: float) -> str:
     return f"{s // 60}:{s % 60:02d}"
 
 
-def _cmd(engine: str, topology: str, job: Job, folder: Path, duration: float) -> list[str]:
+def _cmd(engine: str, topology: str, job: Job, folder: Path, duration: float, keep_recordings: bool) -> list[str]:
     py = sys.executable
     sets = [a for o in job.overrides for a in ("--set", o.flag.split(" ", 1)[1])]
     common = [topology, *sets, "--seed", str(job.seed), "--duration", repr(duration), "--out", str(folder)]
     if engine == "sim":
-        return [py, "-m", "zswarm", "sim", *common, "--no-plots", "--lean", "--quiet"]
+        rec = [] if keep_recordings else ["--no-recording"]
+        return [py, "-m", "zswarm", "sim", *common, "--no-plots", "--lean", "--quiet", *rec]
     return [py, "-m", "zswarm", "run", *common, "--quiet"]
 
 
@@ -307,7 +308,7 @@ def run_sweep(
                     shutil.rmtree(folder)  # a run cut short by an interruption starts over
                 folder.mkdir(parents=True)
                 log = open(folder / "log.txt", "wb")  # noqa: SIM115 - the child owns it; closed when reaped
-                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration, keep_recordings), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
                 log.close()
                 running[job.run_id] = (job, proc, time.monotonic(), folder)
             time.sleep(0.05)
@@ -450,7 +451,7 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
                     xv = np.arange(len(xs), dtype=float)
                     ax.set_xticks(xv, xs)
                 mean_a, lo_a, hi_a = np.array(mean), np.array(lo), np.array(hi)
-                line = ax.errorbar(xv, mean_a, yerr=[mean_a - lo_a, hi_a - mean_a], marker="o", ms=3, capsize=2, lw=1, label=gname or None)
+                line = ax.errorbar(xv, mean_a, yerr=[np.maximum(mean_a - lo_a, 0), np.maximum(hi_a - mean_a, 0)], marker="o", ms=3, capsize=2, lw=1, label=gname or None)
                 nv = np.array(never)
                 if nv.any():
                     ax.plot(xv[nv], mean_a[nv], "x", ms=8, color=line[0].get_color())

@@ -72,7 +72,7 @@ def test_sweep_writes_rows_plots_and_resumes(tmp_path):
     assert len(rows(out)) == 8
 
     other = sweep("--vary", "links.drop=0,0.2", "--duration", "1.5", "--out", str(out))
-    assert other.returncode == 2 and "holds a different sweep (differs in: vary)" in other.stderr
+    assert other.returncode == 2 and "holds a different sweep (differs in: repeats, vary)" in other.stderr
 
 
 def test_interrupted_sweep_resumes_where_it_stopped(tmp_path):
