@@ -461,7 +461,10 @@ class AgentNode:
         """Recent samples of a rate ("gyro", "vel") on this agent's clock; once per tick."""
         cache = self._tick_cache
         if name not in cache:
-            cache[name] = [(self.clock.local(t), w) for t, w in self.inbox.samples(name)]
+            samples = self.inbox.samples(name)
+            if not self.clock.is_identity:
+                samples = [(self.clock.local(t), w) for t, w in samples]
+            cache[name] = samples
         return cache[name]  # type: ignore[no-any-return]
 
     def _bearing_now(self, j: int) -> np.ndarray | None:

@@ -76,6 +76,7 @@ class AgentClock:
     def __init__(self, spec: ClockSpec, seed: int) -> None:
         self.spec = spec
         self.scale = 1.0 + spec.drift_ppm * 1e-6
+        self.is_identity = self.scale == 1.0 and spec.offset == 0.0  # local(t) == t exactly
         self.period = 1.0 / spec.rate
         self._seed = seed
         self.k = 0

@@ -150,14 +150,17 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
         v = m[k]
         if isinstance(kind, tuple):
             out[k] = _dec_arr(v, kind, k)
-        elif kind == "vecmap":
-            if not isinstance(v, dict) or not all(isinstance(j, int) for j in v):
-                raise MessageError(f"{k}: expected a map of int to vector")
-            out[k] = {j: _dec_arr(x, (3,), f"{k}[{j}]") for j, x in v.items()}
-        elif kind == "matmap":
-            if not isinstance(v, dict) or not all(isinstance(j, int) for j in v):
-                raise MessageError(f"{k}: expected a map of int to 3x3 matrix")
-            out[k] = {j: _dec_arr(x, (3, 3), f"{k}[{j}]") for j, x in v.items()}
+        elif kind == "vecmap" or kind == "matmap":
+            shape = (3,) if kind == "vecmap" else (3, 3)
+            if type(v) is not dict or not all(type(j) is int for j in v):
+                raise MessageError(f"{k}: expected a map of int to {'vector' if kind == 'vecmap' else '3x3 matrix'}")
+            d = {}
+            for j, x in v.items():
+                try:
+                    d[j] = _dec_arr(x, shape, k)
+                except MessageError as exc:  # name the entry (built only on error)
+                    raise MessageError(str(exc).replace(f"{k}:", f"{k}[{j}]:", 1)) from None
+            out[k] = d
         elif kind == "floatmap":
             if not isinstance(v, dict) or not all(isinstance(j, int) and _finite(x) for j, x in v.items()):
                 raise MessageError(f"{k}: expected a map of int to finite number")
