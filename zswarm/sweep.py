@@ -457,8 +457,8 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
                     ax.plot(xv[nv], mean_a[nv], "x", ms=8, color=line[0].get_color())
             if log:
                 ax.set_yscale("log")
-            if m.startswith("conv_"):
-                ax.axhline(duration, color="0.6", lw=0.8, ls=":")
+            if m.startswith("conv_") and any(not math.isfinite(_float(r[m])) for r in ok):
+                ax.axhline(duration, color="0.6", lw=0.8, ls=":")  # where "never converged" is drawn
             ax.set_xlabel(fld)
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
@@ -488,13 +488,12 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
                     if len(v):
                         Z[a, b] = v.mean()
                     nev[a, b] = m.startswith("conv_") and any(not math.isfinite(_float(r[m])) for r in rs)
-                    
             norm = matplotlib.colors.LogNorm() if log and np.nanmin(Z) > 0 else None
             im = ax.imshow(Z, origin="lower", aspect="auto", norm=norm, cmap="viridis")
             for a in range(len(ys)):
                 for b in range(len(xs)):
                     if math.isfinite(Z[a, b]):
-                        txt = f"{Z[a, b]:.2g}" if log else f"{Z[a, b]:.0f}"
+                        txt = f"{Z[a, b]:.3g}"
                         ax.text(b, a, txt + ("*" if nev[a, b] else ""), ha="center", va="center", fontsize=7, color="w")
             ax.set_xticks(range(len(xs)), xs)
             ax.set_yticks(range(len(ys)), ys)
