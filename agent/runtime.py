@@ -69,6 +69,8 @@ class LinkCounter:
         return d
 
 
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
 VEL_BODY = -1  # key of the body-frame velocity among an Inbox's body vectors
 
 
@@ -131,7 +133,10 @@ class Inbox:
         """Store a message that has reached this agent (caller holds the lock)."""
         msg["rx"] = rx
         sent = msg["t_local"] if "t_local" in msg else msg["t"]
-        self.links.setdefault(link, LinkCounter()).see(msg["seq"], rx - sent)
+        counter = self.links.get(link)
+        if counter is None:
+            counter = self.links[link] = LinkCounter()
+        counter.see(msg["seq"], rx - sent)
         prev = self.latest.get(link)
         if prev is None or msg["seq"] >= prev["seq"]:
             self.latest[link] = msg
@@ -226,7 +231,7 @@ def interval_mean_rate(samples: list[tuple[float, np.ndarray]], t0: float, t1: f
     ts_all = [s[0] for s in samples]
     first = max(0, min(bisect.bisect_right(ts_all, t0) - 1, n - 2))
     ts = ts_all[first:]
-    W = [tuple(float(x) for x in s[1]) for s in samples[first:]]
+    W = [tuple(s[1].tolist()) if type(s[1]) is np.ndarray else tuple(map(float, s[1])) for s in samples[first:]]
     gap = ts_all[-1] - ts_all[-2]
     Wl, Wp = samples[-1][1], samples[-2][1]
     slope = [(float(Wl[c]) - float(Wp[c])) / gap if gap > 0 else 0.0 for c in range(3)]
@@ -357,7 +362,7 @@ class AgentNode:
         # vectors are rotated to this tick with the gyro: b(t) = exp(-τ[ω]^x) b(t_s).
         # Arrival time would add the world's scheduling delay (ms on a busy host).
         # A leader sends the packet's own (R, b) pair, both taken at t_s.
-        align = np.eye(3)
+        align = _EYE3
         if self.leader:
             R_hat, p_hat = sense.get("R"), sense.get("p")
             if R_hat is None or p_hat is None:

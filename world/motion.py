@@ -48,6 +48,13 @@ class PrescribedMotion:
         self.formation = None if formation is None else (np.asarray(formation[0], dtype=float), float(formation[1]))
         self.velocity_exprs = None if velocity is None or all(v is None for v in velocity) else [None if v is None else list(v) for v in velocity]
         self.t = 0.0
+        self._omega_at: tuple[float, NDArray[np.float64]] | None = None
+
+    def omega_now(self) -> NDArray[np.float64]:
+        """True ω of every agent at the current time ``self.t``, shape (n, 3)."""
+        if self._omega_at is not None and self._omega_at[0] == self.t:
+            return self._omega_at[1]
+        return self.omega(self.t)
 
     def omega(self, t: NDArray[np.float64] | float) -> NDArray[np.float64]:
         """True body-frame ω at times ``t``: shape (len(t), n, 3), or (n, 3) for a scalar."""
@@ -92,7 +99,10 @@ class PrescribedMotion:
             hs.append(rest)
         h = np.array(hs)
         mids = self.t + np.cumsum(h) - h / 2
-        W = self.omega(mids)
+        # ω at the midpoints and at t itself (what the gyro reads there) in one call.
+        W_all = self.omega(np.append(mids, t))
+        W = W_all[:-1]
+        self._omega_at = (t, W_all[-1])
         # One Rodrigues call for every step and agent (same numbers as step by step).
         n = W.shape[1]
         E = exp_batch((h[:, None, None] * W).reshape(-1, 3)).reshape(h.size, n, 3, 3)

@@ -48,6 +48,11 @@ class World:
         self.rel_att_std = math.sqrt(scenario.rel_att_var)
         self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
         self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
+        # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
+        pairs = [(i, j) for i in self.ids for j in self.nbrs[i]]
+        self._pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
+        self._pair_j = np.array([self.index[j] for _, j in pairs], dtype=int)
+        self._pairs_of = {i: [(q, j) for q, (a, j) in enumerate(pairs) if a == i] for i in self.ids}
         self.leaders = {a.id for a in scenario.agents if a.role == "leader"}
         self.pub_sense = {i: bus.publisher(keys.sense(run, i)) for i in self.ids}
         self.pub_truth = bus.publisher(keys.truth(run))
@@ -70,7 +75,12 @@ class World:
         t = self.next_time()
         self.motion.advance_to(t)
         R, p = self.motion.R, self.motion.p
-        W = self.motion.omega(t)
+        W = self.motion.omega_now()
+        if "bearings" in self.sensors:
+            # Every agent's bearings at once: b_ij^i = R_i^T (p_j − p_i)/‖p_j − p_i‖ (3.2).
+            D = p[self._pair_j] - p[self._pair_i]
+            D = D / np.sqrt(np.einsum("pk,pk->p", D, D))[:, None]
+            B = np.einsum("pki,pk->pi", R[self._pair_i], D)
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
         self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
@@ -81,7 +91,7 @@ class World:
             # so a seed gives the same measurements on every engine.
             m: dict[str, object] = {"gyro": sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)}
             if "bearings" in self.sensors:
-                m["bearings"] = {j: sensors.noisy_bearing(sensors.bearing(R[a], p[a], p[self.index[j]]), self.bearing_std, rng) for j in self.nbrs[i]}
+                m["bearings"] = {j: sensors.noisy_bearing(B[q], self.bearing_std, rng) for q, j in self._pairs_of[i]}
             if "rel_att" in self.sensors:
                 m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
             if V is not None and "velocity" in self.sensors:

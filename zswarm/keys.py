@@ -78,3 +78,8 @@ def stream_of(run: str, key: str) -> str:
     """The recording channel of a key: the key without the ``zswarm/<run>/`` prefix."""
     prefix = f"{ROOT}/{run}/"
     return key[len(prefix) :] if key.startswith(prefix) else key
+
+
+def stream_key(run: str, stream: str) -> str:
+    """The key (or key prefix) of a recording channel: the inverse of :func:`stream_of`."""
+    return f"{ROOT}/{run}/{stream}"

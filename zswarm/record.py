@@ -45,6 +45,7 @@ class Recorder:
     ) -> None:
         self.run = run
         self.skip = skip  # stream prefixes not written (e.g. "sense/", "edge/" for a lean recording)
+        self._skip_keys = tuple(keys.stream_key(run, s) for s in skip)
         # path None: keep the messages in memory (``messages``) instead of writing a file.
         self.path = None if path is None else Path(path)
         self.messages: list[tuple[str, bytes, int]] = []
@@ -66,10 +67,10 @@ class Recorder:
         bus.watch_alive(keys.alive_all(run), self._on_alive)
 
     def _on_data(self, key: str, payload: bytes) -> None:
+        if self._skip_keys and key.startswith(self._skip_keys):
+            return
         t = self.now_ns()
         stream = keys.stream_of(self.run, key)
-        if self.skip and stream.startswith(self.skip):
-            return
         with self._lock:
             self._buf.append((stream, payload, t))
         if key.endswith("/ctl/stop"):

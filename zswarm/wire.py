@@ -10,7 +10,7 @@ raises :class:`MessageError` (never anything else) on a malformed message.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, TypeGuard
 
 import msgpack
@@ -113,6 +113,85 @@ def _finite(x: Any) -> TypeGuard[int | float]:
     return not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
 
 
+def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
+    """The validator/converter of one field kind (see SCHEMAS)."""
+    if isinstance(kind, tuple):
+        shape = kind
+        return lambda v, k: _dec_arr(v, shape, k)
+    if kind in ("vecmap", "matmap"):
+        shape = (3,) if kind == "vecmap" else (3, 3)
+        what = "vector" if kind == "vecmap" else "3x3 matrix"
+
+        def arrmap(v: Any, k: str) -> dict[int, np.ndarray]:
+            if type(v) is not dict or not all(type(j) is int for j in v):
+                raise MessageError(f"{k}: expected a map of int to {what}")
+            d = {}
+            for j, x in v.items():
+                try:
+                    d[j] = _dec_arr(x, shape, k)
+                except MessageError as exc:  # name the entry (built only on error)
+                    raise MessageError(str(exc).replace(f"{k}:", f"{k}[{j}]:", 1)) from None
+            return d
+
+        return arrmap
+    if kind == "floatmap":
+
+        def floatmap(v: Any, k: str) -> dict[int, float]:
+            if not isinstance(v, dict) or not all(isinstance(j, int) and _finite(x) for j, x in v.items()):
+                raise MessageError(f"{k}: expected a map of int to finite number")
+            return {j: float(x) for j, x in v.items()}
+
+        return floatmap
+    if kind == "jumps":
+
+        def jumps(v: Any, k: str) -> list[tuple[int, float, float, float]]:
+            if not isinstance(v, list) or not all(
+                isinstance(e, list) and len(e) == 4 and isinstance(e[0], int) and not isinstance(e[0], bool) and all(_finite(x) for x in e[1:]) for e in v
+            ):
+                raise MessageError(f"{k}: expected a list of [edge, t, xi_before, xi_after]")
+            return [(e[0], float(e[1]), float(e[2]), float(e[3])) for e in v]
+
+        return jumps
+    if kind == "float":
+
+        def flt(v: Any, k: str) -> float:
+            if not _finite(v):
+                raise MessageError(f"{k}: expected a finite number")
+            return float(v)
+
+        return flt
+    if kind == "int":
+
+        def integer(v: Any, k: str) -> int:
+            if type(v) is not int:
+                raise MessageError(f"{k}: expected an integer")
+            return v
+
+        return integer
+    if kind == "str":
+
+        def string(v: Any, k: str) -> str:
+            if not isinstance(v, str):
+                raise MessageError(f"{k}: expected a string")
+            return v
+
+        return string
+    if kind == "intlist":
+
+        def intlist(v: Any, k: str) -> list[int]:
+            if not isinstance(v, list) or not all(type(x) is int for x in v):
+                raise MessageError(f"{k}: expected a list of integers")
+            return v
+
+        return intlist
+    return lambda v, k: v  # "any": msgpack-native, small
+
+
+# Per message type: (field, handler, optional), in schema order.
+_FIELDS = {t: tuple((k, _kind_handler(kind), k in OPTIONAL.get(t, ())) for k, kind in schema.items()) for t, schema in SCHEMAS.items()}
+_MISSING = object()
+
+
 def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
     """Decode and validate; arrays come back as read-only float64 numpy arrays.
 
@@ -125,68 +204,29 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
         m = msgpack.unpackb(payload, raw=False, strict_map_key=False, max_bin_len=1 << 20, max_str_len=1 << 16)
     except Exception as exc:  # msgpack raises a zoo of types on garbage
         raise MessageError(f"not msgpack ({type(exc).__name__})") from None
-    if not isinstance(m, dict):
+    if type(m) is not dict:
         raise MessageError("not a map")
     if m.get("v") != VERSION:
         raise MessageError(f"schema version {m.get('v')!r}, expected {VERSION}")
     mtype = m.get("type")
-    if mtype not in SCHEMAS:
+    fields = _FIELDS.get(mtype) if type(mtype) is str else None
+    if fields is None:
         raise MessageError(f"unknown type {mtype!r}")
-    if expect is not None and mtype not in ((expect,) if isinstance(expect, str) else expect):
+    if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
         raise MessageError(f"type {mtype!r} where {expect!r} was expected")
-    for k in ("src", "seq"):
-        if isinstance(m.get(k), bool) or not isinstance(m.get(k), int):
-            raise MessageError(f"{k}: expected an integer")
-    t = m.get("t")
+    src, seq, t = m.get("src"), m.get("seq"), m.get("t")
+    if type(src) is not int:
+        raise MessageError("src: expected an integer")
+    if type(seq) is not int:
+        raise MessageError("seq: expected an integer")
     if not _finite(t):
         raise MessageError("t: expected a finite number")
-    out: dict[str, Any] = {"type": mtype, "src": m["src"], "seq": m["seq"], "t": float(t)}
-    optional = OPTIONAL.get(mtype, set())
-    for k, kind in SCHEMAS[mtype].items():
-        if k not in m:
-            if k in optional:
+    out: dict[str, Any] = {"type": mtype, "src": src, "seq": seq, "t": float(t)}
+    for k, handle, optional in fields:
+        v = m.get(k, _MISSING)
+        if v is _MISSING:
+            if optional:
                 continue
             raise MessageError(f"{k}: missing")
-        v = m[k]
-        if isinstance(kind, tuple):
-            out[k] = _dec_arr(v, kind, k)
-        elif kind == "vecmap" or kind == "matmap":
-            shape = (3,) if kind == "vecmap" else (3, 3)
-            if type(v) is not dict or not all(type(j) is int for j in v):
-                raise MessageError(f"{k}: expected a map of int to {'vector' if kind == 'vecmap' else '3x3 matrix'}")
-            d = {}
-            for j, x in v.items():
-                try:
-                    d[j] = _dec_arr(x, shape, k)
-                except MessageError as exc:  # name the entry (built only on error)
-                    raise MessageError(str(exc).replace(f"{k}:", f"{k}[{j}]:", 1)) from None
-            out[k] = d
-        elif kind == "floatmap":
-            if not isinstance(v, dict) or not all(isinstance(j, int) and _finite(x) for j, x in v.items()):
-                raise MessageError(f"{k}: expected a map of int to finite number")
-            out[k] = {j: float(x) for j, x in v.items()}
-        elif kind == "jumps":
-            if not isinstance(v, list) or not all(
-                isinstance(e, list) and len(e) == 4 and isinstance(e[0], int) and not isinstance(e[0], bool) and all(_finite(x) for x in e[1:]) for e in v
-            ):
-                raise MessageError(f"{k}: expected a list of [edge, t, xi_before, xi_after]")
-            out[k] = [(e[0], float(e[1]), float(e[2]), float(e[3])) for e in v]
-        elif kind == "float":
-            if not _finite(v):
-                raise MessageError(f"{k}: expected a finite number")
-            out[k] = float(v)
-        elif kind == "int":
-            if isinstance(v, bool) or not isinstance(v, int):
-                raise MessageError(f"{k}: expected an integer")
-            out[k] = v
-        elif kind == "str":
-            if not isinstance(v, str):
-                raise MessageError(f"{k}: expected a string")
-            out[k] = v
-        elif kind == "intlist":
-            if not isinstance(v, list) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
-                raise MessageError(f"{k}: expected a list of integers")
-            out[k] = v
-        else:
-            out[k] = v
+        out[k] = handle(v, k)
     return out
