@@ -29,4 +29,4 @@ bench: $(STAMP)
 	$(PY) bench/bench_runtime.py
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) runs sweeps .pytest_cache
