@@ -228,7 +228,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     n_points = len(jobs) // args.repeats
     print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {n_jobs} at a time; {out}", file=sys.stderr)
     t0 = time.monotonic()
-    ok, failed, interrupted = sweep.run_sweep(
+    ok, _failed, interrupted = sweep.run_sweep(
         args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
     )
     wall = time.monotonic() - t0

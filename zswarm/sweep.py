@@ -83,7 +83,7 @@ def split_values(text: str) -> list[str]:
         else:
             if c <= 0 or b < a:
                 raise ValueError(f"range {text!r}: expected START:STOP:STEP with STEP > 0 and STOP >= START")
-            n = int(math.floor((b - a) / c + 1e-9)) + 1
+            n = math.floor((b - a) / c + 1e-9) + 1
             return [_num(a + k * c) for k in range(n)]
     out, depth, quote, cur = [], 0, "", ""
     for ch in text:
@@ -237,8 +237,8 @@ class Progress:
 def _hms(s: float) -> str:
     if not math.isfinite(s):
         return "?"
-    s = int(round(s))
-    return f"{s // 60}:{s % 60:02d}"
+    n = round(s)
+    return f"{n // 60}:{n % 60:02d}"
 
 
 def _cmd(engine: str, topology: str, job: Job, folder: Path, duration: float, keep_recordings: bool) -> list[str]:

@@ -62,7 +62,7 @@ def test_drop_ratio_and_delay_on_every_link(procs, tmp_path):
 
 def test_sim_and_run_agree_on_convergence_time_with_lossy_delayed_links(procs, tmp_path):
     sets = ["links.delay_ms=50", "links.drop=0.2"]
-    out, s = run(procs, tmp_path, sets, 40.0)
+    _, s = run(procs, tmp_path, sets, 40.0)
     sc = load(FIXED8, [parse_override(x) for x in sets])
     sim_out = tmp_path / "sim"
     sim_out.mkdir()
