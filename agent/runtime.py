@@ -252,19 +252,16 @@ def interval_mean_rate(samples: list[tuple[float, np.ndarray]], t0: float, t1: f
         return (a[0] + u * (b[0] - a[0]), a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2]))
 
     # Breakpoints of the piecewise-linear rate inside (t0, t1): sample times and t_cap.
+    # The rate is continuous, so one value per breakpoint serves both segments.
     grid = sorted({t0, t1, *(t for t in (*ts, t_cap) if t0 < t < t1)})
+    vals = [value(g, bisect.bisect_right(ts, g) - 1) for g in grid]
     acc = [0.0, 0.0, 0.0]
-    k = bisect.bisect_right(ts, grid[0]) - 1
-    prev = value(grid[0], k)
-    for a_, b_ in zip(grid, grid[1:], strict=False):
-        # Evaluate at b_ from the left-hand segment [a_, b_] (b_ may be a sample time).
-        k = bisect.bisect_right(ts, a_) - 1
-        cur = value(b_, k)
-        h = b_ - a_
-        acc[0] += 0.5 * (prev[0] + cur[0]) * h
-        acc[1] += 0.5 * (prev[1] + cur[1]) * h
-        acc[2] += 0.5 * (prev[2] + cur[2]) * h
-        prev = value(b_, bisect.bisect_right(ts, b_) - 1)
+    for n_ in range(len(grid) - 1):
+        h = grid[n_ + 1] - grid[n_]
+        lo, hi = vals[n_], vals[n_ + 1]
+        acc[0] += 0.5 * (lo[0] + hi[0]) * h
+        acc[1] += 0.5 * (lo[1] + hi[1]) * h
+        acc[2] += 0.5 * (lo[2] + hi[2]) * h
     return np.array(acc) / (t1 - t0)
 
 

@@ -77,10 +77,7 @@ class World:
         R, p = self.motion.R, self.motion.p
         W = self.motion.omega_now()
         if "bearings" in self.sensors:
-            # Every agent's bearings at once: b_ij^i = R_i^T (p_j − p_i)/‖p_j − p_i‖ (3.2).
-            D = p[self._pair_j] - p[self._pair_i]
-            D = D / np.sqrt(np.einsum("pk,pk->p", D, D))[:, None]
-            B = np.einsum("pki,pk->pi", R[self._pair_i], D)
+            B = sensors.bearings(R, p, self._pair_i, self._pair_j)  # every agent's, at once
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
         self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))

@@ -22,10 +22,12 @@ from zswarm.so3 import exp
 Vec3 = NDArray[np.float64]
 
 
-def bearing(R_i: NDArray[np.float64], p_i: Vec3, p_j: Vec3) -> Vec3:
-    """Body-frame bearing ``b_ij^i = R_i^T b_ij`` from agent i to agent j (3.2)."""
-    d = p_j - p_i
-    return R_i.T @ (d / math.sqrt(float(d @ d)))
+def bearings(R: NDArray[np.float64], p: NDArray[np.float64], i: NDArray[np.intp], j: NDArray[np.intp]) -> NDArray[np.float64]:
+    """Body-frame bearings ``b_ij^i = R_i^T (p_j − p_i)/‖p_j − p_i‖`` (3.2) of the
+    pairs ``(i[q], j[q])`` (indices into the stacks R (n, 3, 3), p (n, 3)), shape (P, 3)."""
+    D = p[j] - p[i]
+    D = D / np.sqrt(np.einsum("pk,pk->p", D, D))[:, None]
+    return np.einsum("pki,pk->pi", R[i], D)
 
 
 def noisy_bearing(b: Vec3, std: float, rng: np.random.Generator) -> Vec3:

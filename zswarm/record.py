@@ -44,7 +44,7 @@ class Recorder:
         skip: tuple[str, ...] = (),
     ) -> None:
         self.run = run
-        self.skip = skip  # stream prefixes not written (e.g. "sense/", "edge/" for a lean recording)
+        # Keys of the stream prefixes not written (e.g. "sense/", "edge/" for a lean recording).
         self._skip_keys = tuple(keys.stream_key(run, s) for s in skip)
         # path None: keep the messages in memory (``messages``) instead of writing a file.
         self.path = None if path is None else Path(path)

@@ -121,53 +121,40 @@ def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
 
 
 def errors(rec: Recording) -> dict[int, np.ndarray]:
-    """Per agent an array of rows ``(t, attitude_error, position_error)``.
-
-    The truth at an estimate's time ``t`` is that of :func:`_truth_at`
-    (attitude from the sample before ``t`` moved on with its ω, position
-    interpolated), computed for all of an agent's estimates at once.
-    """
+    """Per agent an array of rows ``(t, attitude_error, position_error)``."""
     out: dict[int, np.ndarray] = {}
     col = {i: k for k, i in enumerate(rec.truth_ids)}
-    T = rec.truth_t
     for i, samples in rec.est.items():
         if i not in col:
             continue
-        a = col[i]
-        t = np.array([s[0] for s in samples], dtype=float)
-        k = np.searchsorted(T, t, side="right") - 1
-        ok = k >= 0
-        if not np.any(ok):
-            out[i] = np.zeros((0, 3))
-            continue
-        t, k = t[ok], k[ok]
-        R_hat = np.array([s[1] for s, o in zip(samples, ok, strict=True) if o])
-        p_hat = np.array([s[2] for s, o in zip(samples, ok, strict=True) if o])
-        tau = t - T[k]
-        R = rec.truth_R[k, a] @ so3.exp_batch(tau[:, None] * rec.truth_w[k, a])
-        k1 = np.minimum(k + 1, len(T) - 1)
-        span = T[k1] - T[k]
-        frac = np.where(k1 > k, tau / np.where(span > 0, span, 1.0), 0.0)
-        p = (1 - frac)[:, None] * rec.truth_p[k, a] + frac[:, None] * rec.truth_p[k1, a]
+        t, R_hat, p_hat, R, p = _estimates_with_truth(rec, samples, col[i])
         tr = np.einsum("nij,nij->n", R, R_hat)  # tr(R R̂^T)
         att = np.sqrt(np.maximum(0.0, (3.0 - tr) * 0.25))
         out[i] = np.column_stack((t, att, np.linalg.norm(p - p_hat, axis=1)))
     return out
 
 
-def _truth_at(rec: Recording, t: float, a: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """Truth (R, p) of column ``a`` at time ``t`` (None before the first sample)."""
-    k = int(np.searchsorted(rec.truth_t, t, side="right")) - 1
-    if k < 0:
-        return None
-    R = rec.truth_R[k, a] @ so3.exp((t - rec.truth_t[k]) * rec.truth_w[k, a])
-    # Positions move slowly (< 2 m/s in the papers' scenarios): interpolate linearly.
-    if k + 1 < len(rec.truth_t):
-        s_ = (t - rec.truth_t[k]) / (rec.truth_t[k + 1] - rec.truth_t[k])
-        p = (1 - s_) * rec.truth_p[k, a] + s_ * rec.truth_p[k + 1, a]
-    else:
-        p = rec.truth_p[k, a]
-    return R, p
+def _estimates_with_truth(
+    rec: Recording, samples: list[tuple[float, np.ndarray, np.ndarray]], a: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, R̂, p̂, R, p)`` of an agent's estimates from the first truth sample on, with
+    the truth of column ``a`` at each estimate's time: the attitude of the sample
+    before ``t`` moved on with its ω, the position interpolated linearly (positions
+    move slowly, < 2 m/s in the papers' scenarios)."""
+    T = rec.truth_t
+    t = np.array([s[0] for s in samples], dtype=float).reshape(-1)
+    k = np.searchsorted(T, t, side="right") - 1
+    ok = k >= 0
+    t, k = t[ok], k[ok]
+    R_hat = np.array([s[1] for s, o in zip(samples, ok, strict=True) if o]).reshape(-1, 3, 3)
+    p_hat = np.array([s[2] for s, o in zip(samples, ok, strict=True) if o]).reshape(-1, 3)
+    tau = t - T[k]
+    R = rec.truth_R[k, a] @ so3.exp_batch(tau[:, None] * rec.truth_w[k, a]) if len(t) else np.zeros((0, 3, 3))
+    k1 = np.minimum(k + 1, len(T) - 1)
+    span = T[k1] - T[k]
+    frac = np.where(k1 > k, tau / np.where(span > 0, span, 1.0), 0.0)
+    p = (1 - frac)[:, None] * rec.truth_p[k, a] + frac[:, None] * rec.truth_p[k1, a]
+    return t, R_hat, p_hat, R, p
 
 
 @dataclass
@@ -186,18 +173,11 @@ def tree_metrics(sc: Scenario, rec: Recording, step: float = 0.01) -> TreeMetric
     col = {i: k for k, i in enumerate(rec.truth_ids)}
     Rt: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
     for i in sc.ids:
-        rows_t, rows_R, rows_p = [], [], []
-        for t, R_hat, p_hat in rec.est.get(i, []):
-            tr = _truth_at(rec, t, col[i])
-            if tr is None:
-                continue
-            R_tilde = tr[0] @ R_hat.T
-            rows_t.append(t)
-            rows_R.append(R_tilde)
-            rows_p.append(R_tilde @ p_hat - tr[1])
-        if not rows_t:
+        t, R_hat, p_hat, R, p = _estimates_with_truth(rec, rec.est.get(i, []), col[i])
+        if not len(t):
             return None
-        Rt[i] = (np.array(rows_t), np.array(rows_R), np.array(rows_p))
+        R_tilde = R @ R_hat.transpose(0, 2, 1)
+        Rt[i] = (t, R_tilde, np.einsum("nij,nj->ni", R_tilde, p_hat) - p)
     t0 = max(v[0][0] for v in Rt.values())
     t1 = max(v[0][-1] for v in Rt.values())
     grid = np.arange(t0, t1 + 1e-9, step)

@@ -191,16 +191,14 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
 
 def _series(folder: Path, sc: Scenario, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The convergence measure of :func:`zswarm.report.mean_error_series`, from the run's CSVs."""
-    t = np.round(np.arange(0.0, duration + 1e-9, report.GRID_S), 6)
     if sc.info.graph == "tree":
         d = np.genfromtxt(folder / "edges.csv", delimiter=",", names=True)
-        cols_a, cols_p = [], []
-        for k in range(1, len(sc.oriented) + 1):
-            e = d[d["edge"] == k]
-            idx = np.clip(np.searchsorted(e["t"], t + 1e-9, side="right") - 1, 0, len(e) - 1)
-            cols_a.append(e["relative_attitude_error"][idx])
-            cols_p.append(e["relative_position_error"][idx])
-        return t, np.mean(cols_a, axis=0), np.mean(cols_p, axis=0)
+        edges = {k: d[d["edge"] == k] for k in range(1, len(sc.oriented) + 1)}
+        t = edges[1]["t"]
+        tm = report.TreeMetrics(
+            t, {k: e["relative_attitude_error"] for k, e in edges.items()}, {k: e["relative_position_error"] for k, e in edges.items()}, {}, {}
+        )
+        return report.mean_error_series(sc, {}, tm, duration)
     d = np.loadtxt(folder / "errors.csv", delimiter=",", skiprows=1, ndmin=2)
     errs = {int(i): d[d[:, 1] == i][:, [0, 2, 3]] for i in np.unique(d[:, 1])}
     return report.mean_error_series(sc, errs, None, duration)
