@@ -38,7 +38,10 @@ class World:
             formation=None if f is None else (np.array(f.axis), f.rate),
             velocity=[a.velocity for a in scenario.agents],
         )
-        self.sensors = scenario.info.sensors
+        # What each agent's algorithm declares it measures (zswarm.algorithm.SENSORS).
+        self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
+        want = frozenset().union(*self.sensors.values())
+        self.want_bearings = "bearings" in want
         self.ids = list(scenario.ids)
         self.index = {i: k for k, i in enumerate(self.ids)}
         self.bias = np.array([a.gyro_bias for a in scenario.agents])
@@ -53,7 +56,6 @@ class World:
         self._pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
         self._pair_j = np.array([self.index[j] for _, j in pairs], dtype=int)
         self._pairs_of = {i: [(q, j) for q, (a, j) in enumerate(pairs) if a == i] for i in self.ids}
-        self.leaders = {a.id for a in scenario.agents if a.role == "leader"}
         self.pub_sense = {i: bus.publisher(keys.sense(run, i)) for i in self.ids}
         self.pub_truth = bus.publisher(keys.truth(run))
         self.pub_stats = bus.publisher(keys.stats(run, "world", 0))
@@ -76,7 +78,7 @@ class World:
         self.motion.advance_to(t)
         R, p = self.motion.R, self.motion.p
         W = self.motion.omega_now()
-        if "bearings" in self.sensors:
+        if self.want_bearings:
             B = sensors.bearings(R, p, self._pair_i, self._pair_j)  # every agent's, at once
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
@@ -84,19 +86,25 @@ class World:
         for i in self.ids:
             a = self.index[i]
             rng = self.rngs[i]
+            want = self.sensors[i]
             # One draw order per agent (gyro, bearings, relative attitudes, velocity)
             # so a seed gives the same measurements on every engine.
-            m: dict[str, object] = {"gyro": sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)}
-            if "bearings" in self.sensors:
+            m: dict[str, object] = {}
+            if "gyro" in want:
+                m["gyro"] = sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)
+            if "bearings" in want:
                 m["bearings"] = {j: sensors.noisy_bearing(B[q], self.bearing_std, rng) for q, j in self._pairs_of[i]}
-            if "rel_att" in self.sensors:
+            if "rel_att" in want:
                 m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
-            if V is not None and "velocity" in self.sensors:
+            if V is not None and "velocity" in want:
                 m["vel"] = sensors.velocity(V[a], self.velocity_std, rng)
-            if "velocity_body" in self.sensors:
+            if "velocity_body" in want:
                 m["vel_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
-            if i in self.leaders:
-                m["R"], m["p"] = R[a], p[a]
+            # Own attitude and position: exact (the thesis' leaders know their pose).
+            if "attitude" in want:
+                m["R"] = R[a]
+            if "position" in want:
+                m["p"] = p[a]
             self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
         self.seq += 1
         self.samples += 1

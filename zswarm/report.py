@@ -84,7 +84,8 @@ def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
         if m["type"] == "truth" and kind == "truth":
             truth.append(m)
         elif m["type"] == "est" and kind == "est":
-            est[m["src"]].append((m["t"], m["R_hat"], m["p_hat"]))
+            if "R_hat" in m and "p_hat" in m:
+                est[m["src"]].append((m["t"], m["R_hat"], m["p_hat"]))
             for k, x in m.get("xi", {}).items():
                 xi[k].append((m["t"], x))
             jumps.extend(m.get("jumps", []))

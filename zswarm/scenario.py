@@ -6,7 +6,8 @@ examples and the README for the full format.
 Format (units: seconds, Hz, metres, radians)::
 
     [scenario]  name, description, duration, seed
-    [algorithm] name; [algorithm.gains] per algorithm (see ALGORITHMS);
+    [algorithm] name (built-in, entry point or module path: zswarm.algorithm.resolve);
+                [algorithm.gains] as the algorithm's SPEC.gains declares;
                 [algorithm.params] A, u, gamma, delta, Xi (§4 observers)
     [world]     step (s, <= 0.001), sensor_rate (Hz);
                 [world.formation] axis, rate: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis)
@@ -33,12 +34,13 @@ import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from types import MappingProxyType
+from types import MappingProxyType, ModuleType
 from typing import Any
 
 import numpy as np
 
 from zswarm import hybrid, so3
+from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, StalePolicy, resolve
 from zswarm.expr import Expr, ExprError, parse
 from zswarm.graph import GraphError, check_leader_follower, check_tree
 from zswarm.links import JITTER_KINDS, LinkSpec
@@ -46,82 +48,6 @@ from zswarm.links import JITTER_KINDS, LinkSpec
 
 class ScenarioError(ValueError):
     """A scenario file that cannot be used; the message names file, field and problem."""
-
-
-STALE_POLICIES = ("hold", "drop")
-
-
-@dataclass(frozen=True, slots=True)
-class StalePolicy:
-    """What an agent does with a neighbour's message older than ``max_age`` seconds
-    (its stamp against the agent's clock): ``"hold"`` uses it as if fresh,
-    ``"drop"`` leaves that neighbour's terms out of the step until a fresher one
-    arrives.  Either way such terms are counted (``stale_terms`` in the stats)."""
-
-    max_age: float = 0.2  # s
-    policy: str = "hold"
-
-
-@dataclass(frozen=True, slots=True)
-class AlgorithmInfo:
-    """What the loader knows about an algorithm: its gains and graph assumption."""
-
-    gains: Mapping[str, float | None]  # name -> default (None: required)
-    graph: str  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2)
-    description: str
-    sensors: frozenset[str] = frozenset({"bearings"})  # what the world measures for it
-    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P)
-    # Default stale-data policy.  §3.2 holds: with fixed positions what a neighbour
-    # sends (R̂_j b_ji^j and p̂_j) estimates constants, so an old value is as good as
-    # the neighbour's estimate was.  The others drop: a neighbour's R̂_j, p̂_j are
-    # brought to the tick with its last ω_j, v_j, an extrapolation that degrades with age.
-    stale: StalePolicy = StalePolicy(0.2, "drop")
-
-
-# The gains of each algorithm, with defaults; every gain must be > 0.
-ALGORITHMS: Mapping[str, AlgorithmInfo] = MappingProxyType(
-    {
-        "bearing_pose_fixed": AlgorithmInfo(
-            MappingProxyType({"k_R": None, "k_p": None}),
-            "leader_follower",
-            "thesis §3.2: attitude observer (3.3) + position observer (3.14)",
-            stale=StalePolicy(0.2, "hold"),
-        ),
-        "bearing_pose_fixed_filtered": AlgorithmInfo(
-            MappingProxyType({"k_Omega": None, "k_p": None}),
-            "leader_follower",
-            "thesis §3.2: filtered attitude observer (3.8)-(3.9) + position observer (3.14)",
-            stale=StalePolicy(0.2, "hold"),
-        ),
-        "bearing_pose_moving": AlgorithmInfo(
-            MappingProxyType({"k_R": None, "k_p": None}),
-            "leader_follower",
-            "thesis §3.3: attitude observer (3.23) + position observer (3.25), moving agents",
-            frozenset({"bearings", "velocity"}),
-        ),
-        "relative_attitude_continuous": AlgorithmInfo(
-            MappingProxyType({"k_R": None}),
-            "tree",
-            "thesis §4.3.1: continuous observer (4.3) + (4.8) from relative attitudes",
-            frozenset({"rel_att"}),
-            "A",
-        ),
-        "relative_attitude_hybrid": AlgorithmInfo(
-            MappingProxyType({"k_R": None, "k_xi": None}),
-            "tree",
-            "thesis §4.3.2: hybrid observer (4.25)-(4.26) from relative attitudes",
-            frozenset({"rel_att"}),
-            "hybrid",
-        ),
-        "relative_pose_hybrid": AlgorithmInfo(
-            MappingProxyType({"k_R": None, "k_xi": None, "k_p": None}),
-            "tree",
-            "thesis §4.4: hybrid attitude (4.25)-(4.26) + hybrid position observer (4.30)-(4.31)",
-            frozenset({"rel_att", "bearings", "velocity_body"}),
-            "hybrid",
-        ),
-    }
-)
 
 
 @dataclass(frozen=True, slots=True)
@@ -213,6 +139,26 @@ class Scenario:
     sensor_links: LinkSpec = LinkSpec()  # [links.sensors]: the world→agent sensor links' model
     link_overrides: Mapping[str, LinkSpec] = field(default_factory=dict)  # [links.per_link."j->i"]
     stale: StalePolicy = StalePolicy()  # [algorithm.stale]
+    module: ModuleType | None = field(default=None, repr=False)  # the algorithm (zswarm.algorithm interface)
+    leader_module: ModuleType | None = field(default=None, repr=False)  # what agents with role "leader" run
+    module_dir: str | None = None  # a directory the algorithm's module was found in (beside the scenario file)
+
+    def module_for(self, role: str) -> ModuleType:
+        """The algorithm module an agent of ``role`` runs."""
+        m = self.leader_module if role == "leader" else self.module
+        assert m is not None
+        return m
+
+    def sensors_of(self, i: int) -> frozenset[str]:
+        """The sensor fields the world measures for agent ``i``: its own algorithm's,
+        and the scenario algorithm's (a leader measures what its followers do)."""
+        own: frozenset[str] = self.module_for(self.agent(i).role).SPEC.sensors
+        return own | self.info.sensors
+
+    @property
+    def part_rates(self) -> tuple[float, ...]:
+        """The declared rates (Hz) of the algorithm's parts that have their own."""
+        return tuple(p.rate for p in self.info.parts if p.rate is not None)
 
     def link_spec(self, name: str) -> LinkSpec:
         """The model of link ``name`` ("world->3", "1->3")."""
@@ -225,8 +171,11 @@ class Scenario:
         return self.links.active or self.sensor_links.active or any(s.active for s in self.link_overrides.values())
 
     @property
-    def info(self) -> AlgorithmInfo:
-        return ALGORITHMS[self.algorithm]
+    def info(self) -> AlgorithmSpec:
+        """The algorithm's declaration (``SPEC``)."""
+        assert self.module is not None
+        spec: AlgorithmSpec = self.module.SPEC
+        return spec
 
     @property
     def moving(self) -> bool:
@@ -485,9 +434,18 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
 
     al = c.table(doc["algorithm"], "algorithm", {"name", "gains", "params", "stale"}, {"name"})
     algo = c.string(al["name"], "algorithm.name")
-    if algo not in ALGORITHMS:
-        raise c.err("algorithm.name", f"unknown algorithm (known: {', '.join(ALGORITHMS)})", algo)
-    info = ALGORITHMS[algo]
+    near = path if Path(path).is_file() else None
+    try:
+        module, module_dir = resolve(algo, near)
+        leader_module = resolve(module.SPEC.leader)[0] if module.SPEC.leader else None
+    except AlgorithmError as exc:
+        raise c.err("algorithm.name", str(exc), algo) from None
+    info: AlgorithmSpec = module.SPEC
+    if leader_module is not None:
+        for fname, fspec in info.edge_in.items():
+            out = leader_module.SPEC.edge_out.get(fname)
+            if not fspec.optional and (out is None or out.shape != fspec.shape):
+                raise c.err("algorithm.name", f"its leader algorithm {info.leader!r} does not write the edge field {fname!r} {fspec.shape} it reads", algo)
     g = c.table(al.get("gains", {}), "algorithm.gains", set(info.gains))
     gains: dict[str, float] = {}
     for k, default in info.gains.items():
@@ -534,7 +492,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     seen: dict[int, str] = {}
     for n, ra in enumerate(raw_agents):
         f = f"agents[{n}]"
-        agents.append(_agent(c, ra, f, default_clock, info, gains))
+        agents.append(_agent(c, ra, f, default_clock, info, gains, leaders=leader_module is not None))
         if agents[-1].id in seen:
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
@@ -542,6 +500,10 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     if ids != list(range(1, len(ids) + 1)):
         raise c.err("agents", "ids must be 1..n, each once", ids)
     agents.sort(key=lambda a: a.id)
+    fastest = max((p.rate for p in info.parts if p.rate is not None), default=0.0)
+    for a in agents:
+        if a.clock.rate < fastest:
+            raise c.err(f"{seen[a.id]}.clock.rate", f"must be >= {fastest:g} Hz, the rate of the algorithm's fastest part", a.clock.rate)
     if formation is not None:
         for a in agents:
             if a.velocity is not None:
@@ -612,6 +574,9 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         sensor_links=sensor_links,
         link_overrides=MappingProxyType(link_overrides),
         stale=stale,
+        module=module,
+        leader_module=leader_module,
+        module_dir=module_dir,
     )
 
 
@@ -679,7 +644,7 @@ def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: f
     return [{a.id: tuple(row[n_]) for n_, a in enumerate(agents)} for row in out]
 
 
-def _params(c: _Ctx, d: Any, info: AlgorithmInfo) -> Params | None:
+def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
     """``[algorithm.params]``: A for (4.8); the whole set P of Prop. 4.2 for the hybrid observers."""
     f = "algorithm.params"
     if not info.params:
@@ -769,7 +734,7 @@ def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
     return ClockSpec(rate, jitter, drift, offset)
 
 
-def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmInfo, gains: Mapping[str, float]) -> AgentSpec:
+def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpec, gains: Mapping[str, float], leaders: bool) -> AgentSpec:
     d = c.table(
         d,
         f,
@@ -784,6 +749,8 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmInf
         raise c.err(f"{f}.role", "must be 'leader' or 'follower'", role)
     if info.graph == "tree" and role != "follower":
         raise c.err(f"{f}.role", "the §4 observers have no leaders: every agent estimates its attitude (up to a common rotation)", role)
+    if role == "leader" and not leaders:
+        raise c.err(f"{f}.role", "this algorithm has no leader role (its SPEC.leader is None)", role)
     p = c.vec3(d["p"], f"{f}.p")
     R = c.rotation(d.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.R")
     om = d["omega"]

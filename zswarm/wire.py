@@ -16,7 +16,7 @@ from typing import Any, TypeGuard
 import msgpack
 import numpy as np
 
-VERSION = 1
+VERSION = 2  # 2: edge messages carry the fields their algorithm declares (open schema)
 
 
 class MessageError(ValueError):
@@ -30,12 +30,13 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij,
     # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p
     "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,)},
-    # agent j -> agent i along edge j->i: estimates, j's bearing toward i (b_ji^j),
-    # j's angular rate (to propagate R̂_j to i's tick) and ξ_k when j heads edge k
-    # j's inertial velocity (vel) lets i bring p̂_j to its tick when agents move
-    "edge": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "b": (3,), "w": (3,), "xi": "float", "vel": (3,)},
-    # agent i -> recorder; xi: ξ_k of the edges it heads; jumps since the last est
-    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "vecmap", "xi": "floatmap", "jumps": "jumps"},
+    # agent j -> agent i along edge j->i: the sender's clock, then the fields its
+    # algorithm writes on out-edges (SPEC.edge_out: numbers or float64 arrays by
+    # name; OPEN below), validated by the receiver against its SPEC.edge_in
+    "edge": {"t_local": "float"},
+    # agent i -> recorder: its estimate; xi: ξ_k of the edges it heads; jumps since the
+    # last est; extra: named values the algorithm reports (σ_i, Ω_i, ...)
+    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "fields", "xi": "floatmap", "jumps": "jumps"},
     # world -> recorder: ids[k] has attitude R[k], position p[k], true angular velocity w[k]
     "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3)},
     # counters of a process
@@ -48,7 +49,12 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
 _F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
-OPTIONAL = {"sense": {"bearings", "rel_att", "vel", "vel_body", "R", "p"}, "edge": {"b", "w", "xi", "vel"}, "est": {"xi", "jumps"}}
+OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps"}}
+# Types whose other keys are named values (a finite number or a float64 array), at most
+# MAX_OPEN of them: what an algorithm declares, which the receiver validates.
+OPEN = frozenset({"edge"})
+MAX_OPEN = 64
+MAX_VALUE_LEN = 4096  # elements of one open array
 
 
 def _arr(a: np.ndarray) -> list[Any]:
@@ -62,8 +68,12 @@ def encode(mtype: str, src: int, seq: int, t: float, **fields: Any) -> bytes:
     schema = SCHEMAS[mtype]
     m: dict[str, Any] = {"v": VERSION, "type": mtype, "src": src, "seq": seq, "t": float(t)}
     for k, v in fields.items():
-        kind = schema[k]
-        if isinstance(kind, tuple):
+        kind = schema.get(k, "value" if mtype in OPEN else None)
+        if kind is None:
+            raise KeyError(f"{mtype}: unknown field {k!r}")
+        if kind in ("value", "fields"):
+            m[k] = _enc_value(v) if kind == "value" else {str(n): _enc_value(x) for n, x in v.items()}
+        elif isinstance(kind, tuple):
             m[k] = _arr(v)
         elif kind in ("vecmap", "matmap"):
             m[k] = {int(j): _arr(x) for j, x in v.items()}
@@ -76,6 +86,13 @@ def encode(mtype: str, src: int, seq: int, t: float, **fields: Any) -> bytes:
         else:
             m[k] = v
     return msgpack.packb(m, use_bin_type=True)
+
+
+def _enc_value(v: Any) -> Any:
+    """A named value: a number as a float, anything else as a float64 array."""
+    if isinstance(v, (int, float, np.floating)) and not isinstance(v, bool):
+        return float(v)
+    return _arr(np.asarray(v))
 
 
 _FAST = {(3,): ([3], 24), (3, 3): ([3, 3], 72)}  # the shapes of most fields: a shorter path
@@ -109,6 +126,26 @@ def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
     return a
 
 
+def _dec_value(v: Any, k: str) -> float | np.ndarray:
+    """A named value (see OPEN): a finite number, or a float64 array of at most 4 dimensions."""
+    if type(v) is float or type(v) is int:
+        if not math.isfinite(v):
+            raise MessageError(f"{k}: non-finite value")
+        return float(v)
+    if not (type(v) is list and len(v) == 2 and type(v[0]) is list and len(v[0]) <= 4):
+        raise MessageError(f"{k}: expected a number or [shape, bytes]")
+    shape = v[0]
+    if not all(type(d) is int and 0 <= d <= MAX_VALUE_LEN for d in shape) or math.prod(shape) > MAX_VALUE_LEN:
+        raise MessageError(f"{k}: bad shape {shape}")
+    return _dec_arr(v, tuple(shape), k)
+
+
+def _fields(v: Any, k: str) -> dict[str, float | np.ndarray]:
+    if type(v) is not dict or len(v) > MAX_OPEN or not all(type(n) is str and len(n) <= 64 for n in v):
+        raise MessageError(f"{k}: expected a map of at most {MAX_OPEN} names to values")
+    return {n: _dec_value(x, f"{k}.{n}") for n, x in v.items()}
+
+
 def _finite(x: Any) -> TypeGuard[int | float]:
     return not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
 
@@ -118,6 +155,8 @@ def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
     if isinstance(kind, tuple):
         shape = kind
         return lambda v, k: _dec_arr(v, shape, k)
+    if kind == "fields":
+        return _fields
     if kind in ("vecmap", "matmap"):
         shape = (3,) if kind == "vecmap" else (3, 3)
         what = "vector" if kind == "vecmap" else "3x3 matrix"
@@ -229,4 +268,12 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
                 continue
             raise MessageError(f"{k}: missing")
         out[k] = handle(v, k)
+    if mtype in OPEN:
+        extra = [k for k in m if k not in out and k not in ENVELOPE]
+        if len(extra) > MAX_OPEN:
+            raise MessageError(f"{len(extra)} fields (at most {MAX_OPEN})")
+        for k in extra:
+            if type(k) is not str or len(k) > 64:
+                raise MessageError("field names must be strings of at most 64 characters")
+            out[k] = _dec_value(m[k], k)
     return out

@@ -25,7 +25,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from agent.algorithms.bearing_terms import NeighborData, bearing_correction, position_rate
+from typing import Any
+
+from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
+from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3, exp
 
 
@@ -59,3 +62,34 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     p_dot = position_rate(R_pred, state.p_hat, sigma, gains.k_p, inputs.neighbors)
     R_next = exp(-dt * sigma) @ R_pred
     return State(R_next, state.p_hat + dt * p_dot), Outputs(sigma)
+
+
+def initial_state(init: Initial, gains: Gains) -> State:
+    return State(init.R_hat, init.p_hat)
+
+
+def inputs(view: View, gains: Gains) -> Inputs:
+    """ω_i: the gyro's mean over the step; the neighbours' data at the tick."""
+    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), neighbor_data(view))
+
+
+def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
+    est: dict[str, Any] = {"R_hat": state.R_hat, "p_hat": state.p_hat}
+    if outputs is not None:
+        est["sigma"] = outputs.sigma
+    return Publish(edge_messages(view, state.R_hat, state.p_hat), est)
+
+
+SPEC = AlgorithmSpec(
+    description="thesis §3.2: attitude observer (3.3) + position observer (3.14)",
+    gains={"k_R": None, "k_p": None},
+    sensors=frozenset({"gyro", "bearings"}),
+    edge_in=EDGE_FIELDS,
+    edge_out=EDGE_FIELDS,
+    parts=(Part("observer", inputs, step),),
+    graph="leader_follower",
+    # Hold: with fixed positions what a neighbour sends (R̂_j b_ji^j and p̂_j)
+    # estimates constants, so an old value is as good as the neighbour's estimate was.
+    stale=StalePolicy(0.2, "hold"),
+    leader="leader_pose",
+)

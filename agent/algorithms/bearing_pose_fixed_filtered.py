@@ -16,7 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from agent.algorithms.bearing_terms import NeighborData, bearing_correction, position_rate
+from dataclasses import replace
+
+from agent.algorithms import bearing_pose_fixed
+from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
+from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, View
 from zswarm.so3 import Mat3, Vec3, exp
 
 
@@ -53,3 +57,26 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     R_next = exp(-dt * Omega) @ R_pred
     Omega_next = Omega + dt * (-gains.k_Omega * Omega + innov)
     return State(R_next, state.p_hat + dt * p_dot, Omega_next), Outputs(innov)
+
+
+def initial_state(init: Initial, gains: Gains) -> State:
+    return State(init.R_hat, init.p_hat, init.Omega)
+
+
+def inputs(view: View, gains: Gains) -> Inputs:
+    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), neighbor_data(view))
+
+
+def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
+    est = {"R_hat": state.R_hat, "p_hat": state.p_hat, "Omega": state.Omega}
+    if outputs is not None:
+        est["sigma"] = outputs.sigma
+    return Publish(edge_messages(view, state.R_hat, state.p_hat), est)
+
+
+SPEC = replace(
+    bearing_pose_fixed.SPEC,
+    description="thesis §3.2: filtered attitude observer (3.8)-(3.9) + position observer (3.14)",
+    gains={"k_Omega": None, "k_p": None},
+    parts=(Part("observer", inputs, step),),
+)

@@ -23,12 +23,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from dataclasses import replace
+
 from agent.algorithms import bearing_pose_fixed
-from agent.algorithms.bearing_pose_fixed import Gains, Outputs, State
-from agent.algorithms.bearing_terms import NeighborData
+from agent.algorithms.bearing_pose_fixed import Gains, Outputs, State, initial_state, publish
+from agent.algorithms.bearing_terms import NeighborData, neighbor_data
+from zswarm.algorithm import AlgorithmSpec, Part, StalePolicy, View
 from zswarm.so3 import Vec3
 
-__all__ = ["Gains", "State", "Inputs", "Outputs", "step"]
+__all__ = ["Gains", "State", "Inputs", "Outputs", "step", "inputs", "initial_state", "publish", "SPEC"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,3 +45,20 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     """Advance (3.23)+(3.25) by ``dt`` seconds."""
     nxt, out = bearing_pose_fixed.step(state, bearing_pose_fixed.Inputs(inputs.omega, inputs.neighbors), dt, gains)
     return State(nxt.R_hat, nxt.p_hat + dt * inputs.v), out
+
+
+def inputs(view: View, gains: Gains) -> Inputs:
+    """ω_i and v_i: the measured rates' means over the step; the neighbours' data at the tick."""
+    t0 = view.t - view.dt
+    return Inputs(view.mean_rate("gyro", t0, view.t), view.mean_rate("vel", t0, view.t), neighbor_data(view))
+
+
+SPEC = replace(
+    bearing_pose_fixed.SPEC,
+    description="thesis §3.3: attitude observer (3.23) + position observer (3.25), moving agents",
+    sensors=frozenset({"gyro", "bearings", "velocity"}),
+    parts=(Part("observer", inputs, step),),
+    # Drop: a neighbour's R̂_j, p̂_j are brought to the tick with its last v_j,
+    # an extrapolation that degrades with age.
+    stale=StalePolicy(0.2, "drop"),
+)

@@ -11,10 +11,14 @@ Symbols -> names:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
+from zswarm.algorithm import Field, View
 from zswarm.so3 import Mat3, Vec3, cross
 
 
@@ -61,3 +65,76 @@ def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple
         d = p_hat - n.p_hat_j
         acc = acc + (d - g * (g @ d))
     return -cross(sigma, p_hat) - k_p * acc
+
+
+# --------------------------------------------------------------------------- inputs and messages (§3)
+
+# What a §3 agent sends each out-neighbour i: its estimates and its bearing toward i.
+EDGE_FIELDS: Mapping[str, Field] = MappingProxyType(
+    {
+        "R_hat": Field((3, 3), doc="R̂_j, the sender's attitude estimate"),
+        "p_hat": Field((3,), doc="p̂_j, the sender's position estimate"),
+        "b": Field((3,), doc="b_ji^j, the sender's body-frame bearing toward the receiver"),
+        "vel": Field((3,), optional=True, doc="v_j, the sender's inertial velocity (moving agents)"),
+    }
+)
+
+
+def neighbor_data(view: View) -> tuple[NeighborData, ...]:
+    """Per in-neighbour j its (R̂_j, p̂_j, b_ji^j) and our own bearing b_ij^i, at this tick.
+
+    Our bearing, sampled at the sensor packet's acquisition time, is turned to
+    the tick's body frame with the gyro (``view.align``).  Moving agents: the
+    inertial bearings turn (0.5 rad/s in §3.3.4), so j's R̂_j b_ij^j, sampled at
+    j's stamp t_j, is paired with our own bearing at t_j (from the sensor
+    history), turned to this tick's body frame by the gyro; p̂_j is brought to
+    this tick with j's measured velocity.  Pairing with the newest bearing
+    instead left a 4e-3 attitude floor over Zenoh (5–10 ms ages × 0.5 rad/s).
+    """
+    nbrs = []
+    bearings = view.sense.get("bearings", {})
+    for j, k in zip(view.neighbors, view.k_neighbors, strict=True):
+        b_own = bearings.get(j)
+        if b_own is None:
+            continue
+        m = view.neighbor(j)
+        if m is None:
+            continue  # no (fresh enough) data from j: its term is left out of the sums
+        f = m.fields
+        b_now = view.align @ b_own
+        if not view.moving:
+            nbrs.append(NeighborData(k, f["R_hat"], f["p_hat"], f["b"], b_now))
+            continue
+        b_t = view.body_vector(j, view.t_world)
+        if b_t is not None:
+            b_now = b_t
+        tau = m.age
+        b_then = view.body_vector(j, m.t_world)
+        b_att = b_now
+        if b_then is not None:
+            b_att = view.rotation(m.t, view.t).T @ b_then
+        p_hat_j = f["p_hat"] + tau * f["vel"] if "vel" in f else f["p_hat"]
+        nbrs.append(NeighborData(k, f["R_hat"], p_hat_j, f["b"], b_att, b_now))
+    return tuple(nbrs)
+
+
+def edge_messages(view: View, R_hat: Mat3, p_hat: Vec3) -> dict[int, dict[str, Any]]:
+    """Our estimates and our bearing toward each out-neighbour, all at this tick.
+
+    For moving agents the bearing rotation alone misses how far the bearing
+    itself turned since the sample (translation: 0.5 rad/s in §3.3.4), so it is
+    taken from the sensor history at the tick instead.
+    """
+    out: dict[int, dict[str, Any]] = {}
+    bearings = view.sense.get("bearings", {})
+    vel = view.sense.get("vel")
+    for i in view.out_neighbors:
+        b = bearings.get(i)
+        if b is None:
+            continue
+        b_tick = view.body_vector(i, view.t_world) if view.moving else None
+        fields: dict[str, Any] = {"R_hat": R_hat, "p_hat": p_hat, "b": view.align @ b if b_tick is None else b_tick}
+        if vel is not None:
+            fields["vel"] = vel
+        out[i] = fields
+    return out

@@ -18,7 +18,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from agent.algorithms.relative_attitude_terms import EdgeData, continuous_correction
+import numpy as np
+
+from agent.algorithms.relative_attitude_terms import EDGE_FIELDS, EdgeData, continuous_correction, edge_data, edge_messages
+from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3, exp
 
 
@@ -49,3 +52,36 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     R_pred = state.R_hat @ exp(dt * inputs.omega)
     sigma = continuous_correction(R_pred, inputs.edges, gains.A)
     return State(exp(-dt * gains.k_R * sigma) @ R_pred), Outputs(sigma)
+
+
+def initial_state(init: Initial, gains: Gains) -> State:
+    return State(init.R_hat)
+
+
+def inputs(view: View, gains: Gains) -> Inputs:
+    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), edge_data(view, need_xi=False))
+
+
+_ZERO3 = np.zeros(3)
+
+
+def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
+    est = {"R_hat": state.R_hat, "p_hat": _ZERO3}
+    if outputs is not None:
+        est["sigma"] = outputs.sigma
+    return Publish(edge_messages(view, state.R_hat, _ZERO3, {}), est)
+
+
+SPEC = AlgorithmSpec(
+    description="thesis §4.3.1: continuous observer (4.3) + (4.8) from relative attitudes",
+    gains={"k_R": None},
+    sensors=frozenset({"gyro", "rel_att"}),
+    edge_in=EDGE_FIELDS,
+    edge_out=EDGE_FIELDS,
+    parts=(Part("observer", inputs, step),),
+    graph="tree",
+    params="A",
+    # Drop: a neighbour's R̂_j is brought to the tick with its last ω_j, an
+    # extrapolation whose error grows with the age (½ω̇τ²).
+    stale=StalePolicy(0.2, "drop"),
+)

@@ -30,12 +30,18 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from dataclasses import replace
+
+import numpy as np
+
+from agent.algorithms import relative_attitude_continuous
 from agent.algorithms.relative_attitude_continuous import Inputs
-from agent.algorithms.relative_attitude_terms import EdgeData, hybrid_correction, relative_error
+from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, hybrid_correction, relative_error
 from zswarm import hybrid
+from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, View
 from zswarm.so3 import Mat3, Vec3, exp
 
-__all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step"]
+__all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step", "SPEC"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,3 +123,30 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     """Advance (4.25)–(4.26) by ``dt`` seconds (at most one jump per edge, then a flow)."""
     nxt, out, _ = attitude_step(state, inputs, dt, gains)
     return nxt, out
+
+
+def initial_state(init: Initial, gains: Gains) -> State:
+    return State(init.R_hat, dict(init.xi))
+
+
+def inputs(view: View, gains: Gains) -> Inputs:
+    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), edge_data(view, need_xi=True))
+
+
+_ZERO3 = np.zeros(3)
+
+
+def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
+    est = {"R_hat": state.R_hat, "p_hat": _ZERO3, "xi": state.xi}
+    if outputs is not None:
+        est["sigma"] = outputs.sigma
+    return Publish(edge_messages(view, state.R_hat, _ZERO3, state.xi), est)
+
+
+SPEC = replace(
+    relative_attitude_continuous.SPEC,
+    description="thesis §4.3.2: hybrid observer (4.25)-(4.26) from relative attitudes",
+    gains={"k_R": None, "k_xi": None},
+    parts=(Part("observer", inputs, step),),
+    params="hybrid",
+)

@@ -24,11 +24,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
 from zswarm import hybrid
-from zswarm.so3 import Mat3, Vec3, psi
+from zswarm.algorithm import Field, View
+from zswarm.so3 import Mat3, Vec3, exp, psi
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,3 +96,109 @@ def relative_position_rate(R_hat: Mat3, p_hat: Vec3, edges: tuple[EdgeData, ...]
         acc = acc + (p_hat - gi * (gi @ p_hat)) - R_hat @ e.R_ij @ e.R_hat_j.T @ Pj
     return acc
 
+
+
+# --------------------------------------------------------------------------- inputs and messages (§4)
+
+# What a §4 agent sends each tree neighbour: its attitude (and position) estimate,
+# its gyro rate (to bring R̂_j to the receiver's tick), ξ_k when it heads the edge,
+# and for the pose observer its bearing toward the receiver and R̂_j v_j^j.
+EDGE_FIELDS: Mapping[str, Field] = MappingProxyType(
+    {
+        "R_hat": Field((3, 3), doc="R̂_j"),
+        "p_hat": Field((3,), doc="p̂_j (zeros for the attitude observers)"),
+        "w": Field((3,), doc="ω_j, the sender's gyro at its tick"),
+        "xi": Field((), optional=True, doc="ξ_k, from the head of edge k"),
+        "b": Field((3,), optional=True, doc="b_ji^j (§4.4)"),
+        "vel": Field((3,), optional=True, doc="R̂_j v_j^j ≈ ṗ̂_j (§4.4)"),
+    }
+)
+
+
+def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
+    """Per tree neighbour j: every quantity of edge k brought to this tick.
+
+    The measured ``R_ij = R_i^T R_j`` is from time t_s and j's estimate from
+    its tick t_j; both are propagated with the gyros (ours, and j's rate
+    sent with its estimate):
+    ``R_ij(t) = exp(−τ_s[ω_i]) R_ij(t_s) exp(τ_s[ω_j])``,
+    ``R̂_j(t) = R̂_j(t_j) exp((t − t_j)[ω_j])``.  Without this, pairing a
+    10 ms old R̂_j with R_ij on an agent turning at 6.6 rad/s (§4.5, agent 5)
+    biases R̄ by ≈ 0.07 rad.  Stamps are compared on this agent's clock,
+    which assumes the agents' clocks are synchronised (as over one host).
+
+    Until every neighbour has been heard once, no edge is used (only the gyro
+    and velocity prediction runs): a correction from part of the tree would
+    move R̂_i before its other edges are even evaluated (off the thesis'
+    synchronous start, e.g. out of the §4.5 jump set before the first jump check).
+    ``need_xi``: a tail edge is used only once its head's ξ_k has arrived.
+    """
+    if not view.heard_all():
+        return ()
+    edges = []
+    s = view.sense
+    tau_s = view.t - view.sense_t
+    rel = s.get("rel_att", {})
+    bearings = s.get("bearings", {})
+    for j, (k, head) in view.tree_edges.items():
+        R_m = rel.get(j)
+        if R_m is None:
+            continue
+        m = view.neighbor(j)
+        if m is None:
+            continue  # nothing (fresh enough) from j: the edge's terms are left out
+        f = m.fields
+        if need_xi and not head and "xi" not in f:
+            continue
+        w_j = f["w"]
+        tau_j = m.age
+        b_own = bearings.get(j)
+        if b_own is not None:
+            b_t = view.body_vector(j, view.t_world) if view.moving else None
+            b_own = view.align @ b_own if b_t is None else b_t
+        b_nbr = f.get("b")
+        R_ij = view.align @ R_m @ exp(tau_s * w_j)
+        if b_nbr is not None:
+            b_nbr = exp(-tau_j * w_j) @ b_nbr
+            b_then = view.body_vector(j, m.t_world) if (view.moving and b_own is not None) else None
+            if b_then is not None and b_own is not None:
+                # j's bearing is from its tick t_j; the inertial bearing b_ji = −b_ij
+                # has turned since (0.5 rad/s in §4.5): our own bearing's change
+                # over [t_j, t], in j's frame, corrects it.
+                b_nbr = b_nbr - R_ij.T @ (b_own - view.rotation(view.t - tau_j, view.t).T @ b_then)
+        edges.append(
+            EdgeData(
+                k,
+                head,
+                R_ij,
+                f["R_hat"] @ exp(tau_j * w_j),
+                float(f.get("xi", 0.0)),
+                b_own,
+                b_nbr,
+                f["p_hat"] + tau_j * f["vel"] if "vel" in f else f["p_hat"],
+            )
+        )
+    return tuple(edges)
+
+
+def edge_messages(view: View, R_hat: Mat3, p_hat: Vec3, xi: Mapping[int, float]) -> dict[int, dict[str, Any]]:
+    """To each tree neighbour: R̂_i, p̂_i, ω_i, ξ_k of the edges we head, and (§4.4)
+    our bearing toward it and R̂_i v_i^i (≈ ṗ̂_i during flows (4.30), which lets
+    the receiver bring p̂_i to its tick)."""
+    s = view.sense
+    bearings = s.get("bearings", {})
+    vel = R_hat @ (view.align @ s["vel_body"]) if "vel_body" in s else None
+    out: dict[int, dict[str, Any]] = {}
+    for i in view.out_neighbors:
+        fields: dict[str, Any] = {"R_hat": R_hat, "p_hat": p_hat, "w": s["gyro"]}
+        b = bearings.get(i)
+        if b is not None:
+            b_tick = view.body_vector(i, view.t_world) if view.moving else None
+            fields["b"] = view.align @ b if b_tick is None else b_tick
+        if vel is not None:
+            fields["vel"] = vel
+        k, head = view.tree_edges[i]
+        if head and k in xi:
+            fields["xi"] = xi[k]
+        out[i] = fields
+    return out
