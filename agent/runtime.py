@@ -161,10 +161,13 @@ class Inbox:
     def get(self, link: str) -> dict[str, Any] | None:
         return self.latest.get(link)
 
-    def samples(self, name: str) -> list[tuple[float, np.ndarray]]:
-        """``(acquisition world time, value)`` of a field of recent sensor packets ("gyro", "vel")."""
+    def samples(self, name: str, j: int | None = None) -> list[tuple[float, np.ndarray]]:
+        """``(acquisition world time, value)`` of a field of recent sensor packets ("gyro",
+        "vel"), or with ``j``, of a per-neighbour field's entry for j (``rel_att``)."""
         with self._lock:
-            return [(p["t"], p[name]) for p in self.packets if name in p]
+            if j is None:
+                return [(p["t"], p[name]) for p in self.packets if name in p]
+            return [(p["t"], p[name][j]) for p in self.packets if j in p.get(name, ())]
 
     def vectors(self, key: int | str) -> list[tuple[float, np.ndarray, np.ndarray]]:
         """``(acquisition world time, body-frame vector, gyro)`` of recent sensor packets: the
@@ -279,8 +282,19 @@ class TickView:
     def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
         return timing.interval_mean_rate(self._samples(name), t0, t1)
 
+    def body_rate(self, t0: float, t1: float) -> np.ndarray:
+        return timing.rotation_rate(self._samples("gyro"), t0, t1)
+
     def rotation(self, t0: float, t1: float) -> np.ndarray:
         return timing.rotation_over(self._samples("gyro"), t0, t1)
+
+    def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
+        ck = ("R", j, t_world)
+        if ck not in self._cache:
+            inbox = self._node.inbox
+            hist = [(t, R) for t, R in inbox.samples("rel_att", j)]
+            self._cache[ck] = timing.relative_attitude_at(hist, inbox.samples("gyro"), t_world)
+        return self._cache[ck]  # type: ignore[no-any-return]
 
     def body_vector(self, key: int | str, t_world: float, unit: bool = True) -> np.ndarray | None:
         ck = ("b", key, t_world, unit)

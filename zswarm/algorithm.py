@@ -211,8 +211,19 @@ class View(Protocol):
         """Mean over [t0, t1] of a sensed rate ("gyro", "vel"): :func:`zswarm.timing.interval_mean_rate`."""
         ...
 
+    def body_rate(self, t0: float, t1: float) -> np.ndarray:
+        """The constant rate whose exponential over [t0, t1] is the body rotation the gyro
+        measured (third order): :func:`zswarm.timing.rotation_rate`.  The ω to predict
+        an attitude with, ``R̂ exp(dt[ω]^x)``."""
+        ...
+
     def rotation(self, t0: float, t1: float) -> np.ndarray:
         """Body rotation from t0 to t1 from the gyro: :func:`zswarm.timing.rotation_over`."""
+        ...
+
+    def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
+        """The measured R_ij at world time t_world from the sensor history:
+        :func:`zswarm.timing.relative_attitude_at`."""
         ...
 
     def body_vector(self, key: int | str, t_world: float, unit: bool = True) -> np.ndarray | None:

@@ -20,12 +20,30 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from zswarm.so3 import exp
+from zswarm.so3 import exp, log
 
 Sample = tuple[float, np.ndarray]
 
 
 def interval_mean_rate(samples: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
+    return _integrate(samples, t0, t1, False)
+
+
+def rotation_rate(samples: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
+    """The constant body rate ω̄ with ``exp((t1 − t0)[ω̄]^x) = R(t0)^T R(t1)`` for
+    ``Ṙ = R[ω(t)]^x``, ω the gyro as in :func:`interval_mean_rate` (third-order).
+
+    On each linear piece ``[ta, tb]`` of the rate, the Magnus expansion gives
+    ``Ω = h (ω_a + ω_b)/2 + (h²/12) ω_a × ω_b`` (exact to O(h⁵) for a linear
+    rate), and the pieces compose by BCH, ``log(e^A e^B) ≈ A + B + ½ A × B``.
+    The mean rate alone, ``exp(h ω̄)``, misses the ``(h²/12) ω × ω̇ h`` term:
+    about 1e-6 rad per 10 ms step at |ω × ω̇| ≈ 10 rad²/s³, a drift of 1e-4
+    rad/s that an observer's correction balances with a 1e-5–1e-4 error floor.
+    """
+    return _integrate(samples, t0, t1, True)
+
+
+def _integrate(samples: Sequence[Sample], t0: float, t1: float, magnus: bool) -> np.ndarray:
     """Mean of a sampled rate over ``[t0, t1]``.
 
     The rate is linearly interpolated between samples (``(time, vector)``,
@@ -75,9 +93,20 @@ def interval_mean_rate(samples: Sequence[Sample], t0: float, t1: float) -> np.nd
     for n_ in range(len(grid) - 1):
         h = grid[n_ + 1] - grid[n_]
         lo, hi = vals[n_], vals[n_ + 1]
-        acc[0] += 0.5 * (lo[0] + hi[0]) * h
-        acc[1] += 0.5 * (lo[1] + hi[1]) * h
-        acc[2] += 0.5 * (lo[2] + hi[2]) * h
+        a = (0.5 * (lo[0] + hi[0]) * h, 0.5 * (lo[1] + hi[1]) * h, 0.5 * (lo[2] + hi[2]) * h)
+        if magnus:
+            c = h * h / 12.0
+            # BCH with the rotation so far (½ acc × a), then this piece's own Magnus term.
+            x = 0.5 * (acc[1] * a[2] - acc[2] * a[1]) + c * (lo[1] * hi[2] - lo[2] * hi[1])
+            y = 0.5 * (acc[2] * a[0] - acc[0] * a[2]) + c * (lo[2] * hi[0] - lo[0] * hi[2])
+            z = 0.5 * (acc[0] * a[1] - acc[1] * a[0]) + c * (lo[0] * hi[1] - lo[1] * hi[0])
+            acc[0] += a[0] + x
+            acc[1] += a[1] + y
+            acc[2] += a[2] + z
+        else:
+            acc[0] += a[0]
+            acc[1] += a[1]
+            acc[2] += a[2]
     return np.array(acc) / (t1 - t0)
 
 
@@ -86,7 +115,45 @@ def rotation_over(gyro: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
     as ``exp((t1 − t0)[ω̄]^x)`` with ω̄ the gyro's mean over the interval."""
     if t1 == t0:
         return np.eye(3)
-    return exp((t1 - t0) * interval_mean_rate(gyro, t0, t1))
+    if t1 < t0:
+        return rotation_over(gyro, t1, t0).T
+    return exp((t1 - t0) * rotation_rate(gyro, t0, t1))
+
+
+def relative_attitude_at(hist: Sequence[tuple[float, np.ndarray]], gyro: Sequence[Sample], t: float, max_ahead: float = 0.05) -> np.ndarray | None:
+    """A measured relative attitude ``R_ij = R_i^T R_j`` at time ``t`` from its samples
+    ``(time, R_ij)`` and the gyro of i.
+
+    Between two samples, i's own rotation comes from its gyro
+    (:func:`rotation_over`, accurate), and what is left — j's rotation over
+    the gap, ``E_j = R_ij(t0)^T E_i R_ij(t1)`` — is interpolated (or, up to
+    ``max_ahead`` past the newest sample, extrapolated) at a constant rate:
+    ``R_ij(t) = E_i(t0, t)^T R_ij(t0) exp(s log E_j)``.  Exact at the sample
+    times.  None outside the history.
+    """
+    if not hist:
+        return None
+    if len(hist) == 1:
+        return hist[0][1] if hist[0][0] == t else None
+    (t0, R0), (t1, R1) = hist[-2], hist[-1]
+    if t == t1:
+        return R1
+    if not t1 < t <= t1 + max_ahead:
+        for k in range(len(hist) - 1):
+            (t0, R0), (t1, R1) = hist[k], hist[k + 1]
+            if t0 <= t <= t1:
+                break
+        else:
+            return None
+        if t == t0:
+            return R0
+        if t == t1:
+            return R1
+    if t1 <= t0:
+        return None
+    E_j = R0.T @ rotation_over(gyro, t0, t1) @ R1
+    s_ = (t - t0) / (t1 - t0)
+    return rotation_over(gyro, t0, t).T @ R0 @ exp(s_ * log(E_j))
 
 
 def body_vector_at(hist: Sequence[tuple[float, np.ndarray, np.ndarray]], t: float, max_ahead: float = 0.05, unit: bool = True) -> np.ndarray | None:

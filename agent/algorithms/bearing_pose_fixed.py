@@ -70,7 +70,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 def inputs(view: View, gains: Gains) -> Inputs:
     """ω_i: the gyro's mean over the step; the neighbours' data at the tick."""
-    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), neighbor_data(view))
+    return Inputs(view.body_rate(view.t - view.dt, view.t), neighbor_data(view))
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

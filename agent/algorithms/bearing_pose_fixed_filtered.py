@@ -64,7 +64,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), neighbor_data(view))
+    return Inputs(view.body_rate(view.t - view.dt, view.t), neighbor_data(view))
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

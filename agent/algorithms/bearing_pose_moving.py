@@ -42,15 +42,24 @@ class Inputs:
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
-    """Advance (3.23)+(3.25) by ``dt`` seconds."""
-    nxt, out = bearing_pose_fixed.step(state, bearing_pose_fixed.Inputs(inputs.omega, inputs.neighbors), dt, gains)
-    return State(nxt.R_hat, nxt.p_hat + dt * inputs.v), out
+    """Advance (3.23)+(3.25) by ``dt`` seconds.
+
+    Predict with the measurements, ``R̂⁻ = R̂ exp(dt[ω]^x)`` and ``p̂⁻ = p̂ + dt v``,
+    then correct both at the predicted estimate, which refers to the end of the
+    step like the neighbours' data (brought to the tick by the runtime).
+    Correcting p̂ from the start of the step against p̂_j at its end instead
+    paired quantities dt apart on a formation moving at ≈ 1 m/s: the final
+    error at 30 s depended on the step (0.0085 at 100 Hz, 0.019 at 400 Hz,
+    0.022 for the equations).
+    """
+    pred = State(state.R_hat, state.p_hat + dt * inputs.v)
+    return bearing_pose_fixed.step(pred, bearing_pose_fixed.Inputs(inputs.omega, inputs.neighbors), dt, gains)
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
     """ω_i and v_i: the measured rates' means over the step; the neighbours' data at the tick."""
     t0 = view.t - view.dt
-    return Inputs(view.mean_rate("gyro", t0, view.t), view.mean_rate("vel", t0, view.t), neighbor_data(view))
+    return Inputs(view.body_rate(t0, view.t), view.mean_rate("vel", t0, view.t), neighbor_data(view))
 
 
 SPEC = replace(

@@ -59,7 +59,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), edge_data(view, need_xi=False))
+    return Inputs(view.body_rate(view.t - view.dt, view.t), edge_data(view, need_xi=False))
 
 
 _ZERO3 = np.zeros(3)

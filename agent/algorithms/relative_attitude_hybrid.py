@@ -130,7 +130,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(view.mean_rate("gyro", view.t - view.dt, view.t), edge_data(view, need_xi=True))
+    return Inputs(view.body_rate(view.t - view.dt, view.t), edge_data(view, need_xi=True))
 
 
 _ZERO3 = np.zeros(3)

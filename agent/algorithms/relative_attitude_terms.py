@@ -157,9 +157,22 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
             b_t = view.body_vector(j, view.t_world) if view.moving else None
             b_own = view.align @ b_own if b_t is None else b_t
         b_nbr = f.get("b")
-        R_ij = view.align @ R_m @ exp(tau_s * w_j)
+        R_then = view.relative_attitude(j, m.t_world)
+        if R_then is not None:
+            # j's estimate is from its tick t_j: pair it with our measurement at t_j
+            # and carry the pair to this tick with our own gyro.  R̂_j(t_j) R_ij(t_j)^T E_i
+            # = R̃_j(t_j)^T R_i(t): exact but for R̃_j's own (slow, correction-driven) change
+            # over τ_j, so nothing is left at convergence.  Extrapolating R̂_j and R_ij
+            # separately with ω_j instead errs by ½ω̇τ² each, a floor of 1e-5–1e-4.
+            R_ij = view.rotation(m.t, view.t).T @ R_then
+            R_hat_j = f["R_hat"]
+        else:
+            # Older than the sensor history: propagate both with the gyros (first order).
+            R_ij = view.align @ R_m @ exp(tau_s * w_j)
+            R_hat_j = f["R_hat"] @ exp(tau_j * w_j)
+            if b_nbr is not None:
+                b_nbr = exp(-tau_j * w_j) @ b_nbr
         if b_nbr is not None:
-            b_nbr = exp(-tau_j * w_j) @ b_nbr
             b_then = view.body_vector(j, m.t_world) if (view.moving and b_own is not None) else None
             if b_then is not None and b_own is not None:
                 # j's bearing is from its tick t_j; the inertial bearing b_ji = −b_ij
@@ -171,7 +184,7 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
                 k,
                 head,
                 R_ij,
-                f["R_hat"] @ exp(tau_j * w_j),
+                R_hat_j,
                 float(f.get("xi", 0.0)),
                 b_own,
                 b_nbr,

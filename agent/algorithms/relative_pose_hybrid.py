@@ -12,8 +12,10 @@ b_ji^j, R̂_j, p̂_j (received from j).  Poses are estimated up to a common
 rotation and translation (Remark 4.5): p̃_i = R̃_i p̂_i − p_i converges to a
 common constant.
 
-Discretisation: with ``E = exp(−dt k_R [σ]^x)`` (the attitude correction of
-the step), ``p̂⁺ = E (p̂ + dt (R̂⁻ v_i^i − k_p Σ …))``: the ``−k_R[σ]^x p̂`` term is
+Discretisation: predict ``p̂⁻ = p̂ + dt R̂⁻ v_i^i`` (v_i^i at the step's
+midpoint), evaluate the bearing terms at p̂⁻ — the end of the step, where the
+runtime brings the neighbours' p̂_j — and with ``E = exp(−dt k_R [σ]^x)`` (the
+attitude correction of the step), ``p̂⁺ = E (p̂⁻ − dt k_p Σ …(p̂⁻))``: the ``−k_R[σ]^x p̂`` term is
 taken exactly, so ``R̃ p̂`` is unchanged by the attitude correction, as in the
 derivation of (4.33) where p̃'s dynamics do not depend on the attitude
 estimates.
@@ -70,8 +72,8 @@ class Inputs:
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
     """Advance (4.25)–(4.26) and (4.30)–(4.31) by ``dt`` seconds."""
     a, out, R_pred = att.attitude_step(att.State(state.R_hat, state.xi), att.Inputs(inputs.omega, inputs.edges), dt, gains.attitude())
-    rate = R_pred @ inputs.v_body - gains.k_p * relative_position_rate(R_pred, state.p_hat, inputs.edges)
-    p_next = exp(-dt * gains.k_R * out.sigma) @ (state.p_hat + dt * rate)
+    p_pred = state.p_hat + dt * (R_pred @ inputs.v_body)
+    p_next = exp(-dt * gains.k_R * out.sigma) @ (p_pred - dt * gains.k_p * relative_position_rate(R_pred, p_pred, inputs.edges))
     return State(a.R_hat, p_next, a.xi), out
 
 
@@ -84,7 +86,7 @@ def inputs(view: View, gains: Gains) -> Inputs:
     step's midpoint, turned to this tick's body frame (a midpoint rule).  The
     newest sample instead runs ahead of a rotating formation's velocity by
     v̇·dt/2 ≈ 7 mm/s in §4.5, a ≈ 0.05–0.09 m bias on p̃."""
-    omega = view.mean_rate("gyro", view.t - view.dt, view.t)
+    omega = view.body_rate(view.t - view.dt, view.t)
     v = view.body_vector("vel_body", view.t_world - view.dt / 2, unit=False)
     v = view.align @ view.sense["vel_body"] if v is None else exp(-(view.dt / 2) * omega) @ v
     return Inputs(omega, v, edge_data(view, need_xi=True))

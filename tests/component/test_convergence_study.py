@@ -1,0 +1,78 @@
+"""Convergence study: each shipped noise-free scenario on ``sim`` at its default
+rates (agents 100 Hz, sensors 200 Hz) against the same scenario with agents at
+1 kHz and sensors at 2 kHz (zswarm/study.py).
+
+What the study may accept, and why:
+
+* Times to thresholds within 10 % (the issue's criterion) plus one grid step
+  of 0.1 s, the resolution at which convergence times are measured
+  (report.GRID_S): a first-order step of 10 ms moves a convergence time by
+  O(a·dt) relative (a ≤ 5 /s for these observers: ≤ 5 %), a 1 ms step ten
+  times less; anything beyond 10 % is not discretisation.
+* Final errors within ×2, or both below 1e-5 (the issue's criterion): below
+  1e-5 the floors are set by the truth integration and the float arithmetic
+  of 30–60 s of steps, not by the observer.
+* ``thesis-4.5-continuous5`` starts exactly on an unstable equilibrium: when
+  it leaves is set by round-off and asynchrony (Theorem 4.1 promises nothing
+  there), so its times are measured from the escape (mean |R̄_k|_I < 0.9).
+
+The fine runs are the expensive part of the suite (1–2 min each); they run
+two at a time in spawned processes.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import TOPO
+from zswarm import study
+from zswarm.scenario import load
+
+SCENARIOS = ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered", "thesis-3.3-moving5", "thesis-4.5-continuous5", "thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"]
+FROM_ESCAPE = {"thesis-4.5-continuous5"}
+
+
+def _one(args: tuple[str, bool, str]) -> study.Series:
+    name, fine, out = args
+    sc = load(TOPO / f"{name}.toml")
+    return study.run(study.refine(sc) if fine else sc, Path(out))
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("study")
+    jobs = [(n, True, str(tmp / f"{n}-fine")) for n in SCENARIOS] + [(n, False, str(tmp / f"{n}-default")) for n in SCENARIOS]
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        got = list(pool.map(_one, jobs))
+    return {(n, f): s for (n, f, _), s in zip(jobs, got, strict=True)}
+
+
+def test_the_shipped_scenarios_are_all_in_the_study():
+    shipped = {p.stem for p in TOPO.glob("*.toml") if "noisy" not in p.stem}
+    assert shipped == set(SCENARIOS)
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_default_rates_match_the_fine_step(results, name):
+    rows = study.compare(results[(name, False)], results[(name, True)], name in FROM_ESCAPE)
+    times = [r for r in rows if r["what"].endswith("(s)")]
+    assert len(times) >= 2, rows  # the study compares something
+    for r in times:
+        assert r["default"] is not None, (name, r)
+        assert abs(r["default"] - r["fine"]) <= 0.10 * r["fine"] + 0.1, (name, r)
+    for r in rows:
+        if r["what"].startswith("final"):
+            d, f = r["default"], r["fine"]
+            assert (d < 1e-5 and f < 1e-5) or f / 2 <= d <= 2 * f, (name, r)
+
+
+def test_moving5_final_position_is_the_equations(results):
+    """READING-NOTES: the equations give 0.022–0.023 at 30 s; the default step must
+    land within ×2 of the 1 kHz value (it used to give 0.0085)."""
+    d, f = results[("thesis-3.3-moving5", False)].final_pos, results[("thesis-3.3-moving5", True)].final_pos
+    assert 0.015 < f < 0.03, f
+    assert f / 2 <= d <= 2 * f, (d, f)
