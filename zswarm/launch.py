@@ -69,6 +69,10 @@ class Launch:
     def spawn(self, name: str, role: str, ident: int, cmd: list[str]) -> Child:
         logf = open(self.out / "logs" / f"{name}.log", "wb")  # noqa: SIM115 - closed in reap()
         env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if self.sc.module_dir:
+            # A user's algorithm module found beside the scenario file: the children read
+            # the results folder's copy of the scenario, so they need that folder too.
+            env["PYTHONPATH"] = os.pathsep.join(p for p in (self.sc.module_dir, env.get("PYTHONPATH", "")) if p)
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT, start_new_session=True, env=env)
         c = Child(name, role, ident, proc, logf)
         self.children.append(c)

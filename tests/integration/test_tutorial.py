@@ -1,0 +1,85 @@
+"""The tutorial's own observer (docs/tutorial-own-algorithm.md), from a folder outside
+the package, on ``zswarm sim`` and ``zswarm run`` through the same interface as the
+built-in algorithms.
+
+Bearing-only localization with known attitudes converges exponentially on the
+§3.2.5 formation; at k_p = 3 the mean follower error measured on sim is 0.094 m
+at 10 s and 2.3e-4 m at 20 s (a factor ≈ 20 per 5 s), so ≈ 5e-3 m at 15 s.
+Asserted at 15 s: below 0.02 m on sim; on run below 0.1 m (the §3.2 threshold
+of the shipped scenarios).  Run is NOT yet within ×3 of sim here: measured
+0.055 m against sim's 0.005 m while a second test suite loaded both cores —
+an open item of issue 9 (run as close to sim as the machine allows).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import ROOT
+from tests.integration.conftest import zswarm
+
+pytestmark = pytest.mark.integration
+
+
+def user_folder(tmp_path):
+    d = tmp_path / "mylab"
+    d.mkdir()
+    for f in ("bearing_localization.py", "bearing-localization8.toml"):
+        shutil.copy(ROOT / "docs" / "examples" / f, d / f)
+    return d / "bearing-localization8.toml"
+
+
+def test_tutorial_observer_on_sim_and_run(procs, tmp_path):
+    topo = user_folder(tmp_path)
+    sim = subprocess.run(
+        zswarm("sim", str(topo), "--duration", "15", "--out", str(tmp_path / "sim"), "--no-plots", "--quiet"),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert sim.returncode == 0, sim.stderr
+    ss = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert ss["algorithm"] == "bearing_localization"
+    assert ss["mean_position_error_final"] < 0.02, ss["mean_position_error_final"]
+    out = tmp_path / "run"
+    p = procs.start(zswarm("run", str(topo), "--duration", "15", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    code = p.wait(120)
+    procs.adopt(out)
+    assert code == 0, (tmp_path / "launcher.log").read_text()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["mean_position_error_final"] < 0.1, (s["mean_position_error_final"], ss["mean_position_error_final"])
+    assert all(a["malformed_received"] == 0 for a in s["agents"].values())
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (("SPEC = AlgorithmSpec(", "SPEC_ = AlgorithmSpec("), "has no SPEC"),
+        (('gains={"k_p": None}', 'gains={"k_q": None}'), r"Gains.k_p is neither a declared gain"),
+        (('edge_in={"p_hat": Field((3,), doc="p̂_j")}', 'edge_in={"p_hat": Field((4,), doc="p̂_j")}'), "does not write the edge field 'p_hat'"),
+        (("import numpy as np", "import numpy as np\nraise RuntimeError('boom')"), "importing 'bearing_localization' failed: RuntimeError: boom"),
+    ],
+)
+def test_a_broken_user_algorithm_is_a_scenario_error(tmp_path, edit, match):
+    topo = user_folder(tmp_path)
+    mod = topo.parent / "bearing_localization.py"
+    src = mod.read_text()
+    assert edit[0] in src
+    mod.write_text(src.replace(edit[0], edit[1]))
+    r = subprocess.run([sys.executable, "-m", "zswarm", "sim", str(topo), "--duration", "1", "--quiet"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert "bearing-localization8.toml: algorithm.name:" in r.stderr and __import__("re").search(match, r.stderr), r.stderr
+
+
+def test_a_wrong_gain_names_the_field(tmp_path):
+    topo = user_folder(tmp_path)
+    topo.write_text(topo.read_text().replace("k_p = 3.0", "k_p = -1.0"))
+    r = subprocess.run([sys.executable, "-m", "zswarm", "sim", str(topo), "--duration", "1", "--quiet"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "algorithm.gains.k_p: must be > 0" in r.stderr, r.stderr
