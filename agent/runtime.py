@@ -292,8 +292,10 @@ class TickView:
         ck = ("R", j, t_world)
         if ck not in self._cache:
             inbox = self._node.inbox
-            hist = [(t, R) for t, R in inbox.samples("rel_att", j)]
-            self._cache[ck] = timing.relative_attitude_at(hist, inbox.samples("gyro"), t_world)
+            gk = ("g", "world")  # the gyro on world time, once per tick for every neighbour
+            if gk not in self._cache:
+                self._cache[gk] = inbox.samples("gyro")
+            self._cache[ck] = timing.relative_attitude_at(inbox.samples("rel_att", j), self._cache[gk], t_world)
         return self._cache[ck]  # type: ignore[no-any-return]
 
     def body_vector(self, key: int | str, t_world: float, unit: bool = True) -> np.ndarray | None:

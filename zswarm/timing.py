@@ -26,6 +26,19 @@ Sample = tuple[float, np.ndarray]
 
 
 def interval_mean_rate(samples: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
+    """Mean of a sampled rate over ``[t0, t1]``.
+
+    The rate is linearly interpolated between samples (``(time, vector)``,
+    increasing times), held before the first, and past the newest sample
+    extrapolated linearly from the last two for at most one sample gap (then
+    held); the resulting piecewise-linear function is integrated exactly.
+
+    This is the gyro pre-integration of an IMU-driven estimator.  Using only
+    the newest sample over a 10 ms step lags by half a step (≈ ω̇·dt/2 rate
+    error); holding the newest sample until the tick — which over Zenoh
+    arrives 0–5 ms before it — leaves a ½ω̇τ² error per step of the same sign
+    as ω̇, measured as a 1e-3 attitude floor on the §3.2 run.
+    """
     return _integrate(samples, t0, t1, False)
 
 
@@ -44,19 +57,7 @@ def rotation_rate(samples: Sequence[Sample], t0: float, t1: float) -> np.ndarray
 
 
 def _integrate(samples: Sequence[Sample], t0: float, t1: float, magnus: bool) -> np.ndarray:
-    """Mean of a sampled rate over ``[t0, t1]``.
-
-    The rate is linearly interpolated between samples (``(time, vector)``,
-    increasing times), held before the first, and past the newest sample
-    extrapolated linearly from the last two for at most one sample gap (then
-    held); the resulting piecewise-linear function is integrated exactly.
-
-    This is the gyro pre-integration of an IMU-driven estimator.  Using only
-    the newest sample over a 10 ms step lags by half a step (≈ ω̇·dt/2 rate
-    error); holding the newest sample until the tick — which over Zenoh
-    arrives 0–5 ms before it — leaves a ½ω̇τ² error per step of the same sign
-    as ω̇, measured as a 1e-3 attitude floor on the §3.2 run.
-    """
+    """The piecewise-linear rate of the samples, integrated over ``[t0, t1]`` (``magnus``: as a rotation)."""
     # Plain Python on the few samples that matter (numpy's per-call overhead made
     # this a tenth of a §3.2 sim): those from the last one at or before t0 on.
     n = len(samples)
