@@ -32,7 +32,6 @@ from zswarm.bus import Bus
 from zswarm.clock import AgentClock
 from zswarm.links import LinkModel
 from zswarm.scenario import Scenario
-from zswarm.so3 import exp
 
 log = logging.getLogger("zswarm.agent")
 
@@ -71,6 +70,10 @@ class LinkCounter:
         return d
 
 
+# Edge messages kept per link: 160 ms at 100 Hz, more than the data age of any
+# step that is not already stale (the default max_age of the §3/§4 observers is 0.2 s).
+RECENT_EDGE_MESSAGES = 16
+
 _EYE3 = np.eye(3)
 _EYE3.flags.writeable = False
 
@@ -87,6 +90,9 @@ class Inbox:
         self._held: list[tuple[float, int, str, str, dict[str, Any]]] = []
         self._held_n = 0
         self.latest: dict[str, dict[str, Any]] = {}
+        # Recent messages per edge, oldest first (sequence order): a step at time t
+        # reads the newest one stamped at or before t (see :meth:`at_or_before`).
+        self.recent: dict[str, deque[dict[str, Any]]] = {}
         # Recent sensor packets, oldest first (in sequence order): the histories the
         # timing library integrates and interpolates over.
         self.packets: deque[dict[str, Any]] = deque(maxlen=64)
@@ -119,6 +125,11 @@ class Inbox:
                 return
             rx = self.now()
             with self._lock:
+                if self._held:
+                    # Held messages due by now go first: a message released on arrival
+                    # must not overtake one held on the same link (FIFO links), nor be
+                    # stored before older data that is already due.
+                    self._release(rx)
                 if self._link_model is not None:
                     model = self.models.get(link)
                     if model is None:
@@ -147,6 +158,11 @@ class Inbox:
             self.latest[link] = msg
             if expect == "sense":
                 self.packets.append(msg)
+            else:
+                recent = self.recent.get(link)
+                if recent is None:
+                    recent = self.recent[link] = deque(maxlen=RECENT_EDGE_MESSAGES)
+                recent.append(msg)
 
     def release_due(self) -> None:
         """Deliver every held message whose release time has come (the agent calls this each tick)."""
@@ -154,12 +170,40 @@ class Inbox:
             return
         now = self.now()
         with self._lock:
-            while self._held and self._held[0][0] <= now:
-                release, _, link, expect, msg = heapq.heappop(self._held)
-                self._deliver(link, expect, msg, release)
+            self._release(now)
+
+    def _release(self, now: float) -> None:
+        """Deliver the held messages due at ``now``, in release order (caller holds the lock)."""
+        while self._held and self._held[0][0] <= now:
+            release, _, link, expect, msg = heapq.heappop(self._held)
+            self._deliver(link, expect, msg, release)
 
     def get(self, link: str) -> dict[str, Any] | None:
         return self.latest.get(link)
+
+    def recent_packets(self, after: float) -> list[dict[str, Any]]:
+        """Sensor packets acquired after world time ``after`` (oldest first), with the
+        newest one at or before it first when there is one."""
+        with self._lock:
+            out: list[dict[str, Any]] = []
+            for p in reversed(self.packets):
+                out.append(p)
+                if p["t"] <= after:
+                    break
+            out.reverse()
+            return out
+
+    def at_or_before(self, link: str, t_world: float) -> dict[str, Any] | None:
+        """The newest message on an edge stamped at or before ``t_world``; if every
+        recent one is newer, the oldest of them (None: nothing received yet)."""
+        with self._lock:
+            recent = self.recent.get(link)
+            if not recent:
+                return None
+            for m in reversed(recent):
+                if m["t"] <= t_world:
+                    return m
+            return recent[0]
 
     def samples(self, name: str, j: int | None = None) -> list[tuple[float, np.ndarray]]:
         """``(acquisition world time, value)`` of a field of recent sensor packets ("gyro",
@@ -240,10 +284,14 @@ class TickView:
 
     @property
     def align(self) -> np.ndarray:
-        """Body frame at the packet's acquisition time -> at this tick: exp(−τ[ω]^x), the packet's gyro."""
+        """Body frame at the packet's acquisition time -> at this step's end: the gyro
+        history's rotation (identity when the step ends at the packet, as it does
+        unless the world skipped samples there)."""
         if "align" not in self._cache:
-            w = self.sense.get("gyro")
-            self._cache["align"] = _EYE3 if w is None else exp(-(self.t - self.sense_t) * w)
+            if self.t == self.sense_t or "gyro" not in self.sense:
+                self._cache["align"] = _EYE3
+            else:
+                self._cache["align"] = self.rotation(self.sense_t, self.t).T
         return self._cache["align"]  # type: ignore[no-any-return]
 
     def neighbor(self, j: int) -> _Neighbor | None:
@@ -251,7 +299,13 @@ class TickView:
         if key in self._cache:
             return self._cache[key]  # type: ignore[no-any-return]
         n = None
-        m = None if self.first else self._node.inbox.get(self._links.get(j, ""))
+        # Not the newest message but the newest one stamped at or before this step:
+        # the step's own measurements end at t, and pairing them with a neighbour's
+        # data from after t meant extrapolating our own bearings and rotation into the
+        # future (over Zenoh a neighbour's step is often 5–10 ms newer than ours); the
+        # two extrapolations' ½ω̇τ² mismatch left a 4e-5 attitude floor on the §3.3
+        # run, and in sim with one agent's sensors 6 ms late.
+        m = None if self.first else self._node.inbox.at_or_before(self._links.get(j, ""), self.t_world)
         if m is not None:
             node = self._node
             t_j = node.clock.local(m["t"])
@@ -311,13 +365,16 @@ class TickView:
 class _PartState:
     """A part's schedule: when it last stepped and when it is next due (own clock)."""
 
-    __slots__ = ("part", "rate", "last", "due")
+    __slots__ = ("part", "rate", "last", "min_gap")
 
-    def __init__(self, part: Part, rate: float) -> None:
+    def __init__(self, part: Part, rate: float, clock_rate: float) -> None:
         self.part = part
         self.rate = rate
-        self.last: float | None = None
-        self.due = -math.inf
+        self.last = 0.0
+        # A part with its own rate steps when a step ends at least this long after
+        # its last one: its period less half a clock period, so that step ends
+        # jittered by the sensor grid do not make it skip a whole tick.
+        self.min_gap = 1.0 / rate - 0.5 / clock_rate
 
 
 class AgentNode:
@@ -351,7 +408,7 @@ class AgentNode:
             {k: float(est.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if head},
         )
         self.state = self.algo.initial_state(init, self.gains)
-        self.parts = [_PartState(p, p.rate or self.spec.clock.rate) for p in self.aspec.parts]
+        self.parts = [_PartState(p, p.rate or self.spec.clock.rate, self.spec.clock.rate) for p in self.aspec.parts]
         self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
         self.jump_count: dict[int, int] = {}
         self.clock = AgentClock(self.spec.clock, seed=(seed * 1000003 + agent_id) % (1 << 63))
@@ -377,78 +434,140 @@ class AgentNode:
         self.t_first: float | None = None
         self.t_last: float | None = None
         self.started = False
-        self.substeps = 0  # extra sub-steps taken for late ticks
+        self.catch_up_steps = 0  # steps beyond one per tick, taken to catch up after a late tick
+        self.t_step = -math.inf  # own-clock time the state refers to (the last step's end)
+        self.idle_ticks = 0  # ticks with no sensor packet newer than the last step
         self.compute_s = 0.0
         self.compute_max = 0.0
 
     # ------------------------------------------------------------------ the step
 
     def tick(self, t_world: float) -> None:
-        """One step at world time ``t_world`` (the agent reads its own clock from it)."""
-        t_local = self.clock.local(t_world)
+        """One tick at world time ``t_world`` (the agent reads its own clock from it).
+
+        Steps end at measurements, not at the tick.  The state is brought to
+        the newest sensor packet at or before the tick, and what is published
+        is stamped with that packet's time, so the gyro, the bearings and the
+        relative attitudes are measured up to the end of every step, never
+        extrapolated.  Stepping to the tick instead meant integrating the gyro
+        past its newest sample, which over Zenoh is 0–5 ms old (20–40 ms
+        after a stall): each step added ½ω̇τ² of attitude error, about 1e-3 on
+        the §3.2 run where ``sim`` (whose ticks and samples coincide) reaches
+        1e-4, and the same ×10 in ``sim`` with a 10 ms sensor delay.
+
+        A late tick (a stalled process, a missed deadline) catches up in steps
+        of at most one period (:meth:`_step_ends`), each ending at a packet of
+        the sensor history and seeing the data of its own time.  One long
+        step would overshoot (gains × dt of order 1) and split into equal
+        sub-steps on the newest data it paired a 12 ms old attitude with
+        12 ms newer bearings: on the §3.3 run a 35 ms stall at t = 1 s left
+        agent 4 (collinear neighbours, a weakly observable direction) a 4e-5
+        attitude error for the rest of the run.  A tick with no packet newer
+        than the last step neither steps nor publishes (counted as idle).
+        """
+        t_tick = self.clock.local(t_world)
         self.inbox.release_due()
         sense = self.inbox.get(self.sense_link)
         if sense is None:
             return  # nothing measured yet: no step, nothing to publish
+        t_m = self.clock.local(sense["t"])
+        t_end = min(t_m, t_tick)
+        if self.started and t_end <= self.t_step:
+            self.idle_ticks += 1
+            return
         c0 = time.perf_counter()
-        first = not self.started
-        self.started = True
         view = self.view
-        view.begin(t_local, t_world, sense, first)
-        outputs = None
-        for ps in self.parts:
-            dt = self._part_dt(ps, t_local, first)
-            ps.last = t_local
-            if dt <= 0.0:
-                continue
-            ps.due = t_local + 1.0 / ps.rate - 1e-9 if ps.part.rate is not None else -math.inf
-            view.dt = dt
-            inputs = ps.part.inputs(view, self.gains)
-            if inputs is None:
-                continue
-            # A late tick (a stalled process, a missed deadline) would take one long
-            # explicit step: gains × dt of order 1 overshoot (and can throw a hybrid
-            # variable into its jump set).  Sub-steps of at most two periods keep the
-            # discretisation what it is at the nominal rate.  The first step (the
-            # initial estimate brought from t = 0 to the first tick) is prediction only.
-            n_sub = 1 if first else max(1, math.ceil(dt * ps.rate / 2.0 - 1e-9))
-            for _ in range(n_sub):
-                self.state, outputs = ps.part.step(self.state, inputs, dt / n_sub, self.gains)
-                for k, before, after in getattr(outputs, "jumps", ()):
-                    self.jumps.append((k, t_world, before, after))
-                    self.jump_count[k] = self.jump_count.get(k, 0) + 1
-            self.substeps += n_sub - 1
-        pub: Publish | None = self.algo.publish(self.state, None if first else outputs, view)
+        outputs: Any = None
+        if not self.started:
+            # The first step brings the initial estimate, which is at world time 0,
+            # to the first measurement: over Zenoh that comes 1–20 ms after t = 0,
+            # and taking the estimate as if it were at the tick shifts R̂_i by ω_i·τ
+            # (0.07 rad for §4.5's agent 5 at 6.6 rad/s), enough to move the §4.5
+            # start out of the hybrid jump set.  Prediction only: no neighbours.  A
+            # process that joins more than 0.5 s late starts from its initial
+            # estimate there instead.
+            self.started = True
+            lag = t_end - self.clock.local(0.0)
+            self._begin(t_end, sense, first=True)
+            for ps in self.parts:
+                ps.last = t_end
+                if 0.0 < lag <= 0.5:
+                    outputs = self._step_part(ps, lag) or outputs
+            self.t_step = t_end
+            outputs = None  # the first step's outputs (no neighbours) are not published
+        else:
+            ends = self._step_ends(t_end)
+            self.catch_up_steps += len(ends) - 1
+            for t_e, packet in ends:
+                self._begin(t_e, packet, first=False)
+                for ps in self.parts:
+                    if ps.part.rate is not None and t_e - ps.last < ps.min_gap:
+                        continue
+                    dt, ps.last = t_e - ps.last, t_e
+                    outputs = self._step_part(ps, dt) or outputs
+                self.t_step = t_e
+        pub: Publish | None = self.algo.publish(self.state, outputs, view)
         if pub is None:
             return
-        self._send(pub, t_world, t_local)
+        self._send(pub, view.t_world, t_tick)
         c = time.perf_counter() - c0
         self.compute_s += c
         self.compute_max = max(self.compute_max, c)
         self.steps += 1
         if self.t_first is None:
-            self.t_first = t_world
-        self.t_last = t_world
+            self.t_first = view.t_world
+        self.t_last = view.t_world
 
-    def _part_dt(self, ps: _PartState, t_local: float, first: bool) -> float:
-        """The step a part takes at this tick (0: none).
+    def _begin(self, t_local: float, packet: dict[str, Any], first: bool) -> None:
+        """Point the view at a step ending at ``t_local`` (own clock), with ``packet`` the
+        newest sensor packet at or before it."""
+        t_w = packet["t"] if self.clock.local(packet["t"]) == t_local else self.clock.world(t_local)
+        self.view.begin(t_local, t_w, packet, first)
 
-        At the first tick with data the initial estimate, which is at world
-        time 0, is brought to the tick: over Zenoh that tick comes 1–20 ms
-        after t = 0, and taking the estimate as if it were at the tick shifts
-        R̂_i by ω_i·τ (0.07 rad for §4.5's agent 5 at 6.6 rad/s), enough to
-        move the §4.5 start out of the hybrid jump set.  That step sees no
-        neighbours (prediction only).  A process that joins more than 0.5 s
-        late starts from its initial estimate at its first tick instead.
+    def _step_part(self, ps: _PartState, dt: float) -> Any:
+        """Step one part by ``dt`` on the view as it stands; its outputs (None: it had no inputs)."""
+        view = self.view
+        view.dt = dt
+        inputs = ps.part.inputs(view, self.gains)
+        if inputs is None:
+            return None
+        self.state, outputs = ps.part.step(self.state, inputs, dt, self.gains)
+        for k, before, after in getattr(outputs, "jumps", ()):
+            self.jumps.append((k, view.t_world, before, after))
+            self.jump_count[k] = self.jump_count.get(k, 0) + 1
+        return outputs
+
+    def _step_ends(self, t_end: float) -> list[tuple[float, dict[str, Any]]]:
+        """Where the steps from the last one to ``t_end`` end (own clock), each with the
+        newest sensor packet at or before it.
+
+        Normally one step (sensors at 200 Hz, ticks at 100 Hz: the packet of the
+        tick or 5 ms before it).  After a stall, one step per clock period, each
+        ending at the last packet within a period of the previous end, or a
+        period on when the world skipped samples there (the view then reads
+        the history around that time).
         """
-        if first:
-            lag = t_local - self.clock.local(0.0)
-            return lag if 0.0 < lag <= 0.5 else 0.0
-        if ps.last is None or t_local < ps.due:
-            return 0.0
-        return t_local - ps.last
+        period = 1.0 / self.spec.clock.rate
+        local = self.clock.local
+        packets = [(local(p["t"]), p) for p in self.inbox.recent_packets(self.clock.world(self.t_step))]
+        ends: list[tuple[float, dict[str, Any]]] = []
+        last, k = self.t_step, 0
+        newest_before = packets[0][1] if packets else self.inbox.get(self.sense_link)
+        while last < t_end - 1e-12:
+            limit = min(last + period * (1.0 + 1e-6), t_end)
+            best = None
+            while k < len(packets) and packets[k][0] <= limit + 1e-12:
+                best = packets[k]
+                k += 1
+            if best is not None and best[0] > last:
+                last, newest_before = best
+            else:
+                last = min(last + period, t_end)
+            ends.append((last, newest_before))
+        return ends
 
     def _send(self, pub: Publish, t_world: float, t_local: float) -> None:
+        """Publish at the tick ``t_local`` (the links' send stamp) what refers to ``t_world``."""
         seq = self.seq
         self.seq += 1
         t_stamp = t_world if pub.t is None else pub.t
@@ -481,7 +600,8 @@ class AgentNode:
                 "steps": self.steps,
                 "step_rate_hz": (self.steps - 1) / span if span > 0 else 0.0,
                 "missed_deadlines": self.missed,
-                "late_substeps": self.substeps,
+                "catch_up_steps": self.catch_up_steps,
+                "idle_ticks": self.idle_ticks,
                 "compute_mean_us": 1e6 * self.compute_s / self.steps if self.steps else 0.0,
                 "compute_max_us": 1e6 * self.compute_max,
                 "sent": {f"{self.id}->{i}": self.seq for i in self.out},

@@ -18,7 +18,8 @@ user's anywhere on the import path) that exposes
 
 The runtime (``agent/runtime.py``) reads the declaration and does the rest:
 subscriptions, validation of what arrives against ``edge_in``, link
-emulation, clocks, stale data, sub-steps of late ticks, publishing, counters.
+emulation, clocks, stale data, steps that end at measurements, catching up
+after late ticks, publishing, counters.
 It never asks which algorithm runs.
 
 ``algorithm.name`` in a scenario is a built-in name (``bearing_pose_fixed``),
@@ -93,9 +94,11 @@ class Part:
     """One part of an algorithm, stepped at its own rate.
 
     ``rate`` is in Hz on the agent's own clock; ``None`` steps the part at
-    every tick of the agent (its ``[clock] rate``).  Parts share the
-    algorithm's one ``State``; they are stepped in declaration order when
-    due in the same tick (a cascade reads what the previous part wrote).
+    every step of the agent (its ``[clock] rate``); a part with a rate steps
+    when a step ends at least its period, less half a clock period, after its
+    last one.  Parts share the algorithm's one ``State``; they are stepped in
+    declaration order when due at the same step (a cascade reads what the
+    previous part wrote).
     """
 
     name: str
@@ -158,7 +161,7 @@ class Publish:
     ``R_hat``, ``p_hat`` (what the errors are computed from), ``xi`` ({k: ξ_k}),
     and any other named arrays (plotted and recorded as extras).  ``command``:
     the fields of ``cmd/<i>`` to the world (``None``: nothing).  ``t``: world
-    time the content refers to (``None``: the tick).
+    time the content refers to (``None``: the step's end, ``view.t_world``).
     """
 
     edges: Mapping[int, Mapping[str, Any]]
@@ -173,7 +176,7 @@ class NeighborMsg(Protocol):
     fields: Mapping[str, Any]  # the declared edge_in fields (arrays, numbers)
     t: float  # stamp of its content, on this agent's clock
     t_world: float  # the same stamp in world time (as sent)
-    age: float  # this tick's time minus t
+    age: float  # the step's time minus t (≥ 0 unless every recent message is newer)
 
 
 class View(Protocol):
@@ -189,18 +192,20 @@ class View(Protocol):
     out_neighbors: tuple[int, ...]
     tree_edges: Mapping[int, tuple[int, bool]]  # tree neighbour j -> (edge k, this agent heads k)
     moving: bool  # positions change (the world's motion is not fixed)
-    t: float  # this tick
+    t: float  # the end of this step: the newest measurement's time (see AgentNode.tick), or a
+    # clock period on from the last step where the world skipped samples
     t_world: float
-    dt: float  # the step being taken (0 at the first tick)
-    first: bool  # the step from the initial estimate (t = 0) to the first tick: prediction only, no neighbours
-    sense: Mapping[str, Any]  # newest sensor packet (fields by SENSORS' keys)
+    dt: float  # the step being taken (0 when the view is begun, before any part steps)
+    first: bool  # the step from the initial estimate (t = 0) to the first measurement: prediction only, no neighbours
+    sense: Mapping[str, Any]  # newest sensor packet at or before t (fields by SENSORS' keys)
     sense_t: float  # its acquisition time on this clock
     sense_t_world: float  # the same in world time (the packet's stamp)
-    align: np.ndarray  # rotates a body-frame vector sampled at sense_t to the tick's body frame (gyro)
+    align: np.ndarray  # rotates a body-frame vector sampled at sense_t to the body frame at t (gyro; I when t == sense_t)
 
     def neighbor(self, j: int) -> NeighborMsg | None:
-        """j's newest message; None if none arrived yet, at the first step, or if it is
-        older than the stale-data max_age under the "drop" policy (counted either way)."""
+        """j's newest message stamped at or before t; None if none arrived yet, at the first
+        step, or if it is older than the stale-data max_age under the "drop" policy
+        (counted either way)."""
         ...
 
     def heard_all(self) -> bool:

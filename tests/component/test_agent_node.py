@@ -1,6 +1,7 @@
 """One agent on MemoryBus with a manual clock."""
 
 import numpy as np
+import pytest
 
 from agent.runtime import AgentNode
 from tests.conftest import TOPO
@@ -63,3 +64,70 @@ def test_malformed_and_foreign_messages_are_counted_and_dropped(caplog):
     bus.put(keys.sense("t", 3), sense_for(sc, 3, 0.0, np.eye(3)))
     node.tick(0.0)
     assert node.steps == 1
+
+
+def _feed(bus, sc, clock, t, R=np.eye(3)):
+    clock.set(t)
+    bus.put(keys.sense("t", 3), sense_for(sc, 3, t, R))
+
+
+def test_steps_end_at_the_newest_measurement_and_a_late_tick_catches_up_a_period_at_a_time():
+    sc, bus, clock, node, got = setup()
+    _feed(bus, sc, clock, 0.0)
+    node.tick(0.0)
+    ends = []
+    orig = node._step_part
+    node._step_part = lambda ps, dt: (ends.append((round(node.view.t, 6), round(dt, 6), round(node.view.sense_t, 6))), orig(ps, dt))[1]
+    # Sensor packets every 5 ms up to 0.035 s, none after; the tick comes at 0.042 s
+    # (a stalled process): one step per 10 ms period, each ending at a packet and
+    # seeing that packet, the last at the newest packet, not at the tick.
+    for k in range(1, 8):
+        _feed(bus, sc, clock, 0.005 * k)
+    clock.set(0.042)
+    node.tick(0.042)
+    assert ends == [(0.01, 0.01, 0.01), (0.02, 0.01, 0.02), (0.03, 0.01, 0.03), (0.035, 0.005, 0.035)]
+    est = [wire.decode(p) for k, p in got if k == keys.est("t", 3)]
+    assert est[-1]["t"] == 0.035 and est[-1]["t_local"] == 0.042  # stamped with its data's time, sent at the tick
+    assert node.counters()["catch_up_steps"] == 3
+    # No packet newer than the last step: the tick neither steps nor publishes.
+    n = len(got)
+    node.tick(0.05)
+    assert len(got) == n and node.counters()["idle_ticks"] == 1
+    # The world skipped 0.04–0.05: a step a period on ends between packets, on the older one.
+    ends.clear()
+    _feed(bus, sc, clock, 0.055)
+    node.tick(0.06)
+    assert ends == [(0.045, 0.01, 0.035), (0.055, 0.01, 0.055)]
+
+
+def test_a_step_reads_the_newest_neighbour_message_at_or_before_its_time():
+    sc, bus, clock, node, got = setup()
+    for t in (0.0, 0.01):
+        _feed(bus, sc, clock, t)
+    for t in (0.0, 0.005, 0.015):  # neighbour 1's steps; the last is newer than our data
+        bus.put(keys.edge("t", 1, 3), wire.encode("edge", 1, int(t * 1000), t, t_local=t, R_hat=np.eye(3), p_hat=np.zeros(3), b=np.array([0, 0, 1.0])))
+    node.view.begin(0.01, 0.01, node.inbox.get("world->3"), first=False)
+    m = node.view.neighbor(1)
+    assert m.t_world == 0.005 and m.age == pytest.approx(0.005)
+    node.view.begin(0.02, 0.02, node.inbox.get("world->3"), first=False)
+    assert node.view.neighbor(1).t_world == 0.015
+
+
+def test_emulated_links_stay_fifo_when_a_message_is_released_on_arrival():
+    """A message whose drawn delay is 0 must not overtake one still held on the same link."""
+    from zswarm.links import LinkModel
+
+    class Scripted(LinkModel):
+        releases = iter([0.004, 0.005])  # first held 4 ms, second released on arrival at 5 ms
+
+        def admit(self, t_arrival):
+            return next(self.releases)
+
+    sc = load(TOPO / "thesis-3.2-fixed8.toml")
+    bus, clock = MemoryBus(), ManualClock()
+    node = AgentNode(sc, 3, bus, "t", 1, now=clock.now)
+    node.inbox._link_model = lambda name: Scripted(sc.link_spec(name), name, 1)
+    _feed(bus, sc, clock, 0.0)
+    _feed(bus, sc, clock, 0.005)
+    assert [p["t"] for p in node.inbox.packets] == [0.0, 0.005]
+    assert node.inbox.get("world->3")["t"] == 0.005

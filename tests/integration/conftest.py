@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.conftest import ROOT
@@ -100,3 +101,35 @@ def wait_for(pred, timeout: float, what: str, step: float = 0.05):
 
 def zswarm(*args: str) -> list[str]:
     return [sys.executable, "-m", "zswarm", *args]
+
+
+SIM_RUN_TOL = 3.0
+"""``run`` ends within a factor 3 of ``sim`` on the final errors when it kept up.
+
+Both engines run the same objects on the same sensor samples, and every step
+ends at a measurement on both (agent/runtime.py, AgentNode.tick), so the
+gyro, bearings and relative attitudes a step uses are the same.  What still
+differs over Zenoh: a neighbour's data are 0–15 ms old instead of 0 or 10 ms,
+and the world skips a few samples when it is late (5–15 in 8000).  On a
+weakly observable direction (§3.3's agent 4, collinear neighbours) such a
+perturbation decays over tens of seconds, so the floors differ by a factor:
+measured 1.0–1.7 on the six noise-free scenarios (quiet 2-core machine).
+Three allows that; the timing faults this guards against gave 10–1000
+(§3.2 before steps ended at measurements: ×10; a 35 ms stall on §3.3: ×14).
+
+When the run did not keep up (summary.json ``overload``), its errors are not
+the algorithm's alone and it must say so instead: then the flag is checked,
+not the factor."""
+
+
+def assert_run_matches_sim(s: dict, ss: dict, keys: tuple[str, ...], launcher_log: Path) -> None:
+    """``run`` summary ``s`` against ``sim`` summary ``ss`` on ``keys`` (see SIM_RUN_TOL)."""
+    ov = s["overload"]
+    if ov["overloaded"]:
+        assert ov["reasons"] and "OVERLOADED" in launcher_log.read_text(), (ov, launcher_log.read_text()[-2000:])
+        return
+    for k in keys:
+        a, b = s[k], ss[k]
+        assert a is not None and b is not None and np.isfinite(a) and np.isfinite(b), (k, a, b)
+        # 1e-12: both at rounding level (a leader-like zero), where a ratio means nothing.
+        assert max(a, b) < 1e-12 or max(a, b) / max(min(a, b), 1e-300) <= SIM_RUN_TOL, (k, a, b, ov)
