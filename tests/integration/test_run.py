@@ -102,3 +102,18 @@ def test_ctrl_c_stops_everything_and_writes_results(procs, tmp_path):
     assert s["interrupted"] and all(v == 0 for v in s["exit_codes"].values()), s["exit_codes"]
     assert 1.0 < max(a["last_estimate_t"] for a in s["agents"].values()) < 30
     assert (out / "errors.csv").stat().st_size > 1000
+
+
+def test_a_run_that_cannot_keep_up_says_so(procs, tmp_path):
+    """Eight agents at 1 kHz and the world at 1 kHz on two cores: each agent tick costs
+    0.2–0.5 ms of Python, so the agents alone want 1.6–4 cores (measured: 20–90 % of
+    the ticks missed, 30 % of the world's samples skipped).  The run must finish and
+    flag itself in its table and in summary.json."""
+    code, out = run_and_load(procs, tmp_path, "thesis-3.2-fixed8", 3.0, ("--set", "clock.rate=1000", "--set", "world.sensor_rate=1000"))
+    log = (tmp_path / "launcher.log").read_text()
+    assert code == 0, log
+    s = json.loads((out / "summary.json").read_text())
+    ov = s["overload"]
+    assert ov["overloaded"] and ov["reasons"], ov
+    assert max(ov["agents_missed_pct"].values()) > ov["threshold_pct"] or ov["world_skipped_pct"] > ov["threshold_pct"]
+    assert "OVERLOADED: " in log and ov["reasons"][0] in log
