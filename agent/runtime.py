@@ -96,6 +96,7 @@ class Inbox:
         # Recent sensor packets, oldest first (in sequence order): the histories the
         # timing library integrates and interpolates over.
         self.packets: deque[dict[str, Any]] = deque(maxlen=64)
+        self._series: dict[str, deque[tuple[float, np.ndarray]]] = {}  # per array field: (t, value), as packets
         self.links: dict[str, LinkCounter] = {}
         self.malformed = 0
         self._logged: set[str] = set()
@@ -158,6 +159,13 @@ class Inbox:
             self.latest[link] = msg
             if expect == "sense":
                 self.packets.append(msg)
+                t = msg["t"]
+                for name, v in msg.items():
+                    if type(v) is np.ndarray:
+                        series = self._series.get(name)
+                        if series is None:
+                            series = self._series[name] = deque(maxlen=self.packets.maxlen)
+                        series.append((t, v))
             else:
                 recent = self.recent.get(link)
                 if recent is None:
@@ -210,7 +218,8 @@ class Inbox:
         "vel"), or with ``j``, of a per-neighbour field's entry for j (``rel_att``)."""
         with self._lock:
             if j is None:
-                return [(p["t"], p[name]) for p in self.packets if name in p]
+                series = self._series.get(name)
+                return list(series) if series is not None else []
             return [(p["t"], p[name][j]) for p in self.packets if j in p.get(name, ())]
 
     def vectors(self, key: int | str) -> list[tuple[float, np.ndarray, np.ndarray]]:
