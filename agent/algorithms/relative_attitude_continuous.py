@@ -7,8 +7,10 @@ Boughellaba (2024), (4.3) with the correction (4.8), on an undirected tree:
 
 Theorem 4.1: almost global; the undesired equilibria (R̄_k = U D_β U^T) are
 unstable but are equilibria, so a start on them stays there in exact
-arithmetic.  Discretisation as in :mod:`bearing_pose_fixed`: predict
-``R̂⁻ = R̂ exp(dt [ω]^x)``, evaluate σ at R̂⁻, correct ``R̂⁺ = exp(−dt k_R [σ]^x) R̂⁻``.
+arithmetic.  Discretisation: predict ``R̂⁻ = R̂ exp(dt [ω]^x)``, then Heun's
+method on the correction (second order, as in :mod:`relative_attitude_hybrid`,
+whose gains give the same dt·k_R λ_max(A) ≈ 0.13 at 100 Hz): σ₁ at R̂⁻, σ₂ at
+``exp(−dt k_R [σ₁]^x) R̂⁻``, ``R̂⁺ = exp(−dt k_R [(σ₁+σ₂)/2]^x) R̂⁻``.
 
 Symbols -> names: R̂_i ``R_hat``, ω_i ``omega``, k_R ``k_R``, A ``A``,
 R_ij ``EdgeData.R_ij``, R̂_j ``EdgeData.R_hat_j``.
@@ -51,7 +53,10 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     """Advance (4.3)+(4.8) by ``dt`` seconds."""
     R_pred = state.R_hat @ exp(dt * inputs.omega)
     sigma = continuous_correction(R_pred, inputs.edges, gains.A)
-    return State(exp(-dt * gains.k_R * sigma) @ R_pred), Outputs(sigma)
+    # Heun (see the module docstring): σ again at the Euler point, then the mean.
+    sigma2 = continuous_correction(exp(-dt * gains.k_R * sigma) @ R_pred, inputs.edges, gains.A)
+    sigma_mean = 0.5 * (sigma + sigma2)
+    return State(exp(-dt * gains.k_R * sigma_mean) @ R_pred), Outputs(sigma_mean)
 
 
 def initial_state(init: Initial, gains: Gains) -> State:

@@ -18,8 +18,14 @@ construction; :func:`jump_map` asserts it).
 
 Discretisation per step: predict ``R̂⁻ = R̂ exp(dt[ω]^x)``; check the jump set
 at ``R̂⁻`` and apply the jump map (jumps have priority, as in HyEQ); then flow
-with σ and ξ̇ evaluated at ``R̂⁻``: ``R̂⁺ = exp(−dt k_R [σ]^x) R̂⁻``,
-``ξ⁺ = ξ + dt ξ̇`` (Euler; k_ξ γ dt ≈ 0.07 at the thesis gains and 100 Hz).
+with Heun's method (explicit trapezoid, second order) on the correction:
+σ₁, ξ̇₁ at (R̂⁻, ξ); the Euler point ``R̂₁ = exp(−dt k_R [σ₁]^x) R̂⁻``,
+``ξ₁ = ξ + dt ξ̇₁``; σ₂, ξ̇₂ there; then ``R̂⁺ = exp(−dt k_R [(σ₁+σ₂)/2]^x) R̂⁻``,
+``ξ⁺ = ξ + dt (ξ̇₁+ξ̇₂)/2`` (the tail's ξ_k and the neighbours' R̂_j held).  At
+the thesis gains the correction's fastest rate is k_R λ_max(A) ≈ 13/s and
+k_ξ γ ≈ 6.7/s, so dt·rate ≈ 0.13 and 0.07 at 100 Hz: Euler (a factor 1 − h
+per step where the flow has e^{−h}) converged 4 % early (|R̄|_I < 1e-2 at
+13.9 s against 14.5 s with agents at 1 kHz); Heun gives 14.8 s against 14.6 s.
 
 Symbols -> names: R̂_i ``R_hat``, ξ_k ``xi[k]``, k_R ``k_R``, k_ξ ``k_xi``, A ``A``,
 u ``u``, γ ``gamma``, δ ``delta``, Ξ ``Xi``.
@@ -63,7 +69,7 @@ class State:
 
 @dataclass(frozen=True, slots=True)
 class Outputs:
-    sigma: Vec3  # σ_i of (4.25), inertial frame
+    sigma: Vec3  # σ_i of (4.25), inertial frame: the mean of the step's two evaluations (Heun)
     jumps: tuple[tuple[int, float, float], ...]  # (edge k, ξ before, ξ after) at this step
     U: float  # Σ_{headed k} U(R̄_k, ξ_k) after the step's jumps, at R̂⁻
 
@@ -109,14 +115,22 @@ def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tupl
     all_xi = {e.k: (xi[e.k] if e.head else e.xi) for e in inputs.edges}
     sigma = hybrid_correction(R_bars, inputs.edges, all_xi, gains.A, gains.u)
     U = 0.0
-    nxt = dict(xi)
+    rate1: dict[int, float] = {}
     for e in inputs.edges:
         if e.head:
             R_bar = R_bars[e.k]
             U += hybrid.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k])
-            nxt[e.k] = xi[e.k] + dt * flow_xi(R_bar, xi[e.k], gains)
-    R_next = exp(-dt * gains.k_R * sigma) @ R_pred
-    return State(R_next, nxt), Outputs(sigma, tuple(jumps), U), R_pred
+            rate1[e.k] = flow_xi(R_bar, xi[e.k], gains)
+    # Heun: the flow's rates again at the Euler end point, then their mean.
+    R1 = exp(-dt * gains.k_R * sigma) @ R_pred
+    xi1 = {k: v + dt * rate1.get(k, 0.0) for k, v in xi.items()}
+    R_bars1 = {e.k: relative_error(R1, e) for e in inputs.edges}
+    sigma2 = hybrid_correction(R_bars1, inputs.edges, {e.k: (xi1[e.k] if e.head else e.xi) for e in inputs.edges}, gains.A, gains.u)
+    nxt = dict(xi)
+    for k, r1 in rate1.items():
+        nxt[k] = xi[k] + 0.5 * dt * (r1 + flow_xi(R_bars1[k], xi1[k], gains))
+    sigma_mean = 0.5 * (sigma + sigma2)
+    return State(exp(-dt * gains.k_R * sigma_mean) @ R_pred, nxt), Outputs(sigma_mean, tuple(jumps), U), R_pred
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
