@@ -501,9 +501,8 @@ class AgentNode:
             for ps in self.parts:
                 ps.last = t_end
                 if 0.0 < lag <= 0.5:
-                    outputs = self._step_part(ps, lag) or outputs
+                    self._step_part(ps, lag)  # its outputs (no neighbours) are not published
             self.t_step = t_end
-            outputs = None  # the first step's outputs (no neighbours) are not published
         else:
             ends = self._step_ends(t_end)
             self.catch_up_steps += len(ends) - 1
