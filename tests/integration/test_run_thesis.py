@@ -4,7 +4,7 @@ Agreement is judged on convergence times (the first time after which an
 error stays below a threshold): the engines run the same objects on the same
 sensor samples, but over Zenoh agents tick asynchronously and messages are
 0.1–10 ms old, which shifts transients by a fraction of a second.  Measured
-(2 cores): §4.5 settle times 13.7–15.2 s on run vs 13.0–14.5 s on sim;
+(2 cores): §4.5 hybrid per-edge settle times 14.4–16.1 s on run vs 13.9–15.4 s on sim;
 ±25 % fails for a broken engine (a missed jump or stale ξ changes them by
 tens of seconds or prevents convergence).  Final floors are only required
 to be below the thresholds on both, and the final errors within a factor 3
