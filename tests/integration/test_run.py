@@ -32,7 +32,9 @@ def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
     assert s["engine"] == "run" and s["completed"]
     for i, a in s["agents"].items():
         assert a["alive_at_end"], i
-        assert a["step_rate_hz"] == pytest.approx(a["configured_rate_hz"], rel=0.05), i
+        if not s["overload"]["overloaded"]:
+            # ≤ 2 % missed ticks and ≤ 2 % skipped samples (so ≲ 2 % idle ticks) leave ≥ 96 %.
+            assert a["step_rate_hz"] == pytest.approx(a["configured_rate_hz"], rel=0.05), i
         if a["role"] == "follower":
             assert a["attitude_error_final"] < 1e-2, (i, a)
             assert a["position_error_final"] < 0.1, (i, a)
