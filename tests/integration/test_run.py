@@ -33,7 +33,8 @@ def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
     for i, a in s["agents"].items():
         assert a["alive_at_end"], i
         if not s["overload"]["overloaded"]:
-            # ≤ 2 % missed ticks and ≤ 2 % skipped samples (so ≲ 2 % idle ticks) leave ≥ 96 %.
+            # A run that kept up (≤ 2 % missed ticks and skipped samples) publishes at the
+            # configured rate less its missed and idle ticks: 99.4–99.9 Hz measured quietly.
             assert a["step_rate_hz"] == pytest.approx(a["configured_rate_hz"], rel=0.05), i
         if a["role"] == "follower":
             assert a["attitude_error_final"] < 1e-2, (i, a)
