@@ -349,7 +349,10 @@ class TickView:
         return timing.rotation_rate(self._samples("gyro"), t0, t1)
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
-        return timing.rotation_over(self._samples("gyro"), t0, t1)
+        ck = ("rot", t0, t1)  # algorithms ask for the same interval per neighbour and per term
+        if ck not in self._cache:
+            self._cache[ck] = timing.rotation_over(self._samples("gyro"), t0, t1)
+        return self._cache[ck]  # type: ignore[no-any-return]
 
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
         ck = ("R", j, t_world)
@@ -372,18 +375,17 @@ class TickView:
 
 
 class _PartState:
-    """A part's schedule: when it last stepped and when it is next due (own clock)."""
+    """A part's schedule: when it last stepped (own clock) and how long it waits between steps."""
 
-    __slots__ = ("part", "rate", "last", "min_gap")
+    __slots__ = ("part", "last", "min_gap")
 
-    def __init__(self, part: Part, rate: float, clock_rate: float) -> None:
+    def __init__(self, part: Part, clock_rate: float) -> None:
         self.part = part
-        self.rate = rate
         self.last = 0.0
         # A part with its own rate steps when a step ends at least this long after
         # its last one: its period less half a clock period, so that step ends
-        # jittered by the sensor grid do not make it skip a whole tick.
-        self.min_gap = 1.0 / rate - 0.5 / clock_rate
+        # jittered by the sensor grid do not make it skip a whole tick.  0: every step.
+        self.min_gap = 1.0 / part.rate - 0.5 / clock_rate if part.rate is not None else 0.0
 
 
 class AgentNode:
@@ -417,7 +419,7 @@ class AgentNode:
             {k: float(est.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if head},
         )
         self.state = self.algo.initial_state(init, self.gains)
-        self.parts = [_PartState(p, p.rate or self.spec.clock.rate, self.spec.clock.rate) for p in self.aspec.parts]
+        self.parts = [_PartState(p, self.spec.clock.rate) for p in self.aspec.parts]
         self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
         self.jump_count: dict[int, int] = {}
         self.clock = AgentClock(self.spec.clock, seed=(seed * 1000003 + agent_id) % (1 << 63))
@@ -509,7 +511,7 @@ class AgentNode:
             for t_e, packet in ends:
                 self._begin(t_e, packet, first=False)
                 for ps in self.parts:
-                    if ps.part.rate is not None and t_e - ps.last < ps.min_gap:
+                    if t_e - ps.last < ps.min_gap:
                         continue
                     dt, ps.last = t_e - ps.last, t_e
                     outputs = self._step_part(ps, dt) or outputs

@@ -14,9 +14,7 @@ Symbols -> names: R̂_i ``R_hat``, p̂_i ``p_hat``, Ω_i ``Omega``, k_Ω ``k_Ome
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from agent.algorithms import bearing_pose_fixed
 from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate

@@ -21,9 +21,7 @@ Leaders 1 and 2 know their pose (Assumption 3.4a) and do not run it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from agent.algorithms import bearing_pose_fixed
 from agent.algorithms.bearing_pose_fixed import Gains, Outputs, State, initial_state, publish

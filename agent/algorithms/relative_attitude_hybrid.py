@@ -34,9 +34,7 @@ u ``u``, γ ``gamma``, δ ``delta``, Ξ ``Xi``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 

@@ -178,7 +178,7 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
                 # j's bearing is from its tick t_j; the inertial bearing b_ji = −b_ij
                 # has turned since (0.5 rad/s in §4.5): our own bearing's change
                 # over [t_j, t], in j's frame, corrects it.
-                b_nbr = b_nbr - R_ij.T @ (b_own - view.rotation(view.t - tau_j, view.t).T @ b_then)
+                b_nbr = b_nbr - R_ij.T @ (b_own - view.rotation(m.t, view.t).T @ b_then)
         edges.append(
             EdgeData(
                 k,

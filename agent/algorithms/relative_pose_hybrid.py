@@ -27,9 +27,7 @@ Symbols -> names: p̂_i ``p_hat``, v_i^i ``v_body``, k_p ``k_p``; the rest as in
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 from agent.algorithms import relative_attitude_hybrid as att
 from agent.algorithms.relative_attitude_hybrid import Outputs
