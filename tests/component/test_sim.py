@@ -42,7 +42,9 @@ def test_fixed8_matches_reading_notes(fixed8):
     summary, m = fixed8
     assert m[0.0][0] == pytest.approx(0.53, rel=0.05)
     # The thesis' p̃ = p − R̃ p̂ (3.15): 6.0 at t = 0 (READING-NOTES), where ‖p − p̂‖ is 4.85.
-    assert m[0.0][1] == pytest.approx(6.0, rel=0.02)
+    # The first row is the initial estimate against the truth at t = 0 (5.9968 from the
+    # scenario's values); READING-NOTES prints two figures, ±0.05 = 0.8 %.
+    assert m[0.0][1] == pytest.approx(6.0, rel=0.01)
     assert m[10.0][0] == pytest.approx(1e-2, rel=0.3)
     assert m[20.0][0] < 1.3e-3
     assert m[10.0][1] == pytest.approx(2.1, rel=0.3)

@@ -56,8 +56,10 @@ def test_moving5_matches_reading_notes(moving5):
     fol = [a for a in sc.agents if a.role == "follower"]
     direct = np.mean([np.linalg.norm(np.array(a.p) - np.array(a.estimate.p_hat)) for a in fol])
     tilde = np.mean([np.linalg.norm(np.array(a.p) - a.R_matrix @ np.array(a.estimate.R_hat).reshape(3, 3).T @ np.array(a.estimate.p_hat)) for a in fol])
-    assert direct == pytest.approx(5.5, rel=0.01)
-    assert m[0.0][1] == pytest.approx(tilde, rel=1e-6)
+    assert direct == pytest.approx(5.5, rel=0.01)  # READING-NOTES prints two figures: ±0.05 = 0.9 %
+    # The first row is the initial estimate against the truth at t = 0: the same formula,
+    # so only round-off (1e-15) separates them.
+    assert m[0.0][1] == pytest.approx(tilde, rel=1e-12)
     assert m[2.0][0] < 1e-3  # notes: ≈1e-4 within 2 s
     assert m[5.0][0] < 1e-2  # the threshold
     assert m[10.0][1] == pytest.approx(0.4, rel=0.3)
