@@ -296,12 +296,12 @@ def final_mean(rows: np.ndarray, t_end: float, col: int, window: float = 1.0) ->
 # A run that cannot keep up is flagged (summary.json "overload", a line under the
 # table) when an agent missed more than this share of its ticks or the world
 # skipped more than this share of its samples.  Each agent's steps end at its
-# newest measurement and a late tick is sub-stepped, so a few missed ticks cost
-# nothing measurable (§3.2 on a quiet machine: 0–0.3 % missed, final errors
-# within 3 % of sim); what grows with load is the age of every message, and at
-# 6–12 % missed (one core kept busy, before those fixes) the §3.2 errors were a
-# thousand times sim's.  2 % is "a few %" of the issue, well clear of the
-# quiet-machine figures.
+# newest measurement and a late tick catches up on the sensor history, so a few
+# missed ticks cost nothing measurable (§3.2 filtered: 0–0.2 % missed on a quiet
+# machine, 0.1–0.6 % with one core busy, final errors within 2 % of sim); what
+# grows with load is the age of every message.  The issue measured 6–12 % missed
+# and errors a thousand times sim's with one core busy before those fixes.  2 %
+# is its "a few %", clear of the figures of a run that keeps up.
 OVERLOAD_PCT = 2.0
 
 
