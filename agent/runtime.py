@@ -342,6 +342,17 @@ class TickView:
             self._cache[key] = samples
         return self._cache[key]  # type: ignore[no-any-return]
 
+    def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
+        samples = self._samples(name)
+        out: list[tuple[float, np.ndarray]] = []
+        for t, v in reversed(samples):
+            if t <= t1 + 1e-12:
+                out.append((t, v))
+                if t <= t0 + 1e-12:
+                    break
+        out.reverse()
+        return out
+
     def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
         return timing.interval_mean_rate(self._samples(name), t0, t1)
 
@@ -403,7 +414,7 @@ class AgentNode:
         values: dict[str, Any] = dict(self.spec.gains)
         if scenario.params is not None:
             pr = scenario.params
-            values.update(A=pr.A_matrix, u=np.array(pr.u), gamma=pr.gamma, delta=pr.delta, Xi=pr.Xi)
+            values.update(A=pr.A_matrix, u=np.array(pr.u), gamma=pr.gamma, delta=pr.delta, Xi=pr.Xi, delta_Q=pr.delta_Q, Pi=pr.Pi)
         self.gains = make_gains(self.algo, values)
         # Tree edges (§4): neighbour j -> (edge index k, whether this agent heads k and owns ξ_k).
         self.tree_edges: dict[int, tuple[int, bool]] = {}
@@ -417,11 +428,16 @@ class AgentNode:
             np.array(est.p_hat),
             np.array(est.Omega),
             {k: float(est.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if head},
+            {k: float(scenario.agent(scenario.oriented[k - 1][0]).estimate.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if not head},
+            np.array(est.Q).reshape(3, 3),
+            est.zeta,
         )
         self.state = self.algo.initial_state(init, self.gains)
         self.parts = [_PartState(p, self.spec.clock.rate) for p in self.aspec.parts]
         self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
         self.jump_count: dict[int, int] = {}
+        self.agent_jumps: list[tuple[int, float, float, float]] = []  # (this id, t, ζ before, ζ after) not yet published
+        self.agent_jump_count = 0
         self.clock = AgentClock(self.spec.clock, seed=(seed * 1000003 + agent_id) % (1 << 63))
         self.out = scenario.out_neighbors(agent_id)
         self.inbox = Inbox(
@@ -435,6 +451,8 @@ class AgentNode:
             bus.subscribe(keys.edges_into(run, agent_id), self.inbox.handler("edge", _edge_link, self.aspec.check_edge))
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         self.pub_est = bus.publisher(keys.est(run, agent_id))
+        self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None
+        self.cmd_seq = 0
         self.pub_stats = bus.publisher(keys.stats(run, "agent", agent_id))
         self.sense_link = sense_link
         self.view = TickView(self)
@@ -545,6 +563,9 @@ class AgentNode:
         for k, before, after in getattr(outputs, "jumps", ()):
             self.jumps.append((k, view.t_world, before, after))
             self.jump_count[k] = self.jump_count.get(k, 0) + 1
+        for before, after in getattr(outputs, "agent_jumps", ()):
+            self.agent_jumps.append((self.id, view.t_world, before, after))
+            self.agent_jump_count += 1
         return outputs
 
     def _step_ends(self, t_end: float) -> list[tuple[float, dict[str, Any]]]:
@@ -597,6 +618,13 @@ class AgentNode:
             est["xi"] = e["xi"]
         if self.jumps:
             est["jumps"], self.jumps = self.jumps, []
+        if self.agent_jumps:
+            est["agent_jumps"], self.agent_jumps = self.agent_jumps, []
+        if pub.command is not None and self.pub_cmd is not None:
+            # To the world's plant (zero-order hold there), stamped with the time of the
+            # measurements it was computed from.
+            self.pub_cmd.put(wire.encode("cmd", self.id, self.cmd_seq, t_stamp, t_local=t_local, **pub.command))
+            self.cmd_seq += 1
         self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, **est))
 
     # ------------------------------------------------------------------ reporting
@@ -614,13 +642,15 @@ class AgentNode:
                 "idle_ticks": self.idle_ticks,
                 "compute_mean_us": 1e6 * self.compute_s / self.steps if self.steps else 0.0,
                 "compute_max_us": 1e6 * self.compute_max,
-                "sent": {f"{self.id}->{i}": self.seq for i in self.out},
+                "sent": {f"{self.id}->{i}": self.seq for i in self.out} | ({f"{self.id}->world": self.cmd_seq} if self.pub_cmd is not None else {}),
                 "stale_policy": f"{self.stale.policy} after {self.stale.max_age:g} s",
                 "stale_terms": {f"{j}->{self.id}": n for j, n in sorted(self.stale_terms.items())},
             }
         )
         if self.jump_count:
             c["jumps"] = {str(k): n for k, n in sorted(self.jump_count.items())}
+        if self.agent_jump_count:
+            c["agent_jumps"] = self.agent_jump_count
         return c
 
     def publish_stats(self, t_world: float, final: bool = False) -> None:

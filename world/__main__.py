@@ -72,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
             changed.clear()
         epoch = time.time() + START_LEAD_S / 1.0
         clock = WallClock(epoch, args.time_scale)
+        world.now = clock.now  # command arrivals are stamped in world time
         start = wire.encode("start", 0, 0, 0.0, epoch=epoch, time_scale=args.time_scale, duration=duration, seed=seed, run=run)
         pub_start.put(start)
         log.info("start: epoch %.3f, time scale %g, duration %g s", epoch, args.time_scale, duration)

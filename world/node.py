@@ -7,14 +7,24 @@ Engine-agnostic: ``zswarm sim`` calls :meth:`World.sample` at virtual times;
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from world import sensors
 from world.motion import PrescribedMotion
+from world.plant import CommandInbox, RigidBodyPlant
 from zswarm import keys, wire
 from zswarm.bus import Bus
-from zswarm.scenario import Scenario
+from zswarm.scenario import PLANT_INPUTS, Scenario
+
+
+def _cmd_agent(key: str) -> int | None:
+    """The agent id of a ``zswarm/<run>/cmd/<i>`` key (None: not one)."""
+    parts = key.split("/")
+    if len(parts) == 4 and parts[2] == "cmd" and parts[3].isdigit():
+        return int(parts[3])
+    return None
 
 
 class World:
@@ -25,19 +35,38 @@ class World:
     gives the same measurements on every engine.
     """
 
-    def __init__(self, scenario: Scenario, bus: Bus, run: str, seed: int) -> None:
+    def __init__(self, scenario: Scenario, bus: Bus, run: str, seed: int, now: Callable[[], float] | None = None) -> None:
         self.sc = scenario
         self.moving = scenario.moving
         self.run = run
+        # World time, for the arrival of commands: virtual in sim; a run sets its clock
+        # here once the epoch is announced (before that no agent sends a command).
+        self.now: Callable[[], float] = now if now is not None else self.next_time
         f = scenario.formation
-        self.motion = PrescribedMotion(
-            np.array([a.R_matrix for a in scenario.agents]),
-            np.array([a.p for a in scenario.agents]),
-            [a.omega for a in scenario.agents],
-            scenario.step,
-            formation=None if f is None else (np.array(f.axis), f.rate),
-            velocity=[a.velocity for a in scenario.agents],
-        )
+        self.commands: CommandInbox | None = None
+        self.motion: PrescribedMotion | RigidBodyPlant
+        if scenario.plant == "rigid_body":
+            self.commands = CommandInbox(
+                list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["rigid_body"]
+            )
+            self.motion = RigidBodyPlant(
+                np.array([a.R_matrix for a in scenario.agents]),
+                np.array([a.p for a in scenario.agents]),
+                np.array([a.omega0 for a in scenario.agents]),
+                np.array([np.array(a.J).reshape(3, 3) for a in scenario.agents]),
+                scenario.step,
+                self.commands,
+            )
+            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
+        else:
+            self.motion = PrescribedMotion(
+                np.array([a.R_matrix for a in scenario.agents]),
+                np.array([a.p for a in scenario.agents]),
+                [a.omega for a in scenario.agents],
+                scenario.step,
+                formation=None if f is None else (np.array(f.axis), f.rate),
+                velocity=[a.velocity for a in scenario.agents],
+            )
         # What each agent's algorithm declares it measures (zswarm.algorithm.SENSORS).
         self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
         want = frozenset().union(*self.sensors.values())
@@ -49,6 +78,7 @@ class World:
         self.bearing_std = math.sqrt(scenario.bearing_var)
         self.velocity_std = math.sqrt(scenario.velocity_var)
         self.rel_att_std = math.sqrt(scenario.rel_att_var)
+        self.attitude_std = math.sqrt(scenario.attitude_var)
         self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
         self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
         # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
@@ -82,7 +112,11 @@ class World:
             B = sensors.bearings(R, p, self._pair_i, self._pair_j)  # every agent's, at once
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
-        self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
+        if self.commands is not None:
+            assert isinstance(self.motion, RigidBodyPlant)
+            self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, tau=self.motion.tau))
+        else:
+            self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
         for i in self.ids:
             a = self.index[i]
             rng = self.rngs[i]
@@ -100,9 +134,10 @@ class World:
                 m["vel"] = sensors.velocity(V[a], self.velocity_std, rng)
             if "velocity_body" in want:
                 m["vel_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
-            # Own attitude and position: exact (the thesis' leaders know their pose).
+            # Own attitude: R_i exp([n_R]^x) (§5.6; exact for the thesis' leaders, who
+            # know their pose).  Drawn last: earlier scenarios keep their measurements.
             if "attitude" in want:
-                m["R"] = R[a]
+                m["R"] = sensors.attitude(R[a], self.attitude_std, rng)
             if "position" in want:
                 m["p"] = p[a]
             self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
@@ -120,7 +155,10 @@ class World:
         return skipped
 
     def counters(self) -> dict[str, object]:
-        return {"samples": self.samples, "late": self.late, "sent": {f"world->{i}": self.seq for i in self.ids}}
+        c: dict[str, object] = {"samples": self.samples, "late": self.late, "sent": {f"world->{i}": self.seq for i in self.ids}}
+        if self.commands is not None:
+            c.update(self.commands.counters())
+        return c
 
     def publish_stats(self, t: float, final: bool = False) -> None:
         counters = self.counters()

@@ -6,6 +6,7 @@
   ``n ~ N(0, bearing_var)`` each, rebuild ``sign(b3)·(x, y, 1)/||(x, y, 1)||``.
 * Relative attitude (4.2): ``R_ij = R_i^T R_j``; with noise (§4.5)
   ``R_ij exp([n_R]^x)``, ``n_R ~ N(0, rel_att_var)`` per axis.
+* Own attitude (§5.6): ``R_i exp([n_R]^x)``, ``n_R ~ N(0, attitude_var)`` per axis.
 * Velocity (inertial (3.21) or body frame (4.30)): ``v + n``, ``n ~ N(0, velocity_var)``
   per axis (§3.3.4: "linear and angular velocity measurements ... variance of 0.1").
 """
@@ -57,6 +58,11 @@ def relative_attitude(R_i: NDArray[np.float64], R_j: NDArray[np.float64], std: f
     """``R_ij = R_i^T R_j`` (4.2), times ``exp([n_R]^x)`` with ``n_R ~ N(0, std²)`` per axis."""
     R_ij = R_i.T @ R_j
     return R_ij @ exp(rng.normal(0.0, std, 3)) if std > 0 else R_ij
+
+
+def attitude(R: NDArray[np.float64], std: float, rng: np.random.Generator) -> NDArray[np.float64]:
+    """Own attitude ``R_i exp([n_R]^x)``, ``n_R ~ N(0, std²)`` per axis (§5.6)."""
+    return R @ exp(rng.normal(0.0, std, 3)) if std > 0 else R
 
 
 def velocity(v: Vec3, std: float, rng: np.random.Generator) -> Vec3:

@@ -59,7 +59,7 @@ SENSORS: Mapping[str, str] = MappingProxyType(
 )
 GRAPHS = ("any", "leader_follower", "tree")
 RESERVED = frozenset({"v", "type", "src", "seq", "t", "t_local", "rx"})  # message envelope and runtime keys
-PARAMS = ("", "A", "hybrid")
+PARAMS = ("", "A", "hybrid", "hybrid_vf")
 
 
 class AlgorithmError(ValueError):
@@ -119,9 +119,10 @@ class AlgorithmSpec:
     parts: tuple[Part, ...]  # empty: the agent only publishes what it measures (a leader)
     command: Mapping[str, Field] = field(default_factory=dict)  # sent to the world on cmd/<i> (observers: none)
     graph: str = "any"  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2) | "any"
-    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P)
+    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P) | "hybrid_vf" (and δ_Q̃, Π of Condition 5.1)
     stale: StalePolicy = StalePolicy(0.2, "drop")
     leader: str | None = None  # the algorithm agents with role "leader" run (None: no leaders)
+    sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
 
     def check_edge(self, fields: Mapping[str, Any]) -> Mapping[str, Any]:
         """Validate a received edge message's fields against ``edge_in`` (raises ValueError)."""
@@ -150,6 +151,9 @@ class Initial:
     p_hat: np.ndarray
     Omega: np.ndarray
     xi: Mapping[int, float]  # ξ_k(0) of every edge k this agent heads (0 unless given)
+    xi_in: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of every edge k this agent is the tail of
+    Q: np.ndarray = field(default_factory=lambda: np.eye(3))  # Q_i(0) (velocity-free law, §5.4)
+    zeta: float = 0.0  # ζ_i(0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -224,6 +228,11 @@ class View(Protocol):
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
         """Body rotation from t0 to t1 from the gyro: :func:`zswarm.timing.rotation_over`."""
+        ...
+
+    def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
+        """Samples ``(time on this clock, value)`` of the sensor field ``name`` ("R", "gyro", ...)
+        acquired in ``(t0, t1]``, with the newest one at or before t0 first when there is one."""
         ...
 
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
@@ -328,7 +337,12 @@ def check(module: ModuleType) -> AlgorithmSpec:
 
 
 PARAM_NAMES: Mapping[str, frozenset[str]] = MappingProxyType(
-    {"": frozenset(), "A": frozenset({"A"}), "hybrid": frozenset({"A", "u", "gamma", "delta", "Xi"})}
+    {
+        "": frozenset(),
+        "A": frozenset({"A"}),
+        "hybrid": frozenset({"A", "u", "gamma", "delta", "Xi"}),
+        "hybrid_vf": frozenset({"A", "u", "gamma", "delta", "Xi", "delta_Q", "Pi"}),
+    }
 )
 
 

@@ -388,6 +388,11 @@ def cmd_design_hybrid(args: argparse.Namespace) -> int:
     print(f"Ξ       = {{{', '.join(f'{x:.6g}' for x in Xi)}}}")
     gaps = ", ".join(f"{g:.4g}" for g in d.gaps)
     print(f"Condition 4.1: U(R̄,0) − min_Ξ U(R̄,ξ) at R̄ = Ra(π, q_β), β = 1,2,3: {gaps}  (> δ: {'holds' if d.condition_holds else 'FAILS'})")
+    print(
+        "Condition 5.1 (the velocity-free law's (Q̃_i, ζ_i), §5.4) is the same condition on the same potential (4.23): "
+        f"with δ_Q̃ = {d.delta:.6g} and Π = Ξ it {'holds' if d.condition_holds else 'FAILS'} (Remark 5.2); "
+        "[algorithm.params] delta_Q, Pi are checked against these bounds too"
+    )
     return 0 if d.condition_holds else 1
 
 

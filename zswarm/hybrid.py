@@ -200,8 +200,12 @@ def design(
     return Design(case, (l1, l2, l3), Q, (alpha[0], alpha[1], alpha[2]), u, Dstar, gamma_max, g, delta_max, d, tuple(float(x) for x in Xi), gaps)
 
 
-def check_parameters(A: Mat3, u: Vec3, gamma: float, delta: float, Xi: Sequence[float], u_tol: float = 1e-2) -> Design:
+def check_parameters(A: Mat3, u: Vec3, gamma: float, delta: float, Xi: Sequence[float], u_tol: float = 1e-2, condition: str = "4.1") -> Design:
     """Check user-given (A, u, γ, δ, Ξ) against Prop. 4.2 and Condition 4.1.
+
+    Condition 5.1 (the velocity-free law's (Q̃_i, ζ_i) with δ_Q̃ and Π) is the same
+    statement for the same potential (4.23) on SO(3) × R (Remark 5.2): pass
+    (δ_Q̃, Π) as (delta, Xi) and ``condition="5.1"`` for the messages.
 
     ``u`` must be a unit vector equal, up to the sign of each eigen-component,
     to Prop. 4.2's ``u`` within ``u_tol`` per component (the thesis prints u to
@@ -223,5 +227,5 @@ def check_parameters(A: Mat3, u: Vec3, gamma: float, delta: float, Xi: Sequence[
         )
     gaps = condition_gaps(A, u, d.gamma, Xi)
     if not all(g > d.delta for g in gaps):
-        raise DesignError("delta", f"Condition 4.1 fails: gaps U(R̄,0) − min_Ξ U(R̄,ξ) at the undesired critical points are {[round(g, 6) for g in gaps]}, not all > δ = {d.delta:g}")
+        raise DesignError("delta", f"Condition {condition} fails: gaps U(R̄,0) − min_Ξ U(R̄,ξ) at the undesired critical points are {[round(g, 6) for g in gaps]}, not all > δ = {d.delta:g}")
     return Design(d.case, d.eigenvalues, d.eigenvectors, d.alpha, u, d.Delta_star, d.gamma_max, d.gamma, d.delta_max, d.delta, d.Xi, gaps)

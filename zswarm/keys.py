@@ -31,6 +31,15 @@ def sense(run: str, i: int) -> str:
     return f"{ROOT}/{run}/sense/{i}"
 
 
+def cmd(run: str, i: int) -> str:
+    """Agent i -> world: its command to the plant (a torque for the rigid bodies of (5.1))."""
+    return f"{ROOT}/{run}/cmd/{i}"
+
+
+def cmds_all(run: str) -> str:
+    return f"{ROOT}/{run}/cmd/*"
+
+
 def est(run: str, i: int) -> str:
     """Agent i -> recorder: its estimate."""
     return f"{ROOT}/{run}/est/{i}"

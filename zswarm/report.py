@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import so3, wire
+from zswarm import report_sync, so3, wire
 from zswarm.record import ALIVE_CHANNEL, read, unpack
 from zswarm.scenario import Scenario
 
@@ -57,6 +57,9 @@ class Recording:
     malformed: int = 0
     xi: dict[int, list[tuple[float, float]]] = field(default_factory=dict)  # edge k -> (t, ξ_k)
     jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (k, t, before, after)
+    agent_jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (agent, t, ζ before, ζ after)
+    extra: dict[int, list[tuple[float, dict[str, Any]]]] = field(default_factory=dict)  # agent -> (t, named values)
+    truth_tau: np.ndarray | None = None  # (T, n, 3): the torques the plant applied (rigid bodies)
 
 
 def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
@@ -65,6 +68,8 @@ def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
     xi: dict[int, list[tuple[float, float]]] = defaultdict(list)
     jumps: list[tuple[int, float, float, float]] = []
+    agent_jumps: list[tuple[int, float, float, float]] = []
+    extra: dict[int, list[tuple[float, dict[str, Any]]]] = defaultdict(list)
     stats: dict[tuple[str, int], dict[str, Any]] = {}
     alive: list[dict[str, Any]] = []
     start = None
@@ -92,6 +97,9 @@ def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
             for k, x in m.get("xi", {}).items():
                 xi[k].append((m["t"], x))
             jumps.extend(m.get("jumps", []))
+            agent_jumps.extend(m.get("agent_jumps", []))
+            if "extra" in m:
+                extra[m["src"]].append((m["t"], m["extra"]))
         elif m["type"] == "stats" and kind == "stats":
             role = m["role"]
             prev = stats.get((role, m["src"]))
@@ -121,6 +129,9 @@ def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
         malformed=malformed,
         xi={k: sorted(v) for k, v in sorted(xi.items())},
         jumps=sorted(jumps, key=lambda j: (j[1], j[0])),
+        agent_jumps=sorted(agent_jumps, key=lambda j: (j[1], j[0])),
+        extra={i: sorted(v, key=lambda e: e[0]) for i, v in sorted(extra.items())},
+        truth_tau=np.array([m["tau"] for m in truth]) if all("tau" in m for m in truth) else None,
     )
 
 
@@ -238,12 +249,14 @@ def mean_error_series(sc: Scenario, errs: dict[int, np.ndarray], tm: TreeMetrics
     Leader–follower schemes: the mean over followers of each one's newest
     estimate error at each grid time (agents tick on their own clocks; NaN
     until every follower has an estimate).  §4 schemes: the mean over edges
-    of |R̄_k|_I and of the relative position error (the thesis' measures).
+    of |R̄_k|_I and of the relative position error (the thesis' measures);
+    Chapter 5 control: the max over edges of |R̄_k|_I.
     """
     t = np.round(np.arange(0.0, duration + 1e-9, GRID_S), 6)
     if tm is not None:
         idx = np.clip(np.searchsorted(tm.t, t, side="right") - 1, 0, len(tm.t) - 1)
-        att = np.mean([v[idx] for v in tm.rel_att.values()], axis=0)
+        # Chapter 5 control: max over edges (synchronized means every edge is); §4 observers: the mean.
+        att = (np.max if report_sync.is_sync(sc) else np.mean)([v[idx] for v in tm.rel_att.values()], axis=0)
         pos = np.mean([v[idx] for v in tm.rel_pos.values()], axis=0) if tm.rel_pos and "bearings" in sc.info.sensors else np.full(len(t), np.nan)
         return t, att, pos
     cols_a, cols_p = [], []
@@ -343,6 +356,7 @@ def summarize(
     exit_codes: dict[str, int | None] | None = None,
     tm: TreeMetrics | None = None,
     thresholds: tuple[float, float] = THRESHOLDS,
+    sm: report_sync.SyncMetrics | None = None,
 ) -> dict[str, Any]:
     """The summary.json content (see README, "Results folder")."""
     t_end = duration
@@ -379,14 +393,21 @@ def summarize(
         }
         for link, c in st.get("links", {}).items():
             links[link] = {"sent": sent.get(link, 0), **c}
+    world = rec.stats.get(("world", 0), {})
+    for link, c in world.get("links", {}).items():  # the command links i->world, counted at the world
+        links[link] = {"sent": sent.get(link, 0), **c}
     for link, n in sent.items():
         links.setdefault(link, {"sent": n, "delivered": 0, "dropped": n, "reordered": 0})
     followers = [agents[str(a.id)] for a in sc.agents if a.role == "follower"]
     extra: dict[str, Any] = {}
-    if sc.info.graph == "tree":
+    conv: dict[str, Any] | None = None
+    if report_sync.is_sync(sc):
+        sm = report_sync.sync_metrics(sc, rec) if sm is None else sm
+        extra = report_sync.summary(sc, rec, sm, agents)
+        conv = report_sync.convergence(sm, duration, thresholds)
+    elif sc.info.graph == "tree":
         tm = tree_metrics(sc, rec) if tm is None else tm
         extra = _tree_summary(sc, rec, agents, t_end, tm)
-    world = rec.stats.get(("world", 0), {})
     return extra | {
         "scenario": sc.name,
         "algorithm": sc.algorithm,
@@ -397,11 +418,11 @@ def summarize(
         "completed": rec.stop_seen,
         "agents": agents,
         "links": dict(sorted(links.items())),
-        "mean_attitude_error_final": _nanmean([f["attitude_error_final"] for f in followers]),
+        "mean_attitude_error_final": _nanmean([f["attitude_error_final"] for f in followers]) if conv is None else extra["mean_relative_attitude_error_final"],
         "mean_position_error_final": _nanmean([f["position_error_final"] for f in followers]),
-        "mean_over": "followers" if sc.info.graph != "tree" else "agents (up to a common frame)",
+        "mean_over": "edges: |R̄_k|_I of the truth" if conv is not None else "followers" if sc.info.graph != "tree" else "agents (up to a common frame)",
         "final_window_s": 1.0,
-        "convergence": convergence(sc, errs, tm, duration, thresholds),
+        "convergence": convergence(sc, errs, tm, duration, thresholds) if conv is None else conv,
         "stale_policy": {"policy": sc.stale.policy, "max_age_s": sc.stale.max_age},
         "world": world,
         "overload": overload(agents, world),
@@ -518,14 +539,21 @@ def make_report(
     write errors.csv, summary.json and plots; return the summary."""
     rec = load_recording(out_dir / "recording.mcap" if messages is None else messages)
     errs = errors(rec)
-    tm = tree_metrics(sc, rec) if sc.info.graph == "tree" else None
-    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds)
+    sync = report_sync.is_sync(sc)
+    sm = report_sync.sync_metrics(sc, rec) if sync else None
+    tm = tree_metrics(sc, rec) if sc.info.graph == "tree" and not sync else None
+    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds, sm)
     write_errors_csv(out_dir / "errors.csv", errs)
     if tm is not None:
         write_edges_csv(out_dir / "edges.csv", sc, tm, rec)
+    if sm is not None:
+        report_sync.write_edges_csv(out_dir / "edges.csv", sc, sm, rec)
+        report_sync.write_agents_csv(out_dir / "agents.csv", sc, sm)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if plots:
-        if tm is None:
+        if sm is not None:
+            report_sync.plot(out_dir / "plots", sc, sm, rec)
+        elif tm is None:
             plot(out_dir / "plots", sc, errs)
         else:
             plot_tree(out_dir / "plots", sc, tm, rec)
@@ -612,6 +640,10 @@ def _e(x: float | None) -> str:
 def table(summary: dict[str, Any]) -> str:
     """The per-agent (and, for §4, per-edge) summary table printed at the end of a run."""
     tree = "edges" in summary
+    if "synchronization" in summary:
+        lines = [f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {summary['duration_s']:g} s, seed {summary['seed']})"]
+        lines += report_sync.table_lines(summary)
+        return "\n".join(lines + _overload_lines(summary))
     lines = [
         f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {summary['duration_s']:g} s, seed {summary['seed']})",
         f"{'agent':>5} {'role':<8} {'alive':<5} {'att.err':>10} {'pos.err':>10} {'steps':>6} {'rate Hz':>8} {'missed':>6}",
@@ -636,11 +668,15 @@ def table(summary: dict[str, Any]) -> str:
         f"mean over {who} (last 1 s): attitude {_e(summary['mean_attitude_error_final'])}, "
         f"position {_e(summary['mean_position_error_final'])}; links: {len(summary['links'])}, dropped messages: {drops}"
     )
+    return "\n".join(lines + _overload_lines(summary))
+
+
+def _overload_lines(summary: dict[str, Any]) -> list[str]:
     ov = summary.get("overload") or {}
-    if ov.get("overloaded"):
-        lines.append(
-            f"OVERLOADED: {'; '.join(ov['reasons'])}: this machine did not keep up, so the "
-            "agents stepped on older data than configured and these errors may not be the algorithm's alone; compare with "
-            "zswarm sim, or run with --time-scale 0.5 or fewer processes per core"
-        )
-    return "\n".join(lines)
+    if not ov.get("overloaded"):
+        return []
+    return [
+        f"OVERLOADED: {'; '.join(ov['reasons'])}: this machine did not keep up, so the "
+        "agents stepped on older data than configured and these errors may not be the algorithm's alone; compare with "
+        "zswarm sim, or run with --time-scale 0.5 or fewer processes per core"
+    ]

@@ -9,17 +9,25 @@ Format (units: seconds, Hz, metres, radians)::
     [algorithm] name (built-in, entry point or module path: zswarm.algorithm.resolve);
                 [algorithm.gains] as the algorithm's SPEC.gains declares;
                 [algorithm.params] A, u, gamma, delta, Xi (§4 observers)
-    [world]     step (s, <= 0.001), sensor_rate (Hz);
-                [world.formation] axis, rate: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis)
-    [noise]     gyro_var, bearing_var, velocity_var, rel_att_var (variances, as the papers state them)
+    [world]     step (s, <= 0.001), sensor_rate (Hz), plant ("prescribed" motions, or
+                "rigid_body": (5.1) driven by the agents' torques; the default when the
+                algorithm sends a torque), sensors (the sensors fitted; default: what the
+                algorithm declares);
+                [world.formation] axis, rate: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis);
+                [world.commands] max_age (s), policy ("zero" | "hold"): stale commands (world/plant.py)
+    [noise]     gyro_var, bearing_var, velocity_var, rel_att_var, attitude_var (variances, as
+                the papers state them; attitude: R_i exp([n_R]^x), §5.6)
     [clock]     rate (Hz), jitter (s, std of tick times), drift_ppm, offset (s): defaults for agents
     [graph]     edges = [[head, tail], ...]: the oriented tree of §4, edge k is the k-th
     [[agents]]  id, role, p (at t = 0), R, omega = [3 expressions in t], v = [3 expressions
                 in t] (inertial velocity), gyro_bias, neighbors (N_i), k_neighbors (k_ij),
-                gains (per-agent overrides, e.g. k_R = k_i^R of §3.3),
-                [agents.estimate] p, R, Omega, xi = {k = ξ_k(0)}; [agents.clock] overrides
+                gains (per-agent overrides, e.g. k_R = k_i^R of §3.3), J (rigid_body: the
+                inertia, 3 principal moments or a 3x3 list of rows; omega is then ω_i(0)),
+                [agents.estimate] p, R, Omega, xi = {k = ξ_k(0)}, Q, zeta (the velocity-free
+                law's Q_i(0), ζ_i(0)); [agents.clock] overrides
     [links]     delay_ms, jitter_ms, jitter, reorder, drop, ge_*: agent→agent edges;
-                [links.sensors] the same for world→agent links; [links.per_link."j->i"] one link
+                [links.sensors] the same for world→agent links; [links.commands] for the
+                agent→world command links; [links.per_link."j->i"] (or "world->i", "i->world") one link
 
 Any field can be overridden from the command line, ``--set links.delay_ms=50``
 (:func:`parse_override`, :func:`loads` ``overrides``); an error in an
@@ -45,6 +53,20 @@ from zswarm.expr import Expr, ExprError, parse
 from zswarm.graph import GraphError, check_leader_follower, check_tree
 from zswarm.links import JITTER_KINDS, LinkSpec
 
+# The world's plants and command policy (world/plant.py); imported lazily there to keep
+# the loader free of the world package's numerics.
+PLANTS = ("prescribed", "rigid_body")
+PLANT_INPUTS: Mapping[str, Mapping[str, tuple[int, ...]]] = MappingProxyType({"prescribed": {}, "rigid_body": {"tau": (3,)}})
+COMMAND_POLICIES = ("zero", "hold")
+
+
+@dataclass(frozen=True, slots=True)
+class CommandPolicy:
+    """``[world.commands]``: how old a command may be, and what happens past that age (world/plant.py)."""
+
+    max_age: float = 0.5  # s
+    policy: str = "zero"
+
 
 class ScenarioError(ValueError):
     """A scenario file that cannot be used; the message names file, field and problem."""
@@ -63,6 +85,10 @@ class Params:
     @property
     def A_matrix(self) -> np.ndarray:
         return np.array(self.A, dtype=float).reshape(3, 3)
+
+    # The velocity-free law's auxiliary hybrid variable ζ_i (§5.4, Condition 5.1): its δ_Q̃ and Π.
+    delta_Q: float = 0.0
+    Pi: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +117,8 @@ class Estimate:
     R_hat: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # row-major
     Omega: tuple[float, float, float] = (0.0, 0.0, 0.0)
     xi: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of the edges k this agent heads
+    Q: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # Q_i(0), row-major (velocity-free law)
+    zeta: float = 0.0  # ζ_i(0) (velocity-free law)
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,10 +135,16 @@ class AgentSpec:
     clock: ClockSpec
     velocity: tuple[Expr, Expr, Expr] | None = None  # inertial velocity v_i(t), m/s (None: fixed or formation)
     gains: Mapping[str, float] = field(default_factory=dict)  # the algorithm's gains for this agent
+    J: tuple[float, ...] | None = None  # inertia, row-major 3×3 (rigid_body plant)
 
     @property
     def R_matrix(self) -> np.ndarray:
         return np.array(self.R, dtype=float).reshape(3, 3)
+
+    @property
+    def omega0(self) -> np.ndarray:
+        """ω_i(0): the rigid body's initial rate (its ``omega`` expressions at t = 0)."""
+        return np.array([float(e(0.0)) for e in self.omega])
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,6 +173,11 @@ class Scenario:
     sensor_links: LinkSpec = LinkSpec()  # [links.sensors]: the world→agent sensor links' model
     link_overrides: Mapping[str, LinkSpec] = field(default_factory=dict)  # [links.per_link."j->i"]
     stale: StalePolicy = StalePolicy()  # [algorithm.stale]
+    plant: str = "prescribed"  # [world] plant
+    commands: CommandPolicy = CommandPolicy()  # [world.commands]
+    command_links: LinkSpec = LinkSpec()  # [links.commands]: the agent→world command links' model
+    attitude_var: float = 0.0
+    sensors_fitted: frozenset[str] | None = None  # [world] sensors (None: what the algorithms declare)
     module: ModuleType | None = field(default=None, repr=False)  # the algorithm (zswarm.algorithm interface)
     leader_module: ModuleType | None = field(default=None, repr=False)  # what agents with role "leader" run
     module_dir: str | None = None  # a directory the algorithm's module was found in (beside the scenario file)
@@ -161,14 +200,17 @@ class Scenario:
         return tuple(p.rate for p in self.info.parts if p.rate is not None)
 
     def link_spec(self, name: str) -> LinkSpec:
-        """The model of link ``name`` ("world->3", "1->3")."""
+        """The model of link ``name`` ("world->3", "1->3", "3->world")."""
         if name in self.link_overrides:
             return self.link_overrides[name]
+        if name.endswith("->world"):
+            return self.command_links
         return self.sensor_links if name.startswith("world->") else self.links
 
     @property
     def links_active(self) -> bool:
-        return self.links.active or self.sensor_links.active or any(s.active for s in self.link_overrides.values())
+        """Some agent-side link (sensors, edges) is emulated (the command links are the world's)."""
+        return self.links.active or self.sensor_links.active or any(s.active for n, s in self.link_overrides.items() if not n.endswith("->world"))
 
     @property
     def info(self) -> AlgorithmSpec:
@@ -464,7 +506,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     if stale.policy not in STALE_POLICIES:
         raise c.err("algorithm.stale.policy", f"must be one of {', '.join(STALE_POLICIES)}", stale.policy)
 
-    w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate", "formation"})
+    w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate", "formation", "plant", "sensors", "commands"})
     step = c.num(w.get("step", 0.001), "world.step", positive=True, maxv=0.001)
     sensor_rate = c.num(w.get("sensor_rate", 200.0), "world.sensor_rate", positive=True, maxv=1.0 / step)
     formation = None
@@ -476,12 +518,14 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         rate = float(c.expr(fm["rate"], "world.formation.rate")(0.0))
         ax = axis / np.linalg.norm(axis)
         formation = Formation((float(ax[0]), float(ax[1]), float(ax[2])), rate)
+    plant, commands, fitted = _plant(c, w, info, algo, formation is not None)
 
-    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var", "velocity_var", "rel_att_var"})
+    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var", "velocity_var", "rel_att_var", "attitude_var"})
     gyro_var = c.num(nz.get("gyro_var", 0.0), "noise.gyro_var", nonneg=True)
     bearing_var = c.num(nz.get("bearing_var", 0.0), "noise.bearing_var", nonneg=True)
     velocity_var = c.num(nz.get("velocity_var", 0.0), "noise.velocity_var", nonneg=True)
     rel_att_var = c.num(nz.get("rel_att_var", 0.0), "noise.rel_att_var", nonneg=True)
+    attitude_var = c.num(nz.get("attitude_var", 0.0), "noise.attitude_var", nonneg=True)
 
     default_clock = _clock(c, doc.get("clock", {}), "clock", ClockSpec())
 
@@ -492,7 +536,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     seen: dict[int, str] = {}
     for n, ra in enumerate(raw_agents):
         f = f"agents[{n}]"
-        agents.append(_agent(c, ra, f, default_clock, info, gains, leaders=leader_module is not None))
+        agents.append(_agent(c, ra, f, default_clock, info, gains, leaders=leader_module is not None, plant=plant))
         if agents[-1].id in seen:
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
@@ -545,8 +589,10 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
 
-    links, sensor_links, link_overrides = _links(
-        c, doc.get("links", {}), {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors}
+    links, sensor_links, command_links, link_overrides = _links(
+        c,
+        doc.get("links", {}),
+        {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors} | ({f"{a.id}->world" for a in agents} if info.command else set()),
     )
 
     return Scenario(
@@ -574,6 +620,11 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         sensor_links=sensor_links,
         link_overrides=MappingProxyType(link_overrides),
         stale=stale,
+        plant=plant,
+        commands=commands,
+        command_links=command_links,
+        attitude_var=attitude_var,
+        sensors_fitted=fitted,
         module=module,
         leader_module=leader_module,
         module_dir=module_dir,
@@ -605,17 +656,61 @@ def _link_spec(c: _Ctx, d: Any, f: str, base: LinkSpec, extra: set[str] = frozen
     return spec
 
 
-def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, LinkSpec, dict[str, LinkSpec]]:
+def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, LinkSpec, LinkSpec, dict[str, LinkSpec]]:
     """``[links]``: defaults of the agent→agent edges; ``[links.sensors]``: defaults of the
-    world→agent sensor links (zero unless set: on-board sensors); ``[links.per_link."j->i"]``
-    and ``[links.per_link."world->i"]``: one link each, on top of its kind's defaults."""
-    edges = _link_spec(c, d, "links", LinkSpec(), {"per_link", "sensors"})
+    world→agent sensor links (zero unless set: on-board sensors); ``[links.commands]``:
+    defaults of the agent→world command links (zero unless set); ``[links.per_link."j->i"]``,
+    ``"world->i"`` and ``"i->world"``: one link each, on top of its kind's defaults."""
+    edges = _link_spec(c, d, "links", LinkSpec(), {"per_link", "sensors", "commands"})
     sensors = _link_spec(c, d.get("sensors", {}), "links.sensors", LinkSpec())
+    commands = _link_spec(c, d.get("commands", {}), "links.commands", LinkSpec())
     over: dict[str, LinkSpec] = {}
     per = c.table(d.get("per_link", {}), "links.per_link", names)
     for name, sub in per.items():
-        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', sensors if name.startswith("world->") else edges)
-    return edges, sensors, over
+        base = sensors if name.startswith("world->") else commands if name.endswith("->world") else edges
+        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', base)
+    return edges, sensors, commands, over
+
+
+def _plant(c: _Ctx, w: dict[str, Any], info: AlgorithmSpec, algo: str, formation: bool) -> tuple[str, CommandPolicy, frozenset[str] | None]:
+    """``[world] plant``, ``[world.commands]`` and ``[world] sensors``, checked against what the
+    algorithm sends (SPEC.command) and measures (SPEC.sensors)."""
+    from zswarm.algorithm import SENSORS
+
+    sends = {k: f.shape for k, f in info.command.items()}
+    default = next((p for p in PLANTS if sends and dict(PLANT_INPUTS[p]) == sends), "prescribed")
+    plant = c.string(w.get("plant", default), "world.plant")
+    if plant not in PLANTS:
+        raise c.err("world.plant", f"must be one of {', '.join(PLANTS)}", plant)
+    reads = dict(PLANT_INPUTS[plant])
+    if sends and sends != reads:
+        raise c.err("world.plant", f"{algo} sends {sends or 'nothing'} on cmd/<i>, but the {plant!r} plant reads {reads or 'nothing'}", plant)
+    if plant != "prescribed" and formation:
+        raise c.err("world.formation", f"a formation is a prescribed motion; the {plant!r} plant moves by its own dynamics")
+    cm = c.table(w.get("commands", {}), "world.commands", {"max_age", "policy"})
+    if cm and plant == "prescribed":
+        raise c.err("world.commands", "the prescribed plant takes no commands")
+    base = CommandPolicy()
+    policy = CommandPolicy(
+        c.num(cm.get("max_age", base.max_age), "world.commands.max_age", positive=True),
+        c.string(cm.get("policy", base.policy), "world.commands.policy"),
+    )
+    if policy.policy not in COMMAND_POLICIES:
+        raise c.err("world.commands.policy", f"must be one of {', '.join(COMMAND_POLICIES)}", policy.policy)
+    fitted = None
+    if "sensors" in w:
+        raw = w["sensors"]
+        if not isinstance(raw, list) or not all(isinstance(x, str) for x in raw):
+            raise c.err("world.sensors", f"must be a list of sensor names ({', '.join(SENSORS)})", raw)
+        for x in raw:
+            if x not in SENSORS:
+                raise c.err("world.sensors", f"unknown sensor {x!r} (known: {', '.join(SENSORS)})", raw)
+        fitted = frozenset(raw)
+        missing = sorted(set(info.sensors) - fitted)
+        if missing:
+            why = "; ".join(f"{m}: {info.sensor_use.get(m, 'declared in its SPEC.sensors')}" for m in missing)
+            raise c.err("world.sensors", f"{algo} needs the sensor(s) {', '.join(repr(m) for m in missing)}, not fitted ({why})", raw)
+    return plant, policy, fitted
 
 
 def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: float, n: int = 200) -> list[dict[int, tuple[float, ...]]]:
@@ -651,7 +746,7 @@ def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
         if d is not None:
             raise c.err(f, "this algorithm takes no params")
         return None
-    allowed = {"A"} if info.params == "A" else {"A", "u", "gamma", "delta", "Xi"}
+    allowed = {"A"} if info.params == "A" else {"A", "u", "gamma", "delta", "Xi"} | ({"delta_Q", "Pi"} if info.params == "hybrid_vf" else set())
     d = c.table(d if d is not None else {}, f, allowed, allowed)
     a = d["A"]
     if isinstance(a, list) and len(a) == 3 and all(not isinstance(x, list) for x in a):
@@ -678,7 +773,21 @@ def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
     except hybrid.DesignError as exc:
         raise c.err(f"{f}.{exc.field}", exc.problem) from None
     un = np.array(u) / np.linalg.norm(u)  # printed to 4 decimals in the thesis; Prop. 4.1 needs |u| = 1
-    return Params(tuple(A.ravel().tolist()), (float(un[0]), float(un[1]), float(un[2])), gamma, delta, Xi)
+    delta_Q, Pi = 0.0, ()
+    if info.params == "hybrid_vf":
+        # Condition 5.1 for (A, u, γ, δ_Q̃, Π): the same potential (4.23) on SO(3) × R, so
+        # Prop. 4.2 (Remark 5.2, Wang & Tayebi 2022 Prop. 2) bounds δ_Q̃ with Π as δ with Ξ.
+        delta_Q = c.num(d["delta_Q"], f"{f}.delta_Q", positive=True)
+        ps = d["Pi"]
+        if not isinstance(ps, list) or not ps:
+            raise c.err(f"{f}.Pi", 'must be a non-empty list of numbers or expressions like "0.9*pi"', ps)
+        Pi = tuple(float(c.expr(x, f"{f}.Pi[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{f}.Pi[{n}]") for n, x in enumerate(ps))
+        try:
+            hybrid.check_parameters(A, np.array(u), gamma, delta_Q, Pi, condition="5.1")
+        except hybrid.DesignError as exc:
+            fld = {"delta": "delta_Q", "Xi": "Pi"}.get(exc.field, exc.field)
+            raise c.err(f"{f}.{fld}", exc.problem.replace("δ", "δ_Q̃").replace("Ξ", "Π")) from None
+    return Params(tuple(A.ravel().tolist()), (float(un[0]), float(un[1]), float(un[2])), gamma, delta, Xi, delta_Q, Pi)
 
 
 def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:
@@ -734,12 +843,13 @@ def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
     return ClockSpec(rate, jitter, drift, offset)
 
 
-def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpec, gains: Mapping[str, float], leaders: bool) -> AgentSpec:
+def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpec, gains: Mapping[str, float], leaders: bool, plant: str = "prescribed") -> AgentSpec:
+    rigid = plant == "rigid_body"
     d = c.table(
         d,
         f,
-        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"},
-        {"id", "p", "omega"} | ({"role"} if info.graph == "leader_follower" else set()),
+        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()),
+        ({"id", "omega"} if rigid else {"id", "p", "omega"}) | ({"role"} if info.graph == "leader_follower" else set()),
     )
     aid = c.integer(d["id"], f"{f}.id")
     if aid < 1:
@@ -751,12 +861,23 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
         raise c.err(f"{f}.role", "the §4 observers have no leaders: every agent estimates its attitude (up to a common rotation)", role)
     if role == "leader" and not leaders:
         raise c.err(f"{f}.role", "this algorithm has no leader role (its SPEC.leader is None)", role)
-    p = c.vec3(d["p"], f"{f}.p")
+    p = c.vec3(d.get("p", [0, 0, 0]), f"{f}.p")
+    J = None
+    if rigid:
+        if "J" not in d:
+            raise c.err(f"{f}.J", "missing: the rigid_body plant needs each agent's inertia (3 principal moments, or a 3x3 list of rows)")
+        J = _inertia(c, d["J"], f"{f}.J")
     R = c.rotation(d.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.R")
     om = d["omega"]
     if not isinstance(om, list) or len(om) != 3:
         raise c.err(f"{f}.omega", "must be a list of 3 expressions in t", om)
     omega = tuple(c.expr(e, f"{f}.omega[{k}]") for k, e in enumerate(om))
+    if rigid:
+        for k, e in enumerate(omega):
+            if not e.constant:
+                raise c.err(f"{f}.omega[{k}]", "is ω_i(0) of a rigid body (the dynamics (5.1) set ω_i(t)): a number, not an expression in t", om[k])
+        if "v" in d:
+            raise c.err(f"{f}.v", "the rigid_body plant models attitudes only (positions stay at p)")
     velocity = None
     if "v" in d:
         if not isinstance(d["v"], list) or len(d["v"]) != 3:
@@ -775,13 +896,13 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
     agent_gains = dict(gains)
     for k, v in own.items():
         agent_gains[k] = c.num(v, f"{f}.gains.{k}", positive=True)
-    est = c.table(d.get("estimate", {}), f"{f}.estimate", {"p", "R", "Omega", "xi"})
+    est = c.table(d.get("estimate", {}), f"{f}.estimate", {"p", "R", "Omega", "xi"} | ({"Q", "zeta"} if info.params == "hybrid_vf" else set()))
     if role == "leader" and est:
         raise c.err(f"{f}.estimate", "a leader knows its pose and has no estimate")
     xi: dict[int, float] = {}
     if "xi" in est:
-        if info.params != "hybrid":
-            raise c.err(f"{f}.estimate.xi", "only the hybrid observers have ξ")
+        if info.params not in ("hybrid", "hybrid_vf"):
+            raise c.err(f"{f}.estimate.xi", "only the hybrid schemes have ξ")
         if not isinstance(est["xi"], dict):
             raise c.err(f"{f}.estimate.xi", "must be a table {edge index k = ξ_k(0)}", est["xi"])
         for k, v in est["xi"].items():
@@ -793,6 +914,24 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
         c.rotation(est.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.estimate.R"),
         c.vec3(est.get("Omega", [0, 0, 0]), f"{f}.estimate.Omega"),
         MappingProxyType(xi),
+        c.rotation(est.get("Q", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.estimate.Q"),
+        c.num(est.get("zeta", 0.0), f"{f}.estimate.zeta"),
     )
     clock = _clock(c, d.get("clock", {}), f"{f}.clock", default_clock)
-    return AgentSpec(aid, role, p, R, omega, bias, neighbors, k_neighbors, estimate, clock, velocity, MappingProxyType(agent_gains))  # type: ignore[arg-type]
+    return AgentSpec(aid, role, p, R, omega, bias, neighbors, k_neighbors, estimate, clock, velocity, MappingProxyType(agent_gains), J)  # type: ignore[arg-type]
+
+
+def _inertia(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:
+    """An inertia matrix: 3 principal moments (diagonal) or a 3x3 list of rows, symmetric positive definite."""
+    if isinstance(v, list) and len(v) == 3 and all(not isinstance(x, list) for x in v):
+        J = np.diag(c.vec3(v, fld))
+    elif isinstance(v, list) and len(v) == 3 and all(isinstance(r, list) and len(r) == 3 for r in v):
+        J = np.array([[c.num(e, f"{fld}[{a}][{b}]") for b, e in enumerate(r)] for a, r in enumerate(v)])
+    else:
+        raise c.err(fld, "must be 3 principal moments or a 3x3 list of rows (kg m^2)", v)
+    if not np.allclose(J, J.T, rtol=1e-9, atol=1e-12):
+        raise c.err(fld, "must be symmetric", v)
+    lam = np.linalg.eigvalsh(0.5 * (J + J.T))
+    if lam[0] <= 0:
+        raise c.err(fld, f"must be positive definite (eigenvalues {np.round(lam, 6).tolist()})", v)
+    return tuple(J.ravel().tolist())

@@ -18,7 +18,7 @@ from zswarm.bus import MemoryBus
 from zswarm.record import Recorder
 from zswarm.scenario import Scenario
 
-LEAN_SKIP = ("sense/", "edge/")
+LEAN_SKIP = ("sense/", "edge/", "cmd/")
 
 
 def simulate(
@@ -52,7 +52,7 @@ def simulate(
         metadata={"engine": "sim", "scenario": scenario.name},
         skip=LEAN_SKIP if lean else (),
     )
-    world = World(scenario, bus, run, seed)
+    world = World(scenario, bus, run, seed, now=lambda: t_now[0])
     agents = {i: AgentNode(scenario, i, bus, run, seed, now=lambda: t_now[0]) for i in scenario.ids}
     ctl_start = bus.publisher(keys.ctl(run, "start"))
     ctl_stop = bus.publisher(keys.ctl(run, "stop"))

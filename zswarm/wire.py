@@ -35,10 +35,15 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # name; OPEN below), validated by the receiver against its SPEC.edge_in
     "edge": {"t_local": "float"},
     # agent i -> recorder: its estimate; xi: ξ_k of the edges it heads; jumps since the
-    # last est; extra: named values the algorithm reports (σ_i, Ω_i, ...)
-    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "fields", "xi": "floatmap", "jumps": "jumps"},
+    # last est (agent_jumps: of its own hybrid variable, ζ_i of (5.12), k = its id); extra: named values the algorithm reports (σ_i, Ω_i, ...)
+    "est": {"t_local": "float", "R_hat": (3, 3), "p_hat": (3,), "extra": "fields", "xi": "floatmap", "jumps": "jumps", "agent_jumps": "jumps"},
+    # agent i -> world on cmd/<i>: the sender's clock, then the fields its algorithm
+    # sends the plant (SPEC.command: a torque "tau" for the rigid bodies of (5.1)), OPEN
+    # below and validated by the world against the plant's inputs
+    "cmd": {"t_local": "float"},
     # world -> recorder: ids[k] has attitude R[k], position p[k], true angular velocity w[k]
-    "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3)},
+    # (and, for a rigid-body plant, the torque tau[k] it applied over the last world step)
+    "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3), "tau": (-1, 3)},
     # counters of a process
     "stats": {"role": "str", "counters": "any"},
     # run control
@@ -49,10 +54,10 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
 _F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
-OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps"}}
+OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau"}}
 # Types whose other keys are named values (a finite number or a float64 array), at most
 # MAX_OPEN of them: what an algorithm declares, which the receiver validates.
-OPEN = frozenset({"edge"})
+OPEN = frozenset({"edge", "cmd"})
 MAX_OPEN = 64
 MAX_VALUE_LEN = 4096  # elements of one open array
 

@@ -22,6 +22,9 @@ BUILTIN: MappingProxyType[str, str] = MappingProxyType(
             "relative_attitude_hybrid",
             "relative_pose_hybrid",
             "leader_pose",
+            "attitude_sync_continuous",
+            "attitude_sync_hybrid",
+            "attitude_sync_velocity_free",
         )
     }
 )

@@ -1,0 +1,185 @@
+"""Velocity-free hybrid distributed attitude synchronization (thesis §5.4, explicit form §5.5).
+
+Boughellaba (2024), Theorem 5.2 (global asymptotic stability without ω_i):
+
+    τ_i = k_R σ_i − k_Q̃ h_i,   h_i = Ra(ζ_i,u) ψ(A Q̃_i Ra(ζ_i,u)),  Q̃_i = Q_i^T R_i   (5.16), (5.20)
+    Q̇_i = k_Q Q_i [Q̃_i h_i]^x                                                      (5.22)
+    ζ̇_i = −k_ζ (γ ζ_i + 2 u^T ψ(A Q̃_i Ra(ζ_i,u)))                                 (5.23)
+    ζ_i⁺ = argmin_{ζ∈Π} U(Q̃_i, ζ)  when U(Q̃_i, ζ_i) − min_Π U ≥ δ_Q̃                 (5.12)
+    ξ_k as in the hybrid law: (5.21) and the jumps (5.7)
+
+with σ_i the coupling of :mod:`attitude_sync_terms` (READING-NOTES: the
+sign of ζ̇ in the stacked vector field (5.18) is a typo; (5.23) is right).
+The auxiliary (Q_i, ζ_i) is a filter of the agent's own attitude R_i
+(measured: the attitude sensor, §5.6's R_i exp([n_R]^x)) whose output h_i
+supplies the damping that −k_ω ω_i gives the hybrid law.  No gyro.
+
+Discretisation.  Q̃_i's error dynamics are stiff: near Q̃ = I they decay at
+k_Q·½(tr A − λ_j(A)) = 204–308 /s at §5.6's gains (k_Q = 30), so one
+explicit step of the agent's 10 ms would be unstable (dt·308 ≈ 3).  Each
+step therefore integrates (Q_i, ζ_i) over its interval in sub-steps of at
+most 1 ms (h·308 ≈ 0.3) with Heun's method on SO(3) × R (second order:
+``Q⁺ = Q exp(h (w₁ + w₂)/2)``, ``w = k_Q Q̃ h_i``), R_i along the interval
+interpolated on the geodesics between the attitude samples of the sensor
+history (200 Hz).  Then the jump sets of ξ_k and ζ_i are checked at the
+step's end and τ_i is computed there and sent (zero-order hold at the world).
+
+Symbols -> names: Q_i ``Q``, Q̃_i ``Q_tilde``, ζ_i ``zeta``, ξ_k ``xi[k]``,
+k_Q ``k_Q``, k_Q̃ ``k_Qt``, k_ζ ``k_zeta``, k_ξ ``k_xi``, δ_Q̃ ``delta_Q``, Π ``Pi``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.algorithms.attitude_sync_hybrid import flow_and_jump
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, coupling, jump, measured_edges, published_xi, tail_xi
+from zswarm import hybrid
+from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
+from zswarm.so3 import Mat3, Ra, Vec3, exp, log, psi
+
+SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
+
+
+@dataclass(frozen=True, slots=True)
+class Gains:
+    k_R: float
+    k_xi: float
+    k_Q: float
+    k_Qt: float
+    k_zeta: float
+    A: Mat3
+    u: Vec3
+    gamma: float
+    delta: float
+    Xi: tuple[float, ...]
+    delta_Q: float
+    Pi: tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class State:
+    Q: Mat3
+    zeta: float
+    xi: Mapping[int, float] = field(default_factory=dict)
+    xi_in: Mapping[int, float] = field(default_factory=dict)
+    coef_prev: Mapping[int, tuple[float, float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    R: tuple[tuple[float, Mat3], ...]  # own attitude samples (time relative to the step's end, ≤ 0; R_i), oldest first
+    edges: tuple[Edge, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Outputs:
+    tau: Vec3
+    sigma: Vec3
+    h: Vec3  # h_i = Ra(ζ_i,u) ψ(A Q̃_i Ra(ζ_i,u))
+    Q_tilde: Mat3
+    jumps: tuple[tuple[int, float, float], ...]
+    agent_jumps: tuple[tuple[float, float], ...]  # (ζ before, ζ after)
+
+
+def damping(Q_tilde: Mat3, zeta: float, g: Gains) -> tuple[Vec3, Vec3]:
+    """``(h_i, ψ(A Q̃ Ra(ζ,u)))``: the gradient term of (5.20) and the ψ of (5.23)."""
+    Z = Ra(zeta, g.u)
+    p = psi(g.A @ Q_tilde @ Z)
+    return Z @ p, p
+
+
+def aux_rates(Q: Mat3, zeta: float, R: Mat3, g: Gains) -> tuple[Vec3, float]:
+    """Body rate of Q (``Q̇ = Q [w]^x``, w = k_Q Q̃ h) by (5.22), and ζ̇ by (5.23)."""
+    Qt = Q.T @ R
+    h, p = damping(Qt, zeta, g)
+    return g.k_Q * (Qt @ h), -g.k_zeta * (g.gamma * zeta + 2.0 * float(g.u @ p))
+
+
+def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float) -> Mat3:
+    """R_i at time ``s`` (relative to the step's end) on the geodesic between the samples around it."""
+    if s <= samples[0][0] or len(samples) == 1:
+        return samples[0][1]
+    for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False):
+        if s <= t1:
+            f = (s - t0) / (t1 - t0) if t1 > t0 else 1.0
+            return R0 @ exp(f * log(R0.T @ R1))
+    return samples[-1][1]
+
+
+def flow_aux(Q: Mat3, zeta: float, samples: tuple[tuple[float, Mat3], ...], dt: float, g: Gains) -> tuple[Mat3, float]:
+    """(Q_i, ζ_i) over the step ``[−dt, 0]``: Heun sub-steps of at most SUBSTEP_S."""
+    n = max(1, math.ceil(dt / SUBSTEP_S - 1e-9))
+    h = dt / n
+    s = -dt
+    R0 = attitude_at(samples, s)
+    for _ in range(n):
+        R1 = attitude_at(samples, s + h)
+        w1, z1 = aux_rates(Q, zeta, R0, g)
+        Q1 = Q @ exp(h * w1)
+        w2, z2 = aux_rates(Q1, zeta + h * z1, R1, g)
+        Q = Q @ exp(0.5 * h * (w1 + w2))
+        zeta = zeta + 0.5 * h * (z1 + z2)
+        s += h
+        R0 = R1
+    return Q, zeta
+
+
+def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
+    """Flow (Q_i, ζ_i) and ξ over ``dt``, jump, and compute τ_i at the step's end."""
+    Q, zeta = state.Q, state.zeta
+    if dt > 0:
+        Q, zeta = flow_aux(Q, zeta, inputs.R, dt, gains)
+    R = inputs.R[-1][1]
+    Qt = Q.T @ R
+    agent_jumps = []
+    new = jump(gains.A, gains.u, gains.gamma, gains.delta_Q, gains.Pi, Qt, zeta)
+    if new is not None:
+        agent_jumps.append((zeta, new))
+        zeta = new
+    xi, jumps, coefs = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)  # type: ignore[arg-type]
+    all_xi = tail_xi(inputs.edges, state.xi_in) | xi
+    sigma = coupling(inputs.edges, all_xi, gains.A, gains.u)
+    h, _ = damping(Qt, zeta, gains)
+    tau = gains.k_R * sigma - gains.k_Qt * h
+    return State(Q, zeta, xi, state.xi_in, coefs), Outputs(tau, sigma, h, Qt, tuple(jumps), tuple(agent_jumps))
+
+
+def initial_state(init: Initial, gains: Gains) -> State:
+    return State(np.array(init.Q, dtype=float), float(init.zeta), dict(init.xi), dict(init.xi_in))
+
+
+def inputs(view: View, gains: Gains) -> Inputs | None:
+    samples = view.series("R", view.t - view.dt, view.t)
+    if not samples:
+        return None
+    rel = tuple((t - view.t, R) for t, R in samples)
+    if rel[-1][0] < 0:
+        rel = rel + ((0.0, rel[-1][1]),)  # the world skipped samples at the end: hold the newest
+    return Inputs(rel, measured_edges(view, need_xi=True))
+
+
+def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
+    est: dict[str, object] = {"xi": state.xi}
+    if outputs is not None:
+        est.update(tau=outputs.tau, sigma=outputs.sigma, Q=state.Q, zeta=state.zeta)
+    return Publish(published_xi(view, state.xi), est, {"tau": outputs.tau} if outputs is not None else None)
+
+
+SPEC = AlgorithmSpec(
+    description="thesis §5.4/(5.20): velocity-free hybrid attitude synchronization with (Q_i, ζ_i) (5.22)-(5.23) and jumps (5.7), (5.12)",
+    gains={"k_R": None, "k_xi": None, "k_Q": None, "k_Qt": None, "k_zeta": None},
+    sensors=frozenset({"rel_att", "attitude"}),
+    edge_in=EDGE_FIELDS,
+    edge_out=EDGE_FIELDS,
+    parts=(Part("control", inputs, step),),
+    command=COMMAND,
+    graph="tree",
+    params="hybrid_vf",
+    stale=StalePolicy(0.2, "hold"),
+    sensor_use={"attitude": "R_i, for Q̃_i = Q_i^T R_i of (5.20)-(5.23)", "rel_att": "R_ij, the coupling and the jump logic"},
+)

@@ -1,0 +1,310 @@
+"""Results of the attitude synchronization laws (thesis Chapter 5, Figs. 5.3–5.12).
+
+Everything is judged on the truth, not on what the agents believe: on a
+100 Hz grid of the world's truth samples,
+
+* per edge k (head h, tail t): ``|R̄_k|_I`` with ``R̄_k = R_t^T R_h`` (§5.2;
+  Figs. 5.3/5.8), and ξ_k as its head reports it (Figs. 5.5/5.10);
+* per agent: ``‖ω_i‖`` (Figs. 5.4/5.9); the torque the plant applied (the
+  held command, after the link) and the one the agent computed; for the
+  velocity-free law ``|Q̃_i|_I = |Q_i^T R_i|_I`` (Q_i from the agent, R_i the
+  truth; Figs. 5.6/5.11) and ζ_i (Figs. 5.7/5.12).
+
+"Synchronized" is the measure of READING-NOTES: ``max_k |R̄_k|_I``; its
+settle time below a threshold is the first time after which it stays below.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from zswarm.scenario import Scenario
+
+if TYPE_CHECKING:
+    from zswarm.report import Recording
+
+GRID_S = 0.01
+SYNC_THRESHOLDS = (0.1, 0.01)  # READING-NOTES' figures: below 0.1 from t ≈ 58.5 s, below 0.01 from ≈ 102 s (hybrid)
+
+
+def is_sync(sc: Scenario) -> bool:
+    """A Chapter 5 scenario: the agents send torques to a rigid-body plant."""
+    return sc.plant == "rigid_body" and bool(sc.info.command)
+
+
+@dataclass
+class SyncMetrics:
+    t: np.ndarray  # (T,) grid
+    rel_att: dict[int, np.ndarray]  # edge k -> |R̄_k|_I
+    omega: dict[int, np.ndarray]  # agent -> ‖ω_i‖
+    tau_applied: dict[int, np.ndarray]  # agent -> ‖τ_i‖ as applied by the plant (NaN if not recorded)
+    tau_computed: dict[int, np.ndarray]  # agent -> ‖τ_i‖ as computed (NaN before the first)
+    q_tilde: dict[int, np.ndarray]  # agent -> |Q̃_i|_I (velocity-free law only)
+    zeta: dict[int, np.ndarray]  # agent -> ζ_i (velocity-free law only)
+
+    @property
+    def max_rel(self) -> np.ndarray:
+        return np.max(np.array(list(self.rel_att.values())), axis=0)
+
+
+def _norm_I(R: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.clip((3.0 - np.trace(R, axis1=-2, axis2=-1)) / 4.0, 0.0, 1.0))
+
+
+def _held(ts: np.ndarray, vs: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """The newest value at or before each grid time (NaN before the first)."""
+    idx = np.searchsorted(ts, grid + 1e-9, side="right") - 1
+    out = np.full((len(grid),) + vs.shape[1:], np.nan)
+    ok = idx >= 0
+    out[ok] = vs[idx[ok]]
+    return out
+
+
+def sync_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> SyncMetrics:
+    T = rec.truth_t
+    grid = np.round(np.arange(T[0], T[-1] + 1e-9, step), 9)
+    k = np.clip(np.searchsorted(T, grid + 1e-9, side="right") - 1, 0, len(T) - 1)
+    col = {i: a for a, i in enumerate(rec.truth_ids)}
+    R = rec.truth_R[k]
+    rel = {}
+    for e, (h, tl) in enumerate(sc.oriented, start=1):
+        rel[e] = _norm_I(np.einsum("nji,njk->nik", R[:, col[tl]], R[:, col[h]]))
+    omega = {i: np.linalg.norm(rec.truth_w[k, col[i]], axis=1) for i in sc.ids}
+    tau_a = {i: (np.linalg.norm(rec.truth_tau[k, col[i]], axis=1) if rec.truth_tau is not None else np.full(len(grid), np.nan)) for i in sc.ids}
+    tau_c, qt, zeta = {}, {}, {}
+    for i in sc.ids:
+        ex = rec.extra.get(i, [])
+        ts = np.array([t for t, _ in ex])
+        with_tau = [(t, d["tau"]) for t, d in ex if "tau" in d]
+        tau_c[i] = (
+            _held(np.array([t for t, _ in with_tau]), np.linalg.norm(np.array([v for _, v in with_tau]), axis=1), grid) if with_tau else np.full(len(grid), np.nan)
+        )
+        with_q = [(t, d["Q"], d.get("zeta", np.nan)) for t, d in ex if "Q" in d]
+        if with_q:
+            tq = np.array([t for t, _, _ in with_q])
+            kq = np.clip(np.searchsorted(T, tq + 1e-9, side="right") - 1, 0, len(T) - 1)
+            Qs = np.array([q for _, q, _ in with_q]).reshape(-1, 3, 3)
+            qn = _norm_I(np.einsum("nji,njk->nik", Qs, rec.truth_R[kq, col[i]]))
+            qt[i] = _held(tq, qn, grid)
+            zeta[i] = _held(tq, np.array([float(z) for _, _, z in with_q]), grid)
+        del ts
+    return SyncMetrics(grid, rel, omega, tau_a, tau_c, qt, zeta)
+
+
+def settle_time(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
+    """First time after which ``v`` stays below ``thr`` (None: not below at the end)."""
+    bad = np.nonzero(~(v < thr))[0]
+    if len(bad) == 0:
+        return float(t[0])
+    if bad[-1] + 1 >= len(t):
+        return None
+    return float(t[bad[-1] + 1])
+
+
+def leave_time(t: np.ndarray, v: np.ndarray, start: float = 0.9) -> float | None:
+    """When ``v`` (max |R̄_k|_I) first drops below ``start``: the continuous law's escape from its
+    undesired equilibrium (None: it never left)."""
+    below = np.nonzero(v < start)[0]
+    return float(t[below[0]]) if len(below) else None
+
+
+def _final(t: np.ndarray, v: np.ndarray, window: float = 1.0) -> float:
+    sel = t >= t[-1] - window
+    return float(np.nanmean(v[sel])) if np.any(sel) else float("nan")
+
+
+def summary(sc: Scenario, rec: Recording, m: SyncMetrics, agents: dict[str, Any]) -> dict[str, Any]:
+    """The Chapter 5 part of summary.json (per edge, per agent in place, the synchronization block)."""
+    hybrid = sc.params is not None and bool(sc.params.Xi)
+    edges: dict[str, Any] = {}
+    for k, (h, tl) in enumerate(sc.oriented, start=1):
+        v = m.rel_att[k]
+        e: dict[str, Any] = {
+            "head": h,
+            "tail": tl,
+            "relative_attitude_error_final": _final(m.t, v),
+            "settles_below_0.1_at": settle_time(m.t, v, 0.1),
+            "settles_below_0.01_at": settle_time(m.t, v, 0.01),
+        }
+        if hybrid:
+            js = [j for j in rec.jumps if j[0] == k]
+            xs = rec.xi.get(k, [])
+            e.update(xi_owner=h, jumps=len(js), jump_log=[{"t": t, "xi_before": b, "xi_after": a} for _, t, b, a in js], xi_final=xs[-1][1] if xs else None)
+        edges[str(k)] = e
+    for i in sc.ids:
+        a = agents[str(i)]
+        a["angular_velocity_final"] = _final(m.t, m.omega[i])
+        a["angular_velocity_peak"] = float(np.nanmax(m.omega[i]))
+        a["torque_peak_applied"] = float(np.nanmax(m.tau_applied[i])) if np.any(np.isfinite(m.tau_applied[i])) else None
+        a["torque_peak_computed"] = float(np.nanmax(m.tau_computed[i])) if np.any(np.isfinite(m.tau_computed[i])) else None
+        a["torque_final"] = _final(m.t, m.tau_applied[i]) if np.any(np.isfinite(m.tau_applied[i])) else None
+        if i in m.q_tilde:
+            js = [j for j in rec.agent_jumps if j[0] == i]
+            a["Q_tilde_final"] = _final(m.t, m.q_tilde[i])
+            a["Q_tilde_max_after_5s"] = float(np.nanmax(m.q_tilde[i][m.t >= 5.0])) if np.any(m.t >= 5.0) else None
+            a["zeta_final"] = _final(m.t, m.zeta[i])
+            a["zeta_jumps"] = len(js)
+            a["zeta_jump_log"] = [{"t": t, "zeta_before": b, "zeta_after": af} for _, t, b, af in js]
+        # The attitude/position error columns of the observers mean nothing here.
+        a["attitude_error_final"] = a["position_error_final"] = a["position_error_direct_final"] = float("nan")
+    mx = m.max_rel
+    world = rec.stats.get(("world", 0), {})
+    out: dict[str, Any] = {
+        "orientation": sc.oriented_from,
+        "edges": edges,
+        "synchronization": {
+            "measure": "max over edges of |R̄_k|_I, R̄_k = R_tail^T R_head, from the truth (100 Hz grid)",
+            "initial": float(mx[0]),
+            "final": _final(m.t, mx),
+            "leaves_start_at": leave_time(m.t, mx),
+            "settles_below_0.1_at": settle_time(m.t, mx, 0.1),
+            "settles_below_0.01_at": settle_time(m.t, mx, 0.01),
+            "synchronized": bool(_final(m.t, mx) < 0.01),
+        },
+        "commands": {
+            "policy": world.get("command_policy", f"{sc.commands.policy} after {sc.commands.max_age:g} s"),
+            "per_agent": world.get("commands", {}),
+            "malformed": int(world.get("commands_malformed", 0)),
+        },
+        "max_relative_attitude_error_final": float(np.max([e["relative_attitude_error_final"] for e in edges.values()])),
+        "mean_relative_attitude_error_final": float(np.mean([e["relative_attitude_error_final"] for e in edges.values()])),
+        "errors_up_to": "Chapter 5 control: errors are the relative attitudes |R̄_k|_I of the truth (edges.*, synchronization)",
+    }
+    if hybrid:
+        out["jumps_total"] = len(rec.jumps)
+    if m.q_tilde:
+        out["zeta_jumps_total"] = len(rec.agent_jumps)
+    return out
+
+
+def convergence(m: SyncMetrics, duration: float, thresholds: tuple[float, float]) -> dict[str, Any]:
+    """summary.json "convergence" (what ``zswarm sweep`` tabulates): the settle times of max_k |R̄_k|_I."""
+    mx = m.max_rel
+    return {
+        "measure": "max over edges of |R̄_k|_I (truth)",
+        "grid_s": GRID_S,
+        "attitude_threshold": thresholds[0],
+        "attitude_s": settle_time(m.t, mx, thresholds[0]),
+        "attitude_0.1_s": settle_time(m.t, mx, 0.1),
+    }
+
+
+def write_edges_csv(path: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
+    """Per edge on the grid: |R̄_k|_I and ξ_k (columns as the observers' edges.csv)."""
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", "edge", "head", "tail", "relative_attitude_error", "relative_position_error", "xi"])
+        for k, (h, tl) in enumerate(sc.oriented, start=1):
+            xs = rec.xi.get(k, [])
+            xv = _held(np.array([x[0] for x in xs]), np.array([x[1] for x in xs]), m.t) if xs else np.full(len(m.t), np.nan)
+            for n, t in enumerate(m.t):
+                w.writerow([f"{t:.3f}", k, h, tl, f"{m.rel_att[k][n]:.6e}", "", "" if not np.isfinite(xv[n]) else f"{xv[n]:.6e}"])
+
+
+def write_agents_csv(path: Path, sc: Scenario, m: SyncMetrics) -> None:
+    """Per agent on the grid: ‖ω_i‖, ‖τ_i‖ applied and computed, |Q̃_i|_I and ζ_i (velocity-free)."""
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", "agent", "angular_velocity", "torque_applied", "torque_computed", "Q_tilde", "zeta"])
+        for i in sc.ids:
+            q = m.q_tilde.get(i)
+            z = m.zeta.get(i)
+            for n, t in enumerate(m.t):
+                vals = [m.omega[i][n], m.tau_applied[i][n], m.tau_computed[i][n], q[n] if q is not None else np.nan, z[n] if z is not None else np.nan]
+                w.writerow([f"{t:.3f}", i] + ["" if not np.isfinite(v) else f"{v:.6e}" for v in vals])
+
+
+def plot(out: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
+    """Figs. 5.3–5.7 (5.8–5.12 with noise): |R̄_k|_I, ‖ω_i‖, ξ_k, |Q̃_i|_I, ζ_i, and the torques."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+
+    def fig2(series: dict[int, np.ndarray], label: str, ylabel: str, name: str, title: str, log: bool = True) -> None:
+        fig, axes = plt.subplots(2 if log else 1, 1, figsize=(7, 6 if log else 3.5), sharex=True, squeeze=False)
+        for key, v in series.items():
+            for ax in axes[:, 0]:
+                ax.plot(m.t, v, lw=1, label=label.format(key))
+        axes[0, 0].set_ylabel(ylabel)
+        if log:
+            axes[1, 0].set_yscale("log")
+            axes[1, 0].set_ylabel(ylabel + " (log)")
+        axes[-1, 0].set_xlabel("t (s)")
+        axes[0, 0].set_title(f"{sc.name}: {title}")
+        axes[0, 0].legend(fontsize=7, ncol=4)
+        for ax in axes[:, 0]:
+            ax.grid(True, alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / f"{name}.png", dpi=110)
+        plt.close(fig)
+
+    fig2({k: m.rel_att[k] for k in m.rel_att}, "edge {}", r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude per edge (Fig. 5.3)")
+    fig2(m.omega, "agent {}", r"$\|\omega_i\|$ (rad/s)", "angular_velocity", "angular velocity per agent (Fig. 5.4)")
+    fig2(m.tau_applied, "agent {}", r"$\|\tau_i\|$ applied (N m)", "torque", "torque held by the plant per agent")
+    if rec.xi:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        for k, xs in rec.xi.items():
+            a = np.array(xs)
+            ax.plot(a[:, 0], a[:, 1], lw=1, label=f"ξ_{k}")
+        for _k, t, _b, after in rec.jumps:
+            ax.plot([t], [after], "kx", ms=6)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(r"$\xi_k$ (rad)")
+        ax.set_title(f"{sc.name}: hybrid variables ξ_k (Fig. 5.5; x: jumps)")
+        ax.legend(fontsize=7, ncol=6)
+        ax.grid(True, alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / "xi.png", dpi=110)
+        plt.close(fig)
+    if m.q_tilde:
+        fig2(m.q_tilde, "agent {}", r"$|\tilde Q_i|_I$", "Q_tilde", "auxiliary attitude error per agent (Fig. 5.6)")
+        fig2(m.zeta, "ζ_{}", r"$\zeta_i$ (rad)", "zeta", "hybrid variables ζ_i (Fig. 5.7)", log=False)
+
+
+def _e(x: float | None) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.2e}"
+
+
+def _s(x: float | None) -> str:
+    return "never" if x is None else f"{x:.1f}"
+
+
+def table_lines(summary: dict[str, Any]) -> list[str]:
+    """The Chapter 5 lines of the table printed at the end of a run."""
+    lines = [f"{'agent':>5} {'alive':<5} {'|ω| final':>10} {'|ω| peak':>9} {'τ peak':>8} {'steps':>6} {'rate Hz':>8} {'missed':>6}" + ("  |Q̃| final  ζ jumps" if any("Q_tilde_final" in a for a in summary["agents"].values()) else "")]
+    for i, a in summary["agents"].items():
+        tail = f"  {_e(a.get('Q_tilde_final')):>10} {a.get('zeta_jumps', 0):>8}" if "Q_tilde_final" in a else ""
+        lines.append(
+            f"{i:>5} {'yes' if a['alive_at_end'] else 'NO':<5} {_e(a.get('angular_velocity_final')):>10} {a.get('angular_velocity_peak', float('nan')):>9.3f} "
+            f"{a.get('torque_peak_applied') or float('nan'):>8.3f} {a['steps']:>6} {a['step_rate_hz']:>8.2f} {a['missed_deadlines']:>6}{tail}"
+        )
+    lines.append(f"{'edge':>5} {'head->tail':<10} {'|R̄_k|_I':>10} {'<0.1 from':>10} {'<0.01 from':>11} {'jumps':>6} {'ξ final':>9}")
+    for k, e in summary["edges"].items():
+        xi = e.get("xi_final")
+        lines.append(
+            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {_e(e['relative_attitude_error_final']):>10} {_s(e['settles_below_0.1_at']):>10} "
+            f"{_s(e['settles_below_0.01_at']):>11} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
+        )
+    sy = summary["synchronization"]
+    cmd_links = {k: v for k, v in summary["links"].items() if k.endswith("->world")}
+    sent = sum(int(v.get("sent", 0)) for v in cmd_links.values())
+    dropped = sum(int(v.get("dropped", 0)) for v in cmd_links.values())
+    expired = sum(int(v.get("expired", 0)) for v in summary["commands"]["per_agent"].values())
+    lines.append(
+        f"max_k |R̄_k|_I: {_e(sy['initial'])} at start, left it at {_s(sy['leaves_start_at'])} s, below 0.1 from {_s(sy['settles_below_0.1_at'])} s, "
+        f"below 0.01 from {_s(sy['settles_below_0.01_at'])} s, final {_e(sy['final'])}"
+        + (f"; jumps: {summary['jumps_total']}" if "jumps_total" in summary else "")
+        + (f", ζ jumps: {summary['zeta_jumps_total']}" if "zeta_jumps_total" in summary else "")
+    )
+    lines.append(
+        f"commands: {sent} sent, {dropped} lost, {expired} expired ({summary['commands']['policy']}), {summary['commands']['malformed']} malformed"
+    )
+    return lines
