@@ -279,6 +279,7 @@ class TickView:
         self.moving = sc.moving
         self._links = {j: f"{j}->{node.id}" for j in a.neighbors}
         self.t = self.t_world = self.dt = 0.0
+        self.period = 1.0 / a.clock.rate
         self.first = False
         self.sense: Mapping[str, Any] = {}
         self.sense_t = self.sense_t_world = 0.0

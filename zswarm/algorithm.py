@@ -199,6 +199,7 @@ class View(Protocol):
     t: float  # the end of this step: the newest measurement's time (see AgentNode.tick), or a
     # clock period on from the last step where the world skipped samples
     t_world: float
+    period: float  # this agent's clock period, s (1 / [clock] rate): how long what it sends is held
     dt: float  # the step being taken (0 when the view is begun, before any part steps)
     first: bool  # the step from the initial estimate (t = 0) to the first measurement: prediction only, no neighbours
     sense: Mapping[str, Any]  # newest sensor packet at or before t (fields by SENSORS' keys)

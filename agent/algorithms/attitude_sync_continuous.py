@@ -11,7 +11,8 @@ state off them, after a time that depends on how small that push is.
 
 The law is static: a step computes τ_i from the step's measurements (ω_i
 and each R_ij, both at the step's end) and sends it to the world, which
-holds it until the next one (zero-order hold).  It needs nothing from its
+holds it until the next one (zero-order hold); R̄_k is carried half a period
+ahead to the middle of that hold (attitude_sync_terms, "Sampled data").  It needs nothing from its
 neighbours: R_j^T R_i = R_ij^T is measured (5.2), so it sends no edge messages.
 
 Symbols -> names: ω_i ``omega``, τ_i ``tau``, k_ω ``k_omega``, k_R ``k_R``, A ``A``.
@@ -19,11 +20,12 @@ Symbols -> names: ω_i ``omega``, τ_i ``tau``, k_ω ``k_omega``, k_R ``k_R``, A
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, continuous_coupling, measured_edges
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, continuous_coupling, measured_edges, predict
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
 
@@ -37,13 +39,14 @@ class Gains:
 
 @dataclass(frozen=True, slots=True)
 class State:
-    tau: Vec3 | None = None  # the torque of the last step (None: none computed yet)
+    R_prev: Mapping[int, Mat3] = field(default_factory=dict)  # R̄_k of every edge at the last step
 
 
 @dataclass(frozen=True, slots=True)
 class Inputs:
     omega: Vec3  # ω_i measured at the step's end
     edges: tuple[Edge, ...]
+    lead: float = 0.0  # s: the torque is evaluated this far ahead (half the hold interval)
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,15 +55,18 @@ class Outputs:
     sigma: Vec3  # −Σ_j ψ(A R_j^T R_i)
 
 
-def control(inputs: Inputs, gains: Gains) -> tuple[Vec3, Vec3]:
-    """``(τ_i, σ_i)`` of (5.24)."""
-    sigma = continuous_coupling(inputs.edges, gains.A)
+def control(inputs: Inputs, gains: Gains, R_prev: Mapping[int, Mat3] | None = None, dt: float = 0.0) -> tuple[Vec3, Vec3]:
+    """``(τ_i, σ_i)`` of (5.24), R̄_k predicted ``inputs.lead`` ahead from ``R_prev`` (``dt`` before)."""
+    edges = inputs.edges
+    if R_prev and inputs.lead > 0:
+        edges = tuple(Edge(e.k, e.head, predict(R_prev.get(e.k), e.R_bar, dt, inputs.lead)) for e in edges)
+    sigma = continuous_coupling(edges, gains.A)
     return -gains.k_omega * inputs.omega + gains.k_R * sigma, sigma
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
-    tau, sigma = control(inputs, gains)
-    return State(tau), Outputs(tau, sigma)
+    tau, sigma = control(inputs, gains, state.R_prev, dt)
+    return State({e.k: e.R_bar for e in inputs.edges}), Outputs(tau, sigma)
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
@@ -68,7 +74,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=False))
+    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=False), 0.5 * view.period)
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

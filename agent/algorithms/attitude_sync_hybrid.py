@@ -15,7 +15,9 @@ t).  ξ_k flows over the step in Heun sub-steps of at most 0.5 ms (ξ is fast:
 between the two measured ones (the previous step's and this one's), then the jump set is checked at t
 (jumps have priority, as in HyEQ: at most one per edge and step, and the
 state after a jump is in the flow set since δ > 0), then τ_i(t) is computed
-and sent; the world holds it until the next one.
+and sent; the world holds it until the next one, so it is evaluated at the
+middle of that hold (R̄_k and ξ_k predicted half a period ahead; see
+attitude_sync_terms, "Sampled data").
 
 Symbols -> names: ω_i ``omega``, τ_i ``tau``, ξ_k ``xi[k]``, R̄_k ``R_bar``,
 k_ω ``k_omega``, k_R ``k_R``, k_ξ ``k_xi``, A ``A``, u ``u``, γ ``gamma``,
@@ -26,10 +28,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, coupling, flow_xi, jump, measured_edges, published_xi, tail_xi, xi_coefficients
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, coupling, flow_xi, jump, measured_edges, predict, published_xi, tail_xi, xi_coefficients
 from zswarm import hybrid
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
@@ -52,12 +55,14 @@ class State:
     xi: Mapping[int, float] = field(default_factory=dict)  # ξ_k of the edges this agent heads
     xi_in: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of the edges it is the tail of
     coef_prev: Mapping[int, tuple[float, float, float]] = field(default_factory=dict)  # ξ-rate coefficients of the headed edges at the last step
+    R_prev: Mapping[int, Mat3] = field(default_factory=dict)  # R̄_k of every edge at the last step (the prediction's baseline)
 
 
 @dataclass(frozen=True, slots=True)
 class Inputs:
     omega: Vec3  # ω_i measured at the step's end
     edges: tuple[Edge, ...]
+    lead: float = 0.0  # s: the torque is evaluated this far ahead (half the hold interval, see attitude_sync_terms)
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,14 +95,29 @@ def flow_and_jump(
     return xi, jumps, coefs
 
 
+def held_coupling(edges: tuple[Edge, ...], xi: Mapping[int, float], R_prev: Mapping[int, Mat3], dt: float, lead: float, g: Any) -> Vec3:
+    """σ_i at the middle of the hold interval: each R̄_k predicted ``lead`` ahead along its last
+    change (:func:`predict`) and ξ_k flowed (5.21) to it (attitude_sync_terms, "Sampled data")."""
+    if lead <= 0:
+        return coupling(edges, xi, g.A, g.u)
+    ahead = []
+    xi_ahead = {}
+    for e in edges:
+        Rp = predict(R_prev.get(e.k), e.R_bar, dt, lead)
+        ahead.append(Edge(e.k, e.head, Rp, e.xi))
+        xi_ahead[e.k] = flow_xi(xi_coefficients(g.A, g.u, e.R_bar), xi_coefficients(g.A, g.u, Rp), xi[e.k], lead, g.k_xi, g.gamma)
+    return coupling(tuple(ahead), xi_ahead, g.A, g.u)
+
+
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
-    """Flow ξ over ``dt``, jump, and compute τ_i at the step's end."""
+    """Flow ξ over ``dt``, jump, and compute τ_i for the hold interval that starts at the step's end."""
     xi, jumps, coefs = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)
     all_xi = tail_xi(inputs.edges, state.xi_in) | xi
-    sigma = coupling(inputs.edges, all_xi, gains.A, gains.u)
+    sigma = held_coupling(inputs.edges, all_xi, state.R_prev, dt, inputs.lead, gains)
     tau = -gains.k_omega * inputs.omega + gains.k_R * sigma
     U = sum(hybrid.potential(gains.A, gains.u, gains.gamma, e.R_bar, xi[e.k]) for e in inputs.edges if e.head)
-    return State(xi, state.xi_in, coefs), Outputs(tau, sigma, tuple(jumps), float(U))
+    R_prev = {e.k: e.R_bar for e in inputs.edges}
+    return State(xi, state.xi_in, coefs, R_prev), Outputs(tau, sigma, tuple(jumps), float(U))
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
@@ -105,7 +125,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=True))
+    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=True), 0.5 * view.period)
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

@@ -22,7 +22,10 @@ most 1 ms (h·308 ≈ 0.3) with Heun's method on SO(3) × R (second order:
 ``Q⁺ = Q exp(h (w₁ + w₂)/2)``, ``w = k_Q Q̃ h_i``), R_i along the interval
 interpolated on the geodesics between the attitude samples of the sensor
 history (200 Hz).  Then the jump sets of ξ_k and ζ_i are checked at the
-step's end and τ_i is computed there and sent (zero-order hold at the world).
+step's end and τ_i is computed there and sent (zero-order hold at the world),
+its coupling k_R σ_i evaluated at the middle of the hold like the hybrid
+law's (attitude_sync_terms, "Sampled data"); the damping term k_Q̃ h_i is
+taken at t (a lag there changes the stiffness, not the damping, to first order).
 
 Symbols -> names: Q_i ``Q``, Q̃_i ``Q_tilde``, ζ_i ``zeta``, ξ_k ``xi[k]``,
 k_Q ``k_Q``, k_Q̃ ``k_Qt``, k_ζ ``k_zeta``, k_ξ ``k_xi``, δ_Q̃ ``delta_Q``, Π ``Pi``.
@@ -36,8 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent.algorithms.attitude_sync_hybrid import flow_and_jump
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, coupling, jump, measured_edges, published_xi, tail_xi
+from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, jump, measured_edges, published_xi, tail_xi
 from zswarm import hybrid
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Ra, Vec3, exp, log, psi
@@ -68,12 +71,14 @@ class State:
     xi: Mapping[int, float] = field(default_factory=dict)
     xi_in: Mapping[int, float] = field(default_factory=dict)
     coef_prev: Mapping[int, tuple[float, float, float]] = field(default_factory=dict)
+    R_prev: Mapping[int, Mat3] = field(default_factory=dict)  # R̄_k of every edge at the last step
 
 
 @dataclass(frozen=True, slots=True)
 class Inputs:
     R: tuple[tuple[float, Mat3], ...]  # own attitude samples (time relative to the step's end, ≤ 0; R_i), oldest first
     edges: tuple[Edge, ...]
+    lead: float = 0.0  # s: the coupling is evaluated this far ahead (half the hold interval)
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,10 +148,11 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
         zeta = new
     xi, jumps, coefs = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)  # type: ignore[arg-type]
     all_xi = tail_xi(inputs.edges, state.xi_in) | xi
-    sigma = coupling(inputs.edges, all_xi, gains.A, gains.u)
+    sigma = held_coupling(inputs.edges, all_xi, state.R_prev, dt, inputs.lead, gains)
     h, _ = damping(Qt, zeta, gains)
     tau = gains.k_R * sigma - gains.k_Qt * h
-    return State(Q, zeta, xi, state.xi_in, coefs), Outputs(tau, sigma, h, Qt, tuple(jumps), tuple(agent_jumps))
+    R_prev = {e.k: e.R_bar for e in inputs.edges}
+    return State(Q, zeta, xi, state.xi_in, coefs, R_prev), Outputs(tau, sigma, h, Qt, tuple(jumps), tuple(agent_jumps))
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
@@ -160,7 +166,7 @@ def inputs(view: View, gains: Gains) -> Inputs | None:
     rel = tuple((t - view.t, R) for t, R in samples)
     if rel[-1][0] < 0:
         rel = rel + ((0.0, rel[-1][1]),)  # the world skipped samples at the end: hold the newest
-    return Inputs(rel, measured_edges(view, need_xi=True))
+    return Inputs(rel, measured_edges(view, need_xi=True), 0.5 * view.period)
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
