@@ -1,4 +1,4 @@
-"""The ``zswarm`` command: run, sim, router, record, report, design-hybrid."""
+"""The ``zswarm`` command: run, sim, sweep, basin, router, record, report, design-hybrid."""
 
 from __future__ import annotations
 
@@ -85,6 +85,22 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run is killed and recorded as failed")
     sw.add_argument("--keep-recordings", action="store_true", help="keep each run's recording.mcap (deleted by default; summaries and CSVs stay)")
 
+    b = sub.add_parser(
+        "basin",
+        help="Monte-Carlo check of a tree scheme's global claim: N uniform initial attitudes on sim",
+        description="Draws N initial conditions (draw 0: the scenario's own start; then every R_i(0) uniform on SO(3) "
+        "for the Chapter 5 laws, Q_i(0) too for the velocity-free one, every R̂_i(0) for the §4 observers), runs each "
+        "on sim and reports the fraction that synchronizes (max_k |R̄_k|_I below the threshold from some time on) and "
+        "the settle times.  Writes basin.csv, basin.json, basin.png; the same command with the same --out resumes.",
+    )
+    b.add_argument("topology", help="scenario TOML file (a Chapter 5 law or a §4 observer)")
+    b.add_argument("--draws", type=procutil.positive_int, default=101, help="draws including the scenario's own start (default 101)")
+    b.add_argument("--seed", type=int, default=1, help="seed of the draws (default 1)")
+    b.add_argument("--duration", type=procutil.positive_float, default=None, help="horizon, world seconds (default: the scenario's)")
+    b.add_argument("--threshold", type=procutil.positive_float, default=0.01, help="max_k |R̄_k|_I that counts as synchronized (default 0.01)")
+    b.add_argument("--jobs", type=procutil.positive_int, default=None, help="draws at a time (default: the number of cores)")
+    b.add_argument("--out", type=Path, default=None, help="folder (default basins/<scenario>-<timestamp>/); the same folder resumes")
+
     ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
     procutil.add_zenoh_args(ro, default_mode="router")
 
@@ -116,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
     return cmds[args.cmd](args)
 
 
@@ -240,6 +256,47 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     n_failed = sum(1 for r in rows if r["status"] == "failed")
     print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")
     return 0 if n_failed == 0 else 1
+
+
+def cmd_basin(args: argparse.Namespace) -> int:
+    import os
+    import threading
+
+    from zswarm import basin
+    from zswarm.launch import results_dir
+
+    sc = procutil.load_or_exit(args.topology)
+    try:
+        basin.kind_of(sc)
+    except ValueError as exc:
+        procutil.fail_usage(f"{args.topology}: {exc}")
+    duration = sc.duration if args.duration is None else args.duration
+    out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("basins"))
+    out.mkdir(parents=True, exist_ok=True)
+    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold}
+    spec_path = out / "basin_def.json"
+    if spec_path.exists():
+        old = json.loads(spec_path.read_text())
+        diff = sorted(k for k in spec if k != "topology" and old.get(k) != spec[k])
+        if diff:
+            procutil.fail_usage(f"--out {out}: holds a different basin check (differs in: {', '.join(diff)}); use another --out")
+    else:
+        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+    stop = threading.Event()
+    procutil.stop_on_signals_into(stop)
+    jobs = args.jobs or (os.cpu_count() or 1)
+    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) on sim, {jobs} at a time; {out}", file=sys.stderr)
+    t0 = time.monotonic()
+    rows, interrupted = basin.run_basin(
+        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True)
+    )
+    if interrupted:
+        print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
+        return 130
+    s = basin.write(out, sc.name, rows, args.threshold, duration)
+    print(basin.table(sc.name, s))
+    print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")
+    return 0 if not s["failed"] else 1
 
 
 def cmd_router(args: argparse.Namespace) -> int:

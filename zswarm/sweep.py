@@ -44,12 +44,19 @@ COLUMNS_RESULT = (
     "final_position_error",
     "conv_attitude_s",
     "conv_position_s",
+    "conv_attitude_01_s",
     "edge_sent",
     "edge_delivered",
     "edge_dropped",
     "edge_drop_ratio",
     "edge_latency_p50_ms",
     "sensor_dropped",
+    "cmd_sent",
+    "cmd_dropped",
+    "cmd_drop_ratio",
+    "cmd_latency_p50_ms",
+    "cmd_expired",
+    "jumps",
     "stale_terms",
     "missed_deadlines",
     "wall_s",
@@ -169,10 +176,15 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
     """The sweep.csv columns of one finished run, from its summary.json and errors/edges CSV."""
     s = json.loads((folder / "summary.json").read_text())
     t, att, pos = _series(folder, sc, duration)
-    edges = {k: v for k, v in s["links"].items() if not k.startswith("world->")}
+    edges = {k: v for k, v in s["links"].items() if not k.startswith("world->") and not k.endswith("->world")}
     sensors = {k: v for k, v in s["links"].items() if k.startswith("world->")}
+    cmds = {k: v for k, v in s["links"].items() if k.endswith("->world")}
     sent = sum(int(v.get("sent", 0)) for v in edges.values())
     dropped = sum(int(v.get("dropped", 0)) for v in edges.values())
+    c_sent = sum(int(v.get("sent", 0)) for v in cmds.values())
+    # Commands lost on the way: what the link model dropped plus what never arrived (sequence gaps).
+    c_lost = sum(int(v.get("dropped", 0)) for v in cmds.values())
+    sync = "synchronization" in s
     return {
         "final_attitude_error": s.get("mean_attitude_error_final"),
         "final_position_error": s.get("mean_position_error_final"),
@@ -183,7 +195,14 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
         "edge_dropped": dropped,
         "edge_drop_ratio": dropped / sent if sent else None,
         "edge_latency_p50_ms": _median([float(v["latency_p50_ms"]) for v in edges.values() if "latency_p50_ms" in v]),
+        "conv_attitude_01_s": report.convergence_time(t, att, 0.1) if sync else None,
         "sensor_dropped": sum(int(v.get("dropped", 0)) for v in sensors.values()),
+        "cmd_sent": c_sent if cmds else None,
+        "cmd_dropped": c_lost if cmds else None,
+        "cmd_drop_ratio": c_lost / c_sent if c_sent else None,
+        "cmd_latency_p50_ms": _median([float(v["latency_p50_ms"]) for v in cmds.values() if "latency_p50_ms" in v]),
+        "cmd_expired": sum(int(v.get("expired", 0)) for v in s.get("commands", {}).get("per_agent", {}).values()) if cmds else None,
+        "jumps": s.get("jumps_total"),
         "stale_terms": sum(int(a.get("stale_terms", 0)) for a in s["agents"].values()),
         "missed_deadlines": sum(int(a.get("missed_deadlines", 0)) for a in s["agents"].values()),
     }
@@ -389,6 +408,19 @@ METRICS = (
     ("conv_attitude_s", "attitude convergence time (s)", False),
     ("conv_position_s", "position convergence time (s)", False),
 )
+# Chapter 5 control (summary.json "synchronization"): what the figures plot instead.
+METRICS_SYNC = (
+    ("final_attitude_error", "final mean |R̄_k|_I", True),
+    ("jumps", "jumps of ξ (count)", False),
+    ("conv_attitude_01_s", "max_k |R̄_k|_I below 0.1 from (s)", False),
+    ("conv_attitude_s", "max_k |R̄_k|_I below 0.01 from (s)", False),
+)
+
+
+def metrics_for(rows: list[dict[str, str]]) -> tuple[tuple[str, str, bool], ...]:
+    """The four metrics the sweep figures show: the observers' errors and times, or for a
+    closed loop (rows with a 0.1 settle time) its relative attitudes, jumps and settle times."""
+    return METRICS_SYNC if any(r.get("conv_attitude_01_s") not in (None, "") for r in rows) else METRICS
 
 
 def _float(x: str) -> float:
@@ -422,6 +454,7 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
     written: list[Path] = []
     if not ok:
         return written
+    metrics = metrics_for(ok)
 
     def val(r: dict[str, str], m: str) -> float:
         v = _float(r[m])
@@ -433,7 +466,7 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
         for r in ok:
             groups.setdefault(" ".join(f"{o}={r[o]}" for o in others), []).append(r)
         fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
-        for ax, (m, label, log) in zip(axes.ravel(), METRICS, strict=True):
+        for ax, (m, label, log) in zip(axes.ravel(), metrics, strict=True):
             for gname, grs in sorted(groups.items(), key=lambda kv: [_key(kv[1][0][o]) for o in others]):
                 xs = sorted({r[fld] for r in grs}, key=_key)
                 mean, lo, hi, never = [], [], [], []
@@ -475,7 +508,7 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
         xs = sorted({r[fx] for r in ok}, key=_key)
         ys = sorted({r[fy] for r in ok}, key=_key)
         fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
-        for ax, (m, label, log) in zip(axes, (METRICS[1], METRICS[2], METRICS[3]), strict=True):
+        for ax, (m, label, log) in zip(axes, (metrics[1], metrics[2], metrics[3]), strict=True):
             Z = np.full((len(ys), len(xs)), np.nan)
             nev = np.zeros_like(Z, dtype=bool)
             for a, y in enumerate(ys):

@@ -32,8 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, coupling, flow_xi, jump, measured_edges, predict, published_xi, tail_xi, xi_coefficients
-from zswarm import hybrid
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, coupling, flow_xi, jump, measured_edges, predict, published_xi, tail_xi
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
 
@@ -74,48 +73,55 @@ class Outputs:
 
 
 def flow_and_jump(
-    state_xi: Mapping[int, float], coef_prev: Mapping[int, tuple[float, float, float]], edges: tuple[Edge, ...], dt: float, g: Gains
-) -> tuple[dict[int, float], list[tuple[int, float, float]], dict[int, tuple[float, float, float]]]:
+    state_xi: Mapping[int, float], coef_prev: Mapping[int, tuple[float, float, float]], edges: tuple[Edge, ...], dt: float, g: Any
+) -> tuple[dict[int, float], list[tuple[int, float, float]], dict[int, tuple[float, float, float]], dict[int, Terms]]:
     """ξ of the headed edges after the step's flow (5.21) and the jumps (5.7) at its end;
-    also this step's ξ-rate coefficients (the next step's start)."""
+    also this step's ξ-rate coefficients (the next step's start) and every edge's Terms."""
     xi = dict(state_xi)
     jumps = []
     coefs = {}
+    terms = {e.k: Terms(g.A, g.u, e.R_bar) for e in edges}
     for e in edges:
         if not e.head:
             continue
         x = xi[e.k]
-        c1 = coefs[e.k] = xi_coefficients(g.A, g.u, e.R_bar)
+        t = terms[e.k]
+        c1 = coefs[e.k] = t.abc
         x = flow_xi(coef_prev.get(e.k, c1), c1, x, dt, g.k_xi, g.gamma)
-        new = jump(g.A, g.u, g.gamma, g.delta, g.Xi, e.R_bar, x)
+        new = jump(g.A, g.u, g.gamma, g.delta, g.Xi, e.R_bar, x, t)
         if new is not None:
             jumps.append((e.k, x, new))
             x = new
         xi[e.k] = x
-    return xi, jumps, coefs
+    return xi, jumps, coefs, terms
 
 
-def held_coupling(edges: tuple[Edge, ...], xi: Mapping[int, float], R_prev: Mapping[int, Mat3], dt: float, lead: float, g: Any) -> Vec3:
+def held_coupling(
+    edges: tuple[Edge, ...], xi: Mapping[int, float], R_prev: Mapping[int, Mat3], dt: float, lead: float, g: Any, terms: Mapping[int, Terms]
+) -> Vec3:
     """σ_i at the middle of the hold interval: each R̄_k predicted ``lead`` ahead along its last
-    change (:func:`predict`) and ξ_k flowed (5.21) to it (attitude_sync_terms, "Sampled data")."""
-    if lead <= 0:
-        return coupling(edges, xi, g.A, g.u)
+    change (:func:`predict`) and ξ_k flowed (5.21) to it (attitude_sync_terms, "Sampled data");
+    ``terms``: each edge's Terms at its measured R̄_k."""
+    if lead <= 0 or not R_prev:
+        return coupling(edges, xi, g.A, g.u, terms)
     ahead = []
     xi_ahead = {}
+    terms_ahead = {}
     for e in edges:
         Rp = predict(R_prev.get(e.k), e.R_bar, dt, lead)
         ahead.append(Edge(e.k, e.head, Rp, e.xi))
-        xi_ahead[e.k] = flow_xi(xi_coefficients(g.A, g.u, e.R_bar), xi_coefficients(g.A, g.u, Rp), xi[e.k], lead, g.k_xi, g.gamma)
-    return coupling(tuple(ahead), xi_ahead, g.A, g.u)
+        t = terms_ahead[e.k] = Terms(g.A, g.u, Rp)
+        xi_ahead[e.k] = flow_xi(terms[e.k].abc, t.abc, xi[e.k], lead, g.k_xi, g.gamma)
+    return coupling(tuple(ahead), xi_ahead, g.A, g.u, terms_ahead)
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
     """Flow ξ over ``dt``, jump, and compute τ_i for the hold interval that starts at the step's end."""
-    xi, jumps, coefs = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)
+    xi, jumps, coefs, terms = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)
     all_xi = tail_xi(inputs.edges, state.xi_in) | xi
-    sigma = held_coupling(inputs.edges, all_xi, state.R_prev, dt, inputs.lead, gains)
+    sigma = held_coupling(inputs.edges, all_xi, state.R_prev, dt, inputs.lead, gains, terms)
     tau = -gains.k_omega * inputs.omega + gains.k_R * sigma
-    U = sum(hybrid.potential(gains.A, gains.u, gains.gamma, e.R_bar, xi[e.k]) for e in inputs.edges if e.head)
+    U = sum(terms[e.k].U(xi[e.k], gains.gamma) for e in inputs.edges if e.head)
     R_prev = {e.k: e.R_bar for e in inputs.edges}
     return State(xi, state.xi_in, coefs, R_prev), Outputs(tau, sigma, tuple(jumps), float(U))
 

@@ -104,17 +104,70 @@ def measured_edges(view: View, need_xi: bool) -> tuple[Edge, ...]:
     return tuple(out)
 
 
+class Terms:
+    """Everything the potential (4.23) needs about one R̄, for every ξ at once.
+
+    With ``M = A R̄`` and ``K = [u]^x``, ``Ra(ξ,u) = I + sin ξ K + (1 − cos ξ) K²`` makes
+    ``ψ(A R̄ Ra(ξ,u)) = p0 + sin ξ p1 + (1 − cos ξ) p2`` and
+    ``tr(A R̄ Ra(ξ,u)) = t0 + sin ξ t1 + (1 − cos ξ) t2`` (ψ and tr are linear), so U,
+    ∇_ξ U (Prop. 4.1), the gradient g and the ξ-rate coefficients cost a few flops per ξ:
+    the jump test, the coupling and the ξ sub-steps all read one Terms per edge and step.
+    """
+
+    __slots__ = ("p0", "p1", "p2", "t0", "t1", "t2", "abc", "K", "K2", "trA")
+
+    def __init__(self, A: Mat3, u: Vec3, R_bar: Mat3) -> None:
+        K, K2, trA = _geometry(A, u)
+        M = A @ R_bar
+        MK = M @ K
+        MK2 = MK @ K
+        self.p0, self.p1, self.p2 = psi(M), psi(MK), psi(MK2)
+        self.t0, self.t1, self.t2 = float(M.trace()), float(MK.trace()), float(MK2.trace())
+        self.abc = (float(u @ self.p0), float(u @ self.p1), float(u @ self.p2))
+        self.K, self.K2, self.trA = K, K2, trA
+
+    def U(self, xi: float, gamma: float) -> float:
+        """``U(R̄, ξ) = tr(A) − tr(A R̄ Ra(ξ,u)) + (γ/2) ξ²`` (4.23)."""
+        s, c = math.sin(xi), 1.0 - math.cos(xi)
+        return self.trA - (self.t0 + s * self.t1 + c * self.t2) + 0.5 * gamma * xi * xi
+
+    def grad_xi(self, xi: float, gamma: float) -> float:
+        """``∇_ξ U = γ ξ + 2 u^T ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1)."""
+        a, b, c = self.abc
+        return gamma * xi + 2.0 * (a + b * math.sin(xi) + c * (1.0 - math.cos(xi)))
+
+    def g(self, xi: float) -> Vec3:
+        """``g = Ra(ξ,u) ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1)."""
+        s, c = math.sin(xi), 1.0 - math.cos(xi)
+        p = self.p0 + s * self.p1 + c * self.p2
+        return p + s * (self.K @ p) + c * (self.K2 @ p)
+
+
+_GEOM: dict[bytes, tuple[Mat3, Mat3, float]] = {}
+
+
+def _geometry(A: Mat3, u: Vec3) -> tuple[Mat3, Mat3, float]:
+    """``([u]^x, [u]^x², tr A)``, cached per (A, u)."""
+    key = A.tobytes() + u.tobytes()
+    got = _GEOM.get(key)
+    if got is None:
+        K = hat(u)
+        got = _GEOM[key] = (K, K @ K, float(np.trace(A)))
+    return got
+
+
 def tail_xi(edges: tuple[Edge, ...], xi_in: Mapping[int, float]) -> dict[int, float]:
     """ξ_k of the edges this agent is the tail of: as received, or ξ_k(0) until the head's first message."""
     return {e.k: (e.xi if e.xi is not None else float(xi_in.get(e.k, 0.0))) for e in edges if not e.head}
 
 
-def coupling(edges: tuple[Edge, ...], xi: Mapping[int, float], A: Mat3, u: Vec3) -> Vec3:
+def coupling(edges: tuple[Edge, ...], xi: Mapping[int, float], A: Mat3, u: Vec3, terms: Mapping[int, Terms] | None = None) -> Vec3:
     """``σ_i`` of (5.6)/(5.16) in the form of (5.19): ``Σ_tail R̄_k g_k − Σ_head g_k``; ``xi[k]``
-    for every edge of i."""
+    for every edge of i (``terms[k]``: the edge's :class:`Terms`, if already built)."""
     s = np.zeros(3)
     for e in edges:
-        g = hybrid.grad_R(A, u, e.R_bar, xi[e.k])
+        t = terms[e.k] if terms is not None else Terms(A, u, e.R_bar)
+        g = t.g(xi[e.k])
         s = s - g if e.head else s + e.R_bar @ g
     return s
 
@@ -141,15 +194,10 @@ XI_SUBSTEP_S = 5e-4
 
 
 def xi_coefficients(A: Mat3, u: Vec3, R_bar: Mat3) -> tuple[float, float, float]:
-    """``(a, b, c)`` with ``u^T ψ(A R̄ Ra(ξ,u)) = a + b sin ξ + c (1 − cos ξ)`` for every ξ.
-
-    ``Ra(ξ,u) = I + sin ξ [u]^x + (1 − cos ξ)[u]^x²`` and ψ is linear, so the rate (5.21)
-    of a fixed R̄ is a scalar function of ξ: sub-steps then cost a few flops each.
-    """
-    K = hat(u)
-    M = A @ R_bar
-    MK = M @ K
-    return float(u @ psi(M)), float(u @ psi(MK)), float(u @ psi(MK @ K))
+    """``(a, b, c)`` with ``u^T ψ(A R̄ Ra(ξ,u)) = a + b sin ξ + c (1 − cos ξ)`` for every ξ
+    (:class:`Terms`): the rate (5.21) of a fixed R̄ is a scalar function of ξ, so
+    sub-steps cost a few flops each."""
+    return Terms(A, u, R_bar).abc
 
 
 def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: float, dt: float, k_xi: float, gamma: float) -> float:
@@ -177,10 +225,16 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
     return xi
 
 
-def jump(A: Mat3, u: Vec3, gamma: float, delta: float, S: tuple[float, ...], R_bar: Mat3, x: float) -> float | None:
-    """The jump map of (5.7)/(5.12): ``argmin_{x'∈S} U(R̄, x')`` when ``U(R̄, x) − min_S U ≥ δ``, else None (flow)."""
-    best, u_best = hybrid.best_xi(A, u, gamma, R_bar, S)
-    if hybrid.potential(A, u, gamma, R_bar, x) - u_best >= delta:
+def jump(A: Mat3, u: Vec3, gamma: float, delta: float, S: tuple[float, ...], R_bar: Mat3, x: float, terms: Terms | None = None) -> float | None:
+    """The jump map of (5.7)/(5.12): ``argmin_{x'∈S} U(R̄, x')`` (the first of equal minima)
+    when ``U(R̄, x) − min_S U ≥ δ``, else None (flow)."""
+    t = terms if terms is not None else Terms(A, u, R_bar)
+    best, u_best = S[0], t.U(S[0], gamma)
+    for y in S[1:]:
+        v = t.U(y, gamma)
+        if v < u_best:
+            best, u_best = y, v
+    if t.U(x, gamma) - u_best >= delta:
         return best
     return None
 

@@ -40,10 +40,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, jump, measured_edges, published_xi, tail_xi
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
 from zswarm import hybrid
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Ra, Vec3, exp, log, psi
+from zswarm.so3 import Mat3, Ra, Vec3, exp, hat, log, psi
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
 
@@ -98,21 +98,55 @@ def damping(Q_tilde: Mat3, zeta: float, g: Gains) -> tuple[Vec3, Vec3]:
     return Z @ p, p
 
 
+class _Rates:
+    """The flow (5.22)-(5.23) for one set of gains, with ``Ra(ζ,u) = I + sin ζ K + (1 − cos ζ) K²``
+    from a precomputed ``K = [u]^x`` (the sub-steps call it 20 times a step)."""
+
+    __slots__ = ("A", "K", "K2", "k_Q", "k_zeta", "gamma", "u2")
+
+    def __init__(self, g: Gains) -> None:
+        self.A = np.asarray(g.A, dtype=float)
+        self.K = hat(np.asarray(g.u, dtype=float))
+        self.K2 = self.K @ self.K
+        self.k_Q, self.k_zeta, self.gamma = g.k_Q, g.k_zeta, g.gamma
+        self.u2 = 2.0 * np.asarray(g.u, dtype=float)
+
+    def __call__(self, Q: Mat3, zeta: float, R: Mat3) -> tuple[Vec3, float]:
+        """Body rate of Q (``Q̇ = Q [w]^x``, w = k_Q Q̃ h) by (5.22), and ζ̇ by (5.23)."""
+        Qt = Q.T @ R
+        Z = _EYE + math.sin(zeta) * self.K + (1.0 - math.cos(zeta)) * self.K2
+        p = psi(self.A @ Qt @ Z)
+        return self.k_Q * (Qt @ (Z @ p)), -self.k_zeta * (self.gamma * zeta + float(self.u2 @ p))
+
+
+_EYE = np.eye(3)
+_RATES: dict[int, _Rates] = {}
+
+
 def aux_rates(Q: Mat3, zeta: float, R: Mat3, g: Gains) -> tuple[Vec3, float]:
     """Body rate of Q (``Q̇ = Q [w]^x``, w = k_Q Q̃ h) by (5.22), and ζ̇ by (5.23)."""
-    Qt = Q.T @ R
-    h, p = damping(Qt, zeta, g)
-    return g.k_Q * (Qt @ h), -g.k_zeta * (g.gamma * zeta + 2.0 * float(g.u @ p))
+    return _rates(g)(Q, zeta, R)
 
 
-def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float) -> Mat3:
+def _rates(g: Gains) -> _Rates:
+    r = _RATES.get(id(g))
+    if r is None or r.k_Q != g.k_Q:
+        r = _RATES[id(g)] = _Rates(g)
+    return r
+
+
+def attitude_path(samples: tuple[tuple[float, Mat3], ...]) -> list[tuple[float, float, Mat3, Vec3]]:
+    """The geodesic segments between consecutive samples: ``(t0, t1, R0, log(R0^T R1))``."""
+    return [(t0, t1, R0, log(R0.T @ R1)) for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False) if t1 > t0]
+
+
+def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float, path: list[tuple[float, float, Mat3, Vec3]] | None = None) -> Mat3:
     """R_i at time ``s`` (relative to the step's end) on the geodesic between the samples around it."""
     if s <= samples[0][0] or len(samples) == 1:
         return samples[0][1]
-    for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False):
+    for t0, t1, R0, w in path if path is not None else attitude_path(samples):
         if s <= t1:
-            f = (s - t0) / (t1 - t0) if t1 > t0 else 1.0
-            return R0 @ exp(f * log(R0.T @ R1))
+            return R0 @ exp(((s - t0) / (t1 - t0)) * w)
     return samples[-1][1]
 
 
@@ -120,17 +154,19 @@ def flow_aux(Q: Mat3, zeta: float, samples: tuple[tuple[float, Mat3], ...], dt: 
     """(Q_i, ζ_i) over the step ``[−dt, 0]``: Heun sub-steps of at most SUBSTEP_S."""
     n = max(1, math.ceil(dt / SUBSTEP_S - 1e-9))
     h = dt / n
+    rates = _rates(g)
+    path = attitude_path(samples)
     s = -dt
-    R0 = attitude_at(samples, s)
+    R0 = attitude_at(samples, s, path)
+    w1, z1 = rates(Q, zeta, R0)
     for _ in range(n):
-        R1 = attitude_at(samples, s + h)
-        w1, z1 = aux_rates(Q, zeta, R0, g)
+        R1 = attitude_at(samples, s + h, path)
         Q1 = Q @ exp(h * w1)
-        w2, z2 = aux_rates(Q1, zeta + h * z1, R1, g)
+        w2, z2 = rates(Q1, zeta + h * z1, R1)
         Q = Q @ exp(0.5 * h * (w1 + w2))
         zeta = zeta + 0.5 * h * (z1 + z2)
         s += h
-        R0 = R1
+        w1, z1 = rates(Q, zeta, R1)
     return Q, zeta
 
 
@@ -142,14 +178,15 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     R = inputs.R[-1][1]
     Qt = Q.T @ R
     agent_jumps = []
-    new = jump(gains.A, gains.u, gains.gamma, gains.delta_Q, gains.Pi, Qt, zeta)
+    tq = Terms(gains.A, gains.u, Qt)
+    new = jump(gains.A, gains.u, gains.gamma, gains.delta_Q, gains.Pi, Qt, zeta, tq)
     if new is not None:
         agent_jumps.append((zeta, new))
         zeta = new
-    xi, jumps, coefs = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)  # type: ignore[arg-type]
+    xi, jumps, coefs, terms = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)
     all_xi = tail_xi(inputs.edges, state.xi_in) | xi
-    sigma = held_coupling(inputs.edges, all_xi, state.R_prev, dt, inputs.lead, gains)
-    h, _ = damping(Qt, zeta, gains)
+    sigma = held_coupling(inputs.edges, all_xi, state.R_prev, dt, inputs.lead, gains, terms)
+    h = tq.g(zeta)
     tau = gains.k_R * sigma - gains.k_Qt * h
     R_prev = {e.k: e.R_bar for e in inputs.edges}
     return State(Q, zeta, xi, state.xi_in, coefs, R_prev), Outputs(tau, sigma, h, Qt, tuple(jumps), tuple(agent_jumps))

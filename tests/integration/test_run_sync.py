@@ -1,0 +1,101 @@
+"""``zswarm run`` closes the loop: §5.6's hybrid law over Zenoh, torques to the world's plant.
+
+The run is judged against ``sim`` on the same scenario and against
+READING-NOTES: settle times of max_k |R̄_k|_I within 25 % (the issue's
+criterion; both engines step the same objects on the same samples, but over
+Zenoh the agents tick asynchronously and a torque reaches the world 0.3–5 ms
+after it was computed instead of at once, which moves the lightly damped
+transient by seconds, not tens of seconds).  While it runs, hostile and
+malformed commands are published on the command keys: each must be counted
+by the world and none applied (one NaN torque would make the plant NaN and
+the run never settle).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import msgpack
+import numpy as np
+import pytest
+
+from tests.conftest import TOPO
+from tests.integration.conftest import wait_for, zswarm
+from zswarm import keys, wire
+from zswarm.bus import ZenohBus, zenoh_config
+from zswarm.report import make_report
+from zswarm.scenario import load
+from zswarm.sim import simulate
+
+pytestmark = pytest.mark.integration
+NAME = "thesis-5.6-hybrid7"
+
+
+def _bad_commands(run: str) -> list[tuple[str, bytes]]:
+    """Five commands the world must drop: garbage, a NaN torque, a wrong shape, another
+    agent's src on agent 3's key, an agent the scenario does not have."""
+    nan = msgpack.packb({"v": wire.VERSION, "type": "cmd", "src": 3, "seq": 10**6, "t": 1.0, "t_local": 1.0, "tau": [[3], np.array([np.nan, 0.0, 0.0]).tobytes()]})
+    return [
+        (keys.cmd(run, 2), b"\x93garbage"),
+        (keys.cmd(run, 3), nan),
+        (keys.cmd(run, 4), wire.encode("cmd", 4, 10**6, 1.0, t_local=1.0, tau=np.zeros(2))),
+        (keys.cmd(run, 5), wire.encode("cmd", 6, 10**6, 1.0, t_local=1.0, tau=np.zeros(3))),
+        (keys.cmd(run, 99), wire.encode("cmd", 99, 0, 1.0, t_local=1.0, tau=np.zeros(3))),
+    ]
+
+
+def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_path):
+    sc = load(TOPO / f"{NAME}.toml")
+    out = tmp_path / "run"
+    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
+    run_id, ep = meta["run_id"], meta["router"]["endpoint"]
+    procs.adopt(out)
+    alive: set = set()
+    with ZenohBus(zenoh_config("client", connect=[ep])) as bus:
+        bus.watch_alive(keys.alive_all(run_id), lambda k, up: (alive.add if up else alive.discard)(keys.parse_alive(k)))
+        wait_for(lambda: ("world", 0) in alive, 90, "world alive")
+        time.sleep(3.0)  # into the run: the world is sampling and applying commands
+        pubs = {}
+        for key, payload in _bad_commands(run_id):
+            pubs.setdefault(key, bus.publisher(key)).put(payload)
+        time.sleep(0.5)
+    code = p.wait(sc.duration * 2 + 120)
+    procs.adopt(out)
+    assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+
+    # Every bad command counted, none applied (a NaN torque would never let the run settle).
+    assert s["commands"]["malformed"] == 5, s["commands"]
+    log = (out / "logs" / "world.log").read_text()
+    assert log.count("dropped malformed command") == 5  # once per key, five keys
+    # Command links: every agent's torques reached the world; latency measured.
+    cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
+    assert len(cmd) == 7
+    for v in cmd.values():
+        assert v["sent"] > 0.95 * sc.duration * 100 and v["dropped"] == 0 and v["latency_p50_ms"] < 20, v
+    assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values())
+
+    sim_out = tmp_path / "sim"
+    sim_out.mkdir()
+    simulate(sc, sim_out, sc.duration, sc.seed, lean=True)
+    ss = make_report(sim_out, sc, "sim", sc.duration, 0.0, sc.seed, plots=False)
+    ov = s["overload"]
+    sy, sy_sim = s["synchronization"], ss["synchronization"]
+    # Every ξ_k jumps 0 -> 0.9π at the start (the first steps after the epoch), finitely often after.
+    for e in s["edges"].values():
+        j = e["jump_log"][0]
+        assert j["t"] < 0.1 and j["xi_before"] == pytest.approx(0.0, abs=1e-6) and j["xi_after"] == pytest.approx(0.9 * math.pi)
+    assert 6 <= s["jumps_total"] <= 14, s["jumps_total"]
+    if ov["overloaded"]:
+        assert "OVERLOADED" in (tmp_path / "launcher.log").read_text()
+        return
+    for key, notes in (("settles_below_0.1_at", 58.5), ("settles_below_0.01_at", 102.0)):
+        got, ref = sy[key], sy_sim[key]
+        assert got is not None and ref is not None, (sy, sy_sim)
+        assert abs(got - ref) <= 0.25 * ref, (key, got, ref)  # run vs sim (the issue's criterion)
+        assert abs(got - notes) <= 0.25 * notes, (key, got, notes)  # run vs READING-NOTES
+    assert all(e["relative_attitude_error_final"] < 0.01 for e in s["edges"].values())

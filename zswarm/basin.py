@@ -1,0 +1,297 @@
+"""``zswarm basin``: a Monte-Carlo check of a scheme's global claims on ``sim``.
+
+Theorems 5.1/5.2 (and 4.2 for the §4.5 hybrid observer) claim global
+asymptotic stability; the continuous laws (5.24)/(4.8) only almost global.
+This draws N initial conditions and runs each on ``sim`` (the same World and
+AgentNode objects as every other run, in worker processes):
+
+* draw 0 is the scenario's own start (the thesis' adversarial one: every
+  R̄_k on the undesired set);
+* draws 1..N-1: for the Chapter 5 laws every R_i(0) uniform on SO(3) (and,
+  for the velocity-free law, every Q_i(0) too: Theorem 5.2 is global in the
+  auxiliary state as well), ω(0) = 0, ξ(0) = ζ(0) = 0 as in §5.6; for the §4
+  observers every estimate R̂_i(0) uniform, the truth as in the scenario.
+
+Uniform on SO(3): the unit quaternion of four standard normals (Shoemake's
+subgroup algorithm gives the same law), from ``numpy.random.default_rng([seed,
+draw])``, so a draw is the same whatever the number of workers.
+
+A draw *synchronizes* when max_k |R̄_k|_I (truth for the laws, estimates for
+the observers) stays below the threshold (0.01) from some time before the
+horizon on.  Results: ``basin.csv`` (a row per draw, written as they finish;
+the same command with the same ``--out`` resumes), ``basin.json`` (fractions,
+settle-time quantiles) and ``basin.png`` (the settle times' distribution).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import multiprocessing
+import time
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zswarm.scenario import Override, Scenario, load, parse_override
+
+COLUMNS = ("draw", "kind", "synchronized", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
+
+
+def uniform_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A rotation uniform on SO(3) (Haar): the unit quaternion of four standard normals."""
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _rows(R: np.ndarray) -> str:
+    return "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in r) + "]" for r in R) + "]"
+
+
+def kind_of(sc: Scenario) -> str:
+    """What a draw randomises: "law" (Chapter 5: R_i(0)) or "observer" (§4: R̂_i(0))."""
+    from zswarm import report_sync
+
+    if report_sync.is_sync(sc):
+        return "law"
+    if sc.info.graph == "tree":
+        return "observer"
+    raise ValueError(f"{sc.name}: zswarm basin covers the tree schemes (Chapter 5 laws, §4 observers); {sc.algorithm} is not one")
+
+
+def draw_overrides(sc: Scenario, seed: int, draw: int) -> list[Override]:
+    """The ``--set`` overrides of draw ``draw`` (none for draw 0, the scenario's own start)."""
+    if draw == 0:
+        return []
+    rng = np.random.default_rng([seed % (1 << 63), draw])
+    out = []
+    kind = kind_of(sc)
+    vf = sc.info.params == "hybrid_vf"
+    for n, _a in enumerate(sc.agents):
+        if kind == "law":
+            out.append(parse_override(f"agents[{n}].R={_rows(uniform_rotation(rng))}", "--draw"))
+            if vf:
+                out.append(parse_override(f"agents[{n}].estimate.Q={_rows(uniform_rotation(rng))}", "--draw"))
+        else:
+            out.append(parse_override(f"agents[{n}].estimate.R={_rows(uniform_rotation(rng))}", "--draw"))
+    return out
+
+
+def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: float) -> dict[str, Any]:
+    """One draw on ``sim``, in memory; its row of basin.csv."""
+    from zswarm import report, report_sync
+    from zswarm.sim import simulate
+
+    t0 = time.monotonic()
+    base = load(topology)
+    sc = load(topology, draw_overrides(base, seed, draw))
+    msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
+    rec = report.load_recording(msgs)  # type: ignore[arg-type]
+    if kind_of(sc) == "law":
+        m = report_sync.sync_metrics(sc, rec)
+        t, mx = m.t, m.max_rel
+    else:
+        tm = report.tree_metrics(sc, rec)
+        if tm is None:
+            raise RuntimeError("some agent published no estimate")
+        t, mx = tm.t, np.max(np.array(list(tm.rel_att.values())), axis=0)
+    settle = report_sync.settle_time(t, mx, threshold)
+    return {
+        "draw": draw,
+        "kind": "scenario" if draw == 0 else "uniform",
+        "synchronized": settle is not None,
+        "settle_01_s": report_sync.settle_time(t, mx, 0.1),
+        "settle_s": settle,
+        "final_max": float(mx[-1]),
+        "initial_max": float(mx[0]),
+        "jumps": len(rec.jumps),
+        "agent_jumps": len(rec.agent_jumps),
+        "wall_s": round(time.monotonic() - t0, 2),
+        "status": "ok",
+        "error": "",
+    }
+
+
+def _fmt(v: Any) -> Any:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return v
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return [r for r in csv.DictReader(f) if r.get("status")]
+
+
+def run_basin(
+    topology: str, draws: int, seed: int, duration: float, threshold: float, out: Path, jobs: int, stop: Callable[[], bool], progress: Callable[[str], None]
+) -> tuple[list[dict[str, str]], bool]:
+    """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
+    whether it was interrupted."""
+    path = out / "basin.csv"
+    done = {int(r["draw"]) for r in read_rows(path)}
+    todo = [d for d in range(draws) if d not in done]
+    new = not path.exists()
+    interrupted = False
+    with open(path, "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS)
+        if new:
+            w.writeheader()
+            f.flush()
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(jobs, mp_context=ctx) as pool:
+            pending = {}
+            it = iter(todo)
+
+            def submit() -> None:
+                d = next(it, None)
+                if d is not None:
+                    pending[pool.submit(run_draw, topology, seed, d, duration, threshold)] = d
+
+            for _ in range(jobs):
+                submit()
+            while pending:
+                if stop():
+                    interrupted = True
+                    for fut in pending:
+                        fut.cancel()
+                    break
+                finished, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    d = pending.pop(fut)
+                    try:
+                        row = fut.result()
+                    except Exception as exc:  # a failed draw is recorded, not fatal
+                        row = {"draw": d, "kind": "scenario" if d == 0 else "uniform", "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]}
+                    w.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
+                    f.flush()
+                    progress(f"draw {d}: {row.get('status')} settle {row.get('settle_s')} ({row.get('wall_s')} s)")
+                    submit()
+            if interrupted:
+                pool.shutdown(wait=False, cancel_futures=True)
+    return read_rows(path), interrupted
+
+
+def _f(x: str) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def summarize(rows: list[dict[str, str]], threshold: float, duration: float) -> dict[str, Any]:
+    """Fractions and settle-time quantiles (of the uniform draws; the scenario's own start apart)."""
+    ok = [r for r in rows if r["status"] == "ok"]
+    uni = [r for r in ok if r["kind"] == "uniform"]
+    own = next((r for r in ok if r["kind"] == "scenario"), None)
+    sync = [r for r in uni if r["synchronized"] == "True"]
+    st = np.array(sorted(_f(r["settle_s"]) for r in sync))
+    st1 = np.array(sorted(_f(r["settle_01_s"]) for r in uni if math.isfinite(_f(r["settle_01_s"]))))
+
+    def q(a: np.ndarray) -> dict[str, float] | None:
+        if not len(a):
+            return None
+        p = np.percentile(a, [0, 10, 50, 90, 100])
+        return {"min": float(p[0]), "p10": float(p[1]), "median": float(p[2]), "p90": float(p[3]), "max": float(p[4])}
+
+    n = len(uni)
+    frac = len(sync) / n if n else None
+    # A 95 % Wilson interval on the fraction (so that "100 of 100" reads as ≥ 96.3 %, not 100 %).
+    ci = None
+    if n:
+        z = 1.96
+        c = (frac + z * z / (2 * n)) / (1 + z * z / n)  # type: ignore[operator]
+        h = z * math.sqrt(frac * (1 - frac) / n + z * z / (4 * n * n)) / (1 + z * z / n)  # type: ignore[operator]
+        ci = [max(0.0, c - h), min(1.0, c + h)]
+    return {
+        "threshold": threshold,
+        "horizon_s": duration,
+        "uniform_draws": n,
+        "synchronized": len(sync),
+        "fraction": frac,
+        "fraction_95ci": ci,
+        "settle_s": q(st),
+        "settle_01_s": q(st1),
+        "jumps": q(np.array([_f(r["jumps"]) for r in uni])),
+        "scenario_start": None if own is None else {k: own[k] for k in ("synchronized", "settle_01_s", "settle_s", "final_max", "jumps")},
+        "failed": len(rows) - len(ok),
+    }
+
+
+def plot(out: Path, name: str, rows: list[dict[str, str]], summary: dict[str, Any]) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    uni = [r for r in rows if r["status"] == "ok" and r["kind"] == "uniform"]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    for col, label in (("settle_01_s", "below 0.1"), ("settle_s", f"below {summary['threshold']:g}")):
+        v = np.sort([_f(r[col]) for r in uni if math.isfinite(_f(r[col]))])
+        if len(v):
+            a1.step(v, np.arange(1, len(v) + 1) / max(1, len(uni)), where="post", label=f"max_k |R̄_k|_I {label}")
+    own = summary.get("scenario_start") or {}
+    for col, ls in (("settle_01_s", ":"), ("settle_s", "--")):
+        x = _f(own.get(col, ""))
+        if math.isfinite(x):
+            a1.axvline(x, color="k", ls=ls, lw=0.8)
+    a1.set_xlabel("settle time (s)")
+    a1.set_ylabel("fraction of uniform draws")
+    a1.set_xlim(0, summary["horizon_s"])
+    a1.set_ylim(0, 1.02)
+    if a1.get_legend_handles_labels()[1]:
+        a1.legend(fontsize=8)
+    a1.grid(alpha=0.3)
+    a1.set_title(f"{name}: {summary['synchronized']}/{summary['uniform_draws']} synchronized by {summary['horizon_s']:g} s", fontsize=9)
+    fm = np.array([_f(r["final_max"]) for r in uni])
+    a2.hist(np.log10(np.maximum(fm, 1e-16)), bins=30)
+    a2.axvline(math.log10(summary["threshold"]), color="r", lw=0.8)
+    a2.set_xlabel("log10 final max_k |R̄_k|_I")
+    a2.set_ylabel("draws")
+    a2.grid(alpha=0.3)
+    a2.set_title("dashed/dotted: the scenario's own start", fontsize=9)
+    fig.tight_layout()
+    p = out / "basin.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    return p
+
+
+def table(name: str, s: dict[str, Any]) -> str:
+    def qs(q: dict[str, float] | None) -> str:
+        return "n/a" if q is None else f"min {q['min']:.1f}, p10 {q['p10']:.1f}, median {q['median']:.1f}, p90 {q['p90']:.1f}, max {q['max']:.1f} s"
+
+    ci = s["fraction_95ci"]
+    own = s["scenario_start"] or {}
+    lines = [
+        f"{name}: {s['synchronized']} of {s['uniform_draws']} uniform draws synchronized (max_k |R̄_k|_I < {s['threshold']:g} from some t ≤ {s['horizon_s']:g} s on)"
+        + (f", 95 % CI {100 * ci[0]:.1f}-{100 * ci[1]:.1f} %" if ci else ""),
+        f"  settle below {s['threshold']:g}: {qs(s['settle_s'])}",
+        f"  settle below 0.1:  {qs(s['settle_01_s'])}",
+        f"  the scenario's own start: synchronized {own.get('synchronized', 'n/a')}, below 0.1 from {own.get('settle_01_s') or 'never'}, below {s['threshold']:g} from {own.get('settle_s') or 'never'}",
+    ]
+    if s["failed"]:
+        lines.append(f"  {s['failed']} draws FAILED (see basin.csv)")
+    return "\n".join(lines)
+
+
+def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float) -> dict[str, Any]:
+    s = summarize(rows, threshold, duration)
+    (out / "basin.json").write_text(json.dumps(s, indent=2) + "\n")
+    plot(out, name, rows, s)
+    return s
