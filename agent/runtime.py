@@ -454,6 +454,7 @@ class AgentNode:
         self.pub_est = bus.publisher(keys.est(run, agent_id))
         self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None
         self.cmd_seq = 0
+        self.sent = dict.fromkeys(self.out, 0)  # messages actually sent per out-edge (an algorithm may skip one)
         self.pub_stats = bus.publisher(keys.stats(run, "agent", agent_id))
         self.sense_link = sense_link
         self.view = TickView(self)
@@ -607,6 +608,7 @@ class AgentNode:
             p = self.pub_edge.get(i)
             if p is not None:
                 p.put(wire.encode("edge", self.id, seq, t_stamp, t_local=t_local, **fields))
+                self.sent[i] += 1
         e = pub.estimate
         est: dict[str, Any] = {"t_local": t_local}
         extra = {k: v for k, v in e.items() if k not in ("R_hat", "p_hat", "xi")}
@@ -643,7 +645,7 @@ class AgentNode:
                 "idle_ticks": self.idle_ticks,
                 "compute_mean_us": 1e6 * self.compute_s / self.steps if self.steps else 0.0,
                 "compute_max_us": 1e6 * self.compute_max,
-                "sent": {f"{self.id}->{i}": self.seq for i in self.out} | ({f"{self.id}->world": self.cmd_seq} if self.pub_cmd is not None else {}),
+                "sent": {f"{self.id}->{i}": n for i, n in self.sent.items()} | ({f"{self.id}->world": self.cmd_seq} if self.pub_cmd is not None else {}),
                 "stale_policy": f"{self.stale.policy} after {self.stale.max_age:g} s",
                 "stale_terms": {f"{j}->{self.id}": n for j, n in sorted(self.stale_terms.items())},
             }

@@ -419,8 +419,8 @@ METRICS_SYNC = (
 
 def metrics_for(rows: list[dict[str, str]]) -> tuple[tuple[str, str, bool], ...]:
     """The four metrics the sweep figures show: the observers' errors and times, or for a
-    closed loop (rows with a 0.1 settle time) its relative attitudes, jumps and settle times."""
-    return METRICS_SYNC if any(r.get("conv_attitude_01_s") not in (None, "") for r in rows) else METRICS
+    closed loop (rows with command links) its relative attitudes, jumps and settle times."""
+    return METRICS_SYNC if any(r.get("cmd_sent") not in (None, "") for r in rows) else METRICS
 
 
 def _float(x: str) -> float:

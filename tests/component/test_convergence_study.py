@@ -51,9 +51,15 @@ def results(tmp_path_factory):
     return {(n, f): s for (n, f, _), s in zip(jobs, got, strict=True)}
 
 
+# The Chapter 5 closed loops have their own step-size checks (tests/component/test_sim_sync.py:
+# 100 Hz against 1 kHz agents over their transient, and READING-NOTES' settle times); a 150 s
+# closed loop at 1 kHz costs 3 min here, more than this study's whole budget.
+CLOSED_LOOP = {"thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7"}
+
+
 def test_the_shipped_scenarios_are_all_in_the_study():
     shipped = {p.stem for p in TOPO.glob("*.toml") if "noisy" not in p.stem}
-    assert shipped == set(SCENARIOS)
+    assert shipped == set(SCENARIOS) | CLOSED_LOOP
 
 
 @pytest.mark.parametrize("name", SCENARIOS)

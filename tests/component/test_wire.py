@@ -10,8 +10,9 @@ v = np.array([1.0, 2.0, 3.0])
 CASES = {
     "sense": dict(gyro=v, bearings={1: v, 7: -v}, rel_att={2: R, 4: R.T}, vel=v, vel_body=-v, R=R, p=v),
     "edge": dict(t_local=1.5, R_hat=R, p_hat=v, b=v, w=-v, xi=0.25),
-    "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={"sigma": v, "U": 0.5}, xi={1: 0.25, 3: -0.5}, jumps=[(1, 0.01, 0.0, 0.25)]),
-    "truth": dict(ids=[1, 2], R=np.stack([R, R]), p=np.stack([v, v]), w=np.stack([v, v])),
+    "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={"sigma": v, "U": 0.5}, xi={1: 0.25, 3: -0.5}, jumps=[(1, 0.01, 0.0, 0.25)], agent_jumps=[(3, 0.01, 0.0, 2.8)]),
+    "cmd": dict(t_local=1.5, tau=-v),
+    "truth": dict(ids=[1, 2], R=np.stack([R, R]), p=np.stack([v, v]), w=np.stack([v, v]), tau=np.stack([v, -v])),
     "stats": dict(role="agent", counters={"steps": 3, "links": {"1->3": {"delivered": 2}}}),
     "start": dict(epoch=1e9, time_scale=2.0, duration=40.0, seed=1, run="r1"),
     "stop": dict(reason="duration"),
