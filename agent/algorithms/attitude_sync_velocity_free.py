@@ -21,7 +21,8 @@ step therefore integrates (Q_i, ζ_i) over its interval in sub-steps of at
 most 1 ms (h·308 ≈ 0.3) with Heun's method on SO(3) × R (second order:
 ``Q⁺ = Q exp(h (w₁ + w₂)/2)``, ``w = k_Q Q̃ h_i``), R_i along the interval
 interpolated on the geodesics between the attitude samples of the sensor
-history (200 Hz).  Then the jump sets of ξ_k and ζ_i are checked at the
+history (200 Hz); in practice it integrates Q̃_i by (5.14) with R_i's rate on that
+path, which is the same flow.  Then the jump sets of ξ_k and ζ_i are checked at the
 step's end and τ_i is computed there and sent (zero-order hold at the world),
 its coupling k_R σ_i evaluated at the middle of the hold like the hybrid
 law's (attitude_sync_terms, "Sampled data"); the damping term k_Q̃ h_i is
@@ -99,8 +100,9 @@ def damping(Q_tilde: Mat3, zeta: float, g: Gains) -> tuple[Vec3, Vec3]:
 
 
 class _Rates:
-    """The flow (5.22)-(5.23) for one set of gains, with ``Ra(ζ,u) = I + sin ζ K + (1 − cos ζ) K²``
-    from a precomputed ``K = [u]^x`` (the sub-steps call it 20 times a step)."""
+    """The flow (5.14) of Q̃_i = Q_i^T R_i and (5.23) of ζ_i for one set of gains, with
+    ``Ra(ζ,u) = I + sin ζ K + (1 − cos ζ) K²`` from a precomputed ``K = [u]^x`` (the
+    sub-steps call it 20 times a step)."""
 
     __slots__ = ("A", "K", "K2", "k_Q", "k_zeta", "gamma", "u2")
 
@@ -111,12 +113,11 @@ class _Rates:
         self.k_Q, self.k_zeta, self.gamma = g.k_Q, g.k_zeta, g.gamma
         self.u2 = 2.0 * np.asarray(g.u, dtype=float)
 
-    def __call__(self, Q: Mat3, zeta: float, R: Mat3) -> tuple[Vec3, float]:
-        """Body rate of Q (``Q̇ = Q [w]^x``, w = k_Q Q̃ h) by (5.22), and ζ̇ by (5.23)."""
-        Qt = Q.T @ R
+    def __call__(self, Qt: Mat3, zeta: float) -> tuple[Vec3, float]:
+        """``(k_Q h_i, ζ̇)``: Q̃̇ = Q̃ [ω_i − k_Q h_i]^x (5.14), equivalent to (5.22) for Q_i, and (5.23)."""
         Z = _EYE + math.sin(zeta) * self.K + (1.0 - math.cos(zeta)) * self.K2
         p = psi(self.A @ Qt @ Z)
-        return self.k_Q * (Qt @ (Z @ p)), -self.k_zeta * (self.gamma * zeta + float(self.u2 @ p))
+        return self.k_Q * (Z @ p), -self.k_zeta * (self.gamma * zeta + float(self.u2 @ p))
 
 
 _EYE = np.eye(3)
@@ -125,7 +126,9 @@ _RATES: dict[int, _Rates] = {}
 
 def aux_rates(Q: Mat3, zeta: float, R: Mat3, g: Gains) -> tuple[Vec3, float]:
     """Body rate of Q (``Q̇ = Q [w]^x``, w = k_Q Q̃ h) by (5.22), and ζ̇ by (5.23)."""
-    return _rates(g)(Q, zeta, R)
+    Qt = Q.T @ R
+    kh, zdot = _rates(g)(Qt, zeta)
+    return Qt @ kh, zdot
 
 
 def _rates(g: Gains) -> _Rates:
@@ -150,24 +153,40 @@ def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float, path: list[tu
     return samples[-1][1]
 
 
+def _rate_at(path: list[tuple[float, float, Mat3, Vec3]], s: float) -> Vec3:
+    """The body rate of R_i on the piecewise geodesic at time ``s`` (0 outside the samples)."""
+    for t0, t1, _R0, w in path:
+        if s <= t1:
+            return w / (t1 - t0) if s >= t0 else _ZERO3
+    return _ZERO3
+
+
+_ZERO3 = np.zeros(3)
+
+
 def flow_aux(Q: Mat3, zeta: float, samples: tuple[tuple[float, Mat3], ...], dt: float, g: Gains) -> tuple[Mat3, float]:
-    """(Q_i, ζ_i) over the step ``[−dt, 0]``: Heun sub-steps of at most SUBSTEP_S."""
+    """(Q_i, ζ_i) over the step ``[−dt, 0]``: Heun sub-steps of at most SUBSTEP_S on
+    (Q̃_i, ζ_i) by (5.14), (5.23), with ω_i the rate of R_i's piecewise geodesic between the
+    samples (taken at each sub-step's middle); then ``Q_i = R_i Q̃_i^T`` at the newest sample.
+    The same flow as (5.22) for Q_i, without interpolating R_i at every sub-step."""
     n = max(1, math.ceil(dt / SUBSTEP_S - 1e-9))
     h = dt / n
     rates = _rates(g)
     path = attitude_path(samples)
+    Qt = Q.T @ attitude_at(samples, -dt, path)
     s = -dt
-    R0 = attitude_at(samples, s, path)
-    w1, z1 = rates(Q, zeta, R0)
+    kh1, z1 = rates(Qt, zeta)
     for _ in range(n):
-        R1 = attitude_at(samples, s + h, path)
-        Q1 = Q @ exp(h * w1)
-        w2, z2 = rates(Q1, zeta + h * z1, R1)
-        Q = Q @ exp(0.5 * h * (w1 + w2))
+        w = _rate_at(path, s + 0.5 * h)
+        v1 = w - kh1
+        Qt1 = Qt @ exp(h * v1)
+        kh2, z2 = rates(Qt1, zeta + h * z1)
+        Qt = Qt @ exp(0.5 * h * (v1 + w - kh2))
         zeta = zeta + 0.5 * h * (z1 + z2)
         s += h
-        w1, z1 = rates(Q, zeta, R1)
-    return Q, zeta
+        kh1, z1 = rates(Qt, zeta)
+    R_end = samples[-1][1]
+    return R_end @ Qt.T, zeta
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
