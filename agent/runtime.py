@@ -125,6 +125,7 @@ class Inbox:
                     self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
                 return
             rx = self.now()
+            msg["rx_net"] = rx  # off the network, before any emulated delay
             with self._lock:
                 if self._held:
                     # Held messages due by now go first: a message released on arrival
@@ -188,6 +189,15 @@ class Inbox:
 
     def get(self, link: str) -> dict[str, Any] | None:
         return self.latest.get(link)
+
+    def sensor_transit(self, local: Callable[[float], float], n: int = 16) -> float:
+        """Median network transit of the last ``n`` sensor packets (arrival off the network, before
+        any emulated delay, minus the stamp, on this agent's clock); 0 when none or negative."""
+        with self._lock:
+            ps = list(self.packets)[-n:]
+        if not ps:
+            return 0.0
+        return max(0.0, float(np.median([p["rx_net"] - local(p["t"]) for p in ps])))
 
     def recent_packets(self, after: float) -> list[dict[str, Any]]:
         """Sensor packets acquired after world time ``after`` (oldest first), with the
@@ -280,6 +290,7 @@ class TickView:
         self._links = {j: f"{j}->{node.id}" for j in a.neighbors}
         self.t = self.t_world = self.dt = 0.0
         self.period = 1.0 / a.clock.rate
+        self.command_lead = 0.5 * self.period
         self.first = False
         self.sense: Mapping[str, Any] = {}
         self.sense_t = self.sense_t_world = 0.0
@@ -519,7 +530,8 @@ class AgentNode:
             # estimate there instead.
             self.started = True
             lag = t_end - self.clock.local(0.0)
-            self._begin(t_end, sense, first=True)
+            transit = self.inbox.sensor_transit(self.clock.local) if self.aspec.command else 0.0
+            self._begin(t_end, sense, first=True, t_send=t_tick + transit)
             for ps in self.parts:
                 ps.last = t_end
                 if 0.0 < lag <= 0.5:
@@ -528,8 +540,9 @@ class AgentNode:
         else:
             ends = self._step_ends(t_end)
             self.catch_up_steps += len(ends) - 1
+            transit = self.inbox.sensor_transit(self.clock.local) if self.aspec.command else 0.0
             for t_e, packet in ends:
-                self._begin(t_e, packet, first=False)
+                self._begin(t_e, packet, first=False, t_send=t_tick + transit)
                 for ps in self.parts:
                     if t_e - ps.last < ps.min_gap:
                         continue
@@ -548,11 +561,17 @@ class AgentNode:
             self.t_first = view.t_world
         self.t_last = view.t_world
 
-    def _begin(self, t_local: float, packet: dict[str, Any], first: bool) -> None:
+    def _begin(self, t_local: float, packet: dict[str, Any], first: bool, t_send: float | None = None) -> None:
         """Point the view at a step ending at ``t_local`` (own clock), with ``packet`` the
-        newest sensor packet at or before it."""
+        newest sensor packet at or before it; ``t_send``: when what it sends should reach the
+        world (own clock: the tick plus the network's transit)."""
         t_w = packet["t"] if self.clock.local(packet["t"]) == t_local else self.clock.world(t_local)
         self.view.begin(t_local, t_w, packet, first)
+        # A command is held from its arrival for one period: the middle of that hold, after
+        # the step's end.  In sim (ticks at samples, no transit) exactly half a period; over
+        # Zenoh the measurement is 0-5 ms old at the tick and the command 1-3 ms in transit,
+        # which a controller that aimed at half a period would act that much late.
+        self.view.command_lead = max(0.0, (t_send if t_send is not None else t_local) - t_local) + 0.5 * self.view.period
 
     def _step_part(self, ps: _PartState, dt: float) -> Any:
         """Step one part by ``dt`` on the view as it stands; its outputs (None: it had no inputs)."""

@@ -74,7 +74,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=False), 0.5 * view.period)
+    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=False), view.command_lead)
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

@@ -131,7 +131,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
-    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=True), 0.5 * view.period)
+    return Inputs(np.asarray(view.sense["gyro"]), measured_edges(view, need_xi=True), view.command_lead)
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

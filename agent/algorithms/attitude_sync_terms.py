@@ -26,7 +26,8 @@ delay T/2 = 5 ms takes ≈ 12 × 0.005 = 0.06 off the damping k_ω = 0.1: the
 hybrid law computed at t and held 10 ms never reached max_k |R̄_k|_I < 0.1 in
 150 s (centralised integration), where the continuous-time law (0.5 ms)
 does at 61.7 s.  So every law evaluates its torque at the middle of its hold
-interval, t + T/2: R̄_k carried on along its last measured change
+interval (t + T/2 on sim; over Zenoh also the measurement's age at the tick and
+the transit to the world, View.command_lead): R̄_k carried on along its last measured change
 (:func:`predict`), ξ_k flowed on to that R̄_k, ω_i as measured (a lag on the
 damping term changes the stiffness, not the damping, to first order).  The
 same centralised integration then gives 65.5 s / 103.3 s (0.1 / 0.01) against

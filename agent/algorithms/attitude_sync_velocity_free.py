@@ -222,7 +222,7 @@ def inputs(view: View, gains: Gains) -> Inputs | None:
     rel = tuple((t - view.t, R) for t, R in samples)
     if rel[-1][0] < 0:
         rel = rel + ((0.0, rel[-1][1]),)  # the world skipped samples at the end: hold the newest
-    return Inputs(rel, measured_edges(view, need_xi=True), 0.5 * view.period)
+    return Inputs(rel, measured_edges(view, need_xi=True), view.command_lead)
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:

@@ -99,3 +99,28 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
         assert abs(got - ref) <= 0.25 * ref, (key, got, ref)  # run vs sim (the issue's criterion)
         assert abs(got - notes) <= 0.25 * notes, (key, got, notes)  # run vs READING-NOTES
     assert all(e["relative_attitude_error_final"] < 0.01 for e in s["edges"].values())
+
+
+def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
+    """The velocity-free law (no gyro) over real processes, first 15 s: every ξ_k and every ζ_i
+    jumps 0 -> 0.9π at the start (§5.6: Q̃_i(0) = Ra(π, e3) too), the filter (Q_i, ζ_i) then
+    tracks R_i (|Q̃_i|_I < 0.1 after 5 s; READING-NOTES: ≈ 0.05), and torques reach the world."""
+    name = "thesis-5.6-velocity-free7"
+    out = tmp_path / "run"
+    p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), "--out", str(out), "--duration", "15", "--quiet"), log=tmp_path / "launcher.log")
+    code = p.wait(15 * 3 + 120)
+    procs.adopt(out)
+    assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    for e in s["edges"].values():
+        j = e["jump_log"][0]
+        assert j["t"] < 0.1 and j["xi_after"] == pytest.approx(0.9 * math.pi)
+    for a in s["agents"].values():
+        j = a["zeta_jump_log"][0]
+        assert j["t"] < 0.1 and j["zeta_before"] == pytest.approx(0.0, abs=1e-9) and j["zeta_after"] == pytest.approx(0.9 * math.pi)
+        assert a["Q_tilde_max_after_5s"] < 0.1, a
+    assert s["jumps_total"] <= 14 and s["zeta_jumps_total"] <= 14
+    cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
+    assert len(cmd) == 7 and all(v["sent"] > 0.9 * 15 * 100 and v["dropped"] == 0 for v in cmd.values())
+    assert s["commands"]["malformed"] == 0
