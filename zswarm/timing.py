@@ -130,7 +130,8 @@ def relative_attitude_at(hist: Sequence[tuple[float, np.ndarray]], gyro: Sequenc
     the gap, ``E_j = R_ij(t0)^T E_i R_ij(t1)`` — is interpolated (or, up to
     ``max_ahead`` past the newest sample, extrapolated) at a constant rate:
     ``R_ij(t) = E_i(t0, t)^T R_ij(t0) exp(s log E_j)``.  Exact at the sample
-    times.  None outside the history.
+    times.  None outside the history.  Without gyro samples, ``R_ij`` is taken on
+    the geodesic through the two samples around (or before) ``t``.
     """
     if not hist:
         return None
@@ -152,6 +153,9 @@ def relative_attitude_at(hist: Sequence[tuple[float, np.ndarray]], gyro: Sequenc
             return R1
     if t1 <= t0:
         return None
+    if not gyro:
+        # No gyro (a velocity-free agent): R_ij itself on the geodesic through the two samples.
+        return R0 @ exp(((t - t0) / (t1 - t0)) * log(R0.T @ R1))
     E_j = R0.T @ rotation_over(gyro, t0, t1) @ R1
     s_ = (t - t0) / (t1 - t0)
     return rotation_over(gyro, t0, t).T @ R0 @ exp(s_ * log(E_j))

@@ -100,3 +100,17 @@ def test_body_vector_across_a_gap_follows_the_gyro_history():
         old = so3.exp(-(t - t1) * w1) @ ((1 - s_) * so3.exp(-(t1 - t0) * w1) @ b0 + s_ * b1)
         old /= np.linalg.norm(old)
         assert np.linalg.norm(got - truth) < 1e-2 * np.linalg.norm(old - truth), (t, np.linalg.norm(got - truth), np.linalg.norm(old - truth))
+
+
+def test_relative_attitude_without_gyro_follows_the_geodesic():
+    """A velocity-free agent has no gyro: R_ij between (and just past) samples is on their geodesic."""
+    import numpy as np
+
+    from zswarm import so3, timing
+
+    R0 = so3.Ra(0.3, np.array([1.0, 2.0, 0.5]))
+    w = np.array([0.2, -0.1, 0.4])
+    hist = [(0.0, R0), (0.005, R0 @ so3.exp(0.005 * w))]
+    for t in (0.0025, 0.005, 0.008):
+        got = timing.relative_attitude_at(hist, [], t)
+        assert np.allclose(got, R0 @ so3.exp(t * w), atol=1e-12)
