@@ -17,8 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from agent.algorithms import bearing_pose_fixed
-from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
-from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, View
+from agent.algorithms.bearing_terms import NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
+from zswarm.algorithm import Initial, Part, Publish, View
 from zswarm.so3 import Mat3, Vec3, exp
 
 

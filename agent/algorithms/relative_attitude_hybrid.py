@@ -42,7 +42,7 @@ from agent.algorithms import relative_attitude_continuous
 from agent.algorithms.relative_attitude_continuous import Inputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, hybrid_correction, relative_error
 from zswarm import hybrid
-from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, View
+from zswarm.algorithm import Initial, Part, Publish, View
 from zswarm.so3 import Mat3, Vec3, exp
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step", "SPEC"]
