@@ -79,7 +79,6 @@ def sync_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> SyncMetr
     tau_c, qt, zeta = {}, {}, {}
     for i in sc.ids:
         ex = rec.extra.get(i, [])
-        ts = np.array([t for t, _ in ex])
         with_tau = [(t, d["tau"]) for t, d in ex if "tau" in d]
         tau_c[i] = (
             _held(np.array([t for t, _ in with_tau]), np.linalg.norm(np.array([v for _, v in with_tau]), axis=1), grid) if with_tau else np.full(len(grid), np.nan)
@@ -92,7 +91,6 @@ def sync_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> SyncMetr
             qn = _norm_I(np.einsum("nji,njk->nik", Qs, rec.truth_R[kq, col[i]]))
             qt[i] = _held(tq, qn, grid)
             zeta[i] = _held(tq, np.array([float(z) for _, _, z in with_q]), grid)
-        del ts
     return SyncMetrics(grid, rel, omega, tau_a, tau_c, qt, zeta)
 
 

@@ -59,7 +59,6 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import hybrid
 from zswarm.algorithm import Field, View
 from zswarm.so3 import Mat3, Vec3, exp, hat, log, psi
 
@@ -181,11 +180,6 @@ def continuous_coupling(edges: tuple[Edge, ...], A: Mat3) -> Vec3:
     return s
 
 
-def xi_rate(A: Mat3, u: Vec3, gamma: float, k_xi: float, R_bar: Mat3, xi: float) -> float:
-    """``ξ̇ = −k_ξ (γ ξ + 2 u^T ψ(A R̄ Ra(ξ, u)))`` (5.21), (5.23)."""
-    return -k_xi * hybrid.grad_xi(A, u, gamma, R_bar, xi)
-
-
 # Longest sub-step of the ξ_k (and ζ_i) flow.  ξ is a fast variable: near R̄ = I, ξ = 0,
 # ∂ξ̇/∂ξ = −k_ξ (γ + u^T (tr(A) I − A) u) = −20 (1.93 + 15.0) = −338 /s at §5.6's gains,
 # so one explicit step of the agents' 10 ms (dt·338 = 3.4) is unstable: the ξ_k of a
@@ -256,8 +250,3 @@ def published_xi(view: View, xi: Mapping[int, float]) -> dict[int, dict[str, Any
         if head and k in xi:
             out[j] = {"xi": xi[k]}
     return out
-
-
-def lyapunov_terms(A: Mat3, u: Vec3, gamma: float, R_bars: Mapping[int, Mat3], xi: Mapping[int, float]) -> float:
-    """``Σ_k U(R̄_k, ξ_k)`` (4.23): the potential part of (C.1)/(C.10)."""
-    return float(sum(hybrid.potential(A, u, gamma, R_bars[k], xi[k]) for k in R_bars))
