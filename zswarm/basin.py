@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from zswarm.scenario import Override, Scenario, load, parse_override
+from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 
 COLUMNS = ("draw", "kind", "synchronized", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
 
@@ -121,14 +122,6 @@ def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: fl
         "status": "ok",
         "error": "",
     }
-
-
-def _fmt(v: Any) -> Any:
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return v
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:

@@ -617,20 +617,30 @@ def plot_tree(out: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
         figure(tm.rel_pos, r"$\|\tilde p_h-\tilde p_t\|$", "relative_position_error", "relative position error per edge", True)
         figure(tm.pos_common, r"$\|\tilde p_i-\mathrm{mean}\,\tilde p\|$", "position_error", "position error up to a common translation", False)
     if rec.xi:
-        fig, ax = plt.subplots(figsize=(7, 3.5))
-        for k, xs in rec.xi.items():
-            a = np.array(xs)
-            ax.plot(a[:, 0], a[:, 1], lw=1, label=f"ξ_{k}")
-        for k, t, _b, after in rec.jumps:
-            ax.plot([t], [after], "kx", ms=6)
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel(r"$\xi_k$ (rad)")
-        ax.set_title(f"{sc.name}: hybrid variables (x: jumps)")
-        ax.legend(fontsize=7, ncol=4)
-        ax.grid(True, alpha=0.3)
-        fig.tight_layout()
-        fig.savefig(out / "xi.png", dpi=110)
-        plt.close(fig)
+        plot_xi(out, rec, f"{sc.name}: hybrid variables (x: jumps)", ncol=4)
+
+
+def plot_xi(out: Path, rec: Recording, title: str, ncol: int) -> None:
+    """``xi.png``: ξ_k over time as each head reports it, its jumps marked (x)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for k, xs in rec.xi.items():
+        a = np.array(xs)
+        ax.plot(a[:, 0], a[:, 1], lw=1, label=f"ξ_{k}")
+    for _k, t, _b, after in rec.jumps:
+        ax.plot([t], [after], "kx", ms=6)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(r"$\xi_k$ (rad)")
+    ax.set_title(title)
+    ax.legend(fontsize=7, ncol=ncol)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "xi.png", dpi=110)
+    plt.close(fig)
 
 
 def _e(x: float | None) -> str:

@@ -248,20 +248,9 @@ def plot(out: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
     fig2(m.omega, "agent {}", r"$\|\omega_i\|$ (rad/s)", "angular_velocity", "angular velocity per agent (Fig. 5.4)")
     fig2(m.tau_applied, "agent {}", r"$\|\tau_i\|$ applied (N m)", "torque", "torque held by the plant per agent")
     if rec.xi:
-        fig, ax = plt.subplots(figsize=(7, 3.5))
-        for k, xs in rec.xi.items():
-            a = np.array(xs)
-            ax.plot(a[:, 0], a[:, 1], lw=1, label=f"ξ_{k}")
-        for _k, t, _b, after in rec.jumps:
-            ax.plot([t], [after], "kx", ms=6)
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel(r"$\xi_k$ (rad)")
-        ax.set_title(f"{sc.name}: hybrid variables ξ_k (Fig. 5.5; x: jumps)")
-        ax.legend(fontsize=7, ncol=6)
-        ax.grid(True, alpha=0.3)
-        fig.tight_layout()
-        fig.savefig(out / "xi.png", dpi=110)
-        plt.close(fig)
+        from zswarm.report import plot_xi
+
+        plot_xi(out, rec, f"{sc.name}: hybrid variables ξ_k (Fig. 5.5; x: jumps)", ncol=6)
     if m.q_tilde:
         fig2(m.q_tilde, "agent {}", r"$|\tilde Q_i|_I$", "Q_tilde", "auxiliary attitude error per agent (Fig. 5.6)")
         fig2(m.zeta, "ζ_{}", r"$\zeta_i$ (rad)", "zeta", "hybrid variables ζ_i (Fig. 5.7)", log=False)

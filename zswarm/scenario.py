@@ -764,10 +764,7 @@ def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
     u = c.vec3(d["u"], f"{f}.u")
     gamma = c.num(d["gamma"], f"{f}.gamma", positive=True)
     delta = c.num(d["delta"], f"{f}.delta", positive=True)
-    xs = d["Xi"]
-    if not isinstance(xs, list) or not xs:
-        raise c.err(f"{f}.Xi", 'must be a non-empty list of numbers or expressions like "0.08*pi"', xs)
-    Xi = tuple(float(c.expr(x, f"{f}.Xi[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{f}.Xi[{n}]") for n, x in enumerate(xs))
+    Xi = _angle_set(c, d["Xi"], f"{f}.Xi", "0.08*pi")
     try:
         hybrid.check_parameters(A, np.array(u), gamma, delta, Xi)
     except hybrid.DesignError as exc:
@@ -778,16 +775,20 @@ def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
         # Condition 5.1 for (A, u, γ, δ_Q̃, Π): the same potential (4.23) on SO(3) × R, so
         # Prop. 4.2 (Remark 5.2, Wang & Tayebi 2022 Prop. 2) bounds δ_Q̃ with Π as δ with Ξ.
         delta_Q = c.num(d["delta_Q"], f"{f}.delta_Q", positive=True)
-        ps = d["Pi"]
-        if not isinstance(ps, list) or not ps:
-            raise c.err(f"{f}.Pi", 'must be a non-empty list of numbers or expressions like "0.9*pi"', ps)
-        Pi = tuple(float(c.expr(x, f"{f}.Pi[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{f}.Pi[{n}]") for n, x in enumerate(ps))
+        Pi = _angle_set(c, d["Pi"], f"{f}.Pi", "0.9*pi")
         try:
             hybrid.check_parameters(A, np.array(u), gamma, delta_Q, Pi, condition="5.1")
         except hybrid.DesignError as exc:
             fld = {"delta": "delta_Q", "Xi": "Pi"}.get(exc.field, exc.field)
             raise c.err(f"{f}.{fld}", exc.problem.replace("δ", "δ_Q̃").replace("Ξ", "Π")) from None
     return Params(tuple(A.ravel().tolist()), (float(un[0]), float(un[1]), float(un[2])), gamma, delta, Xi, delta_Q, Pi)
+
+
+def _angle_set(c: _Ctx, v: Any, fld: str, example: str) -> tuple[float, ...]:
+    """A hybrid set (Ξ, Π): a non-empty list of numbers or expressions like ``"0.9*pi"``."""
+    if not isinstance(v, list) or not v:
+        raise c.err(fld, f'must be a non-empty list of numbers or expressions like "{example}"', v)
+    return tuple(float(c.expr(x, f"{fld}[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{fld}[{n}]") for n, x in enumerate(v))
 
 
 def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:

@@ -123,13 +123,6 @@ _EYE = np.eye(3)
 _RATES: dict[int, _Rates] = {}
 
 
-def aux_rates(Q: Mat3, zeta: float, R: Mat3, g: Gains) -> tuple[Vec3, float]:
-    """Body rate of Q (``Q̇ = Q [w]^x``, w = k_Q Q̃ h) by (5.22), and ζ̇ by (5.23)."""
-    Qt = Q.T @ R
-    kh, zdot = _rates(g)(Qt, zeta)
-    return Qt @ kh, zdot
-
-
 def _rates(g: Gains) -> _Rates:
     r = _RATES.get(id(g))
     if r is None or r.k_Q != g.k_Q:
