@@ -10,7 +10,13 @@ AgentNode objects as every other run, in worker processes):
 * draws 1..N-1: for the Chapter 5 laws every R_i(0) uniform on SO(3) (and,
   for the velocity-free law, every Q_i(0) too: Theorem 5.2 is global in the
   auxiliary state as well), ω(0) = 0, ξ(0) = ζ(0) = 0 as in §5.6; for the §4
-  observers every estimate R̂_i(0) uniform, the truth as in the scenario.
+  observers every estimate R̂_i(0) uniform, the truth as in the scenario;
+* or, with ``near = ε``, the same quantities perturbed instead: the
+  scenario's own value times exp(ε [n]×), n a uniform unit axis.  Uniform
+  draws land on the undesired set with probability 0, so they cannot tell a
+  global law from an almost-global one; starts ε from that set can: the
+  continuous law needs ≈ ln(1/ε)/λ to leave it (λ its instability rate), the
+  hybrid laws jump away at once.
 
 Uniform on SO(3): the unit quaternion of four standard normals (Shoemake's
 subgroup algorithm gives the same law), from ``numpy.random.default_rng([seed,
@@ -40,7 +46,7 @@ import numpy as np
 from zswarm.scenario import Override, Scenario, load, parse_override
 from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 
-COLUMNS = ("draw", "kind", "synchronized", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
+COLUMNS = ("draw", "kind", "synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
 
 
 def uniform_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -54,6 +60,14 @@ def uniform_rotation(rng: np.random.Generator) -> np.ndarray:
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def near_rotation(R: np.ndarray, eps: float, rng: np.random.Generator) -> np.ndarray:
+    """R exp(ε [n]×), n uniform on the unit sphere (Rodrigues' formula)."""
+    n = rng.normal(size=3)
+    n /= np.linalg.norm(n)
+    K = np.array([[0.0, -n[2], n[1]], [n[2], 0.0, -n[0]], [-n[1], n[0], 0.0]])
+    return R @ (np.eye(3) + math.sin(eps) * K + (1.0 - math.cos(eps)) * (K @ K))
 
 
 def _rows(R: np.ndarray) -> str:
@@ -71,32 +85,38 @@ def kind_of(sc: Scenario) -> str:
     raise ValueError(f"{sc.name}: zswarm basin covers the tree schemes (Chapter 5 laws, §4 observers); {sc.algorithm} is not one")
 
 
-def draw_overrides(sc: Scenario, seed: int, draw: int) -> list[Override]:
-    """The ``--set`` overrides of draw ``draw`` (none for draw 0, the scenario's own start)."""
+def draw_overrides(sc: Scenario, seed: int, draw: int, near: float | None = None) -> list[Override]:
+    """The ``--set`` overrides of draw ``draw`` (none for draw 0, the scenario's own start):
+    uniform rotations, or with ``near`` the scenario's own ones turned by ``near`` rad."""
     if draw == 0:
         return []
     rng = np.random.default_rng([seed % (1 << 63), draw])
     out = []
     kind = kind_of(sc)
     vf = sc.info.params == "hybrid_vf"
-    for n, _a in enumerate(sc.agents):
+
+    def one(field: str, own: Any) -> None:
+        R = uniform_rotation(rng) if near is None else near_rotation(np.array(own, dtype=float).reshape(3, 3), near, rng)
+        out.append(parse_override(f"{field}={_rows(R)}", "--draw"))
+
+    for n, a in enumerate(sc.agents):
         if kind == "law":
-            out.append(parse_override(f"agents[{n}].R={_rows(uniform_rotation(rng))}", "--draw"))
+            one(f"agents[{n}].R", a.R)
             if vf:
-                out.append(parse_override(f"agents[{n}].estimate.Q={_rows(uniform_rotation(rng))}", "--draw"))
+                one(f"agents[{n}].estimate.Q", a.estimate.Q)
         else:
-            out.append(parse_override(f"agents[{n}].estimate.R={_rows(uniform_rotation(rng))}", "--draw"))
+            one(f"agents[{n}].estimate.R", a.estimate.R_hat)
     return out
 
 
-def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: float) -> dict[str, Any]:
+def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: float, near: float | None = None) -> dict[str, Any]:
     """One draw on ``sim``, in memory; its row of basin.csv."""
     from zswarm import report, report_sync
     from zswarm.sim import simulate
 
     t0 = time.monotonic()
     base = load(topology)
-    sc = load(topology, draw_overrides(base, seed, draw))
+    sc = load(topology, draw_overrides(base, seed, draw, near))
     msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
     rec = report.load_recording(msgs)  # type: ignore[arg-type]
     if kind_of(sc) == "law":
@@ -110,8 +130,9 @@ def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: fl
     settle = report_sync.settle_time(t, mx, threshold)
     return {
         "draw": draw,
-        "kind": "scenario" if draw == 0 else "uniform",
+        "kind": _kind(draw, near),
         "synchronized": settle is not None,
+        "left_s": report_sync.leave_time(t, mx),
         "settle_01_s": report_sync.settle_time(t, mx, 0.1),
         "settle_s": settle,
         "final_max": float(mx[-1]),
@@ -124,6 +145,10 @@ def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: fl
     }
 
 
+def _kind(draw: int, near: float | None) -> str:
+    return "scenario" if draw == 0 else "uniform" if near is None else "near"
+
+
 def read_rows(path: Path) -> list[dict[str, str]]:
     if not path.exists():
         return []
@@ -132,7 +157,16 @@ def read_rows(path: Path) -> list[dict[str, str]]:
 
 
 def run_basin(
-    topology: str, draws: int, seed: int, duration: float, threshold: float, out: Path, jobs: int, stop: Callable[[], bool], progress: Callable[[str], None]
+    topology: str,
+    draws: int,
+    seed: int,
+    duration: float,
+    threshold: float,
+    out: Path,
+    jobs: int,
+    stop: Callable[[], bool],
+    progress: Callable[[str], None],
+    near: float | None = None,
 ) -> tuple[list[dict[str, str]], bool]:
     """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
     whether it was interrupted."""
@@ -140,9 +174,13 @@ def run_basin(
     done = {int(r["draw"]) for r in read_rows(path)}
     todo = [d for d in range(draws) if d not in done]
     new = not path.exists()
+    columns = COLUMNS
+    if not new:  # resume with the file's own columns (a folder written by an older zswarm)
+        with open(path, newline="") as f:
+            columns = tuple(next(csv.reader(f), COLUMNS))
     interrupted = False
     with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
+        w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         if new:
             w.writeheader()
             f.flush()
@@ -154,7 +192,7 @@ def run_basin(
             def submit() -> None:
                 d = next(it, None)
                 if d is not None:
-                    pending[pool.submit(run_draw, topology, seed, d, duration, threshold)] = d
+                    pending[pool.submit(run_draw, topology, seed, d, duration, threshold, near)] = d
 
             for _ in range(jobs):
                 submit()
@@ -170,8 +208,8 @@ def run_basin(
                     try:
                         row = fut.result()
                     except Exception as exc:  # a failed draw is recorded, not fatal
-                        row = {"draw": d, "kind": "scenario" if d == 0 else "uniform", "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]}
-                    w.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
+                        row = {"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]}
+                    w.writerow({k: _fmt(row.get(k)) for k in columns})
                     f.flush()
                     progress(f"draw {d}: {row.get('status')} settle {row.get('settle_s')} ({row.get('wall_s')} s)")
                     submit()
@@ -187,10 +225,10 @@ def _f(x: str) -> float:
         return math.nan
 
 
-def summarize(rows: list[dict[str, str]], threshold: float, duration: float) -> dict[str, Any]:
-    """Fractions and settle-time quantiles (of the uniform draws; the scenario's own start apart)."""
+def summarize(rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None) -> dict[str, Any]:
+    """Fractions and settle-time quantiles (of the drawn starts; the scenario's own start apart)."""
     ok = [r for r in rows if r["status"] == "ok"]
-    uni = [r for r in ok if r["kind"] == "uniform"]
+    uni = [r for r in ok if r["kind"] != "scenario"]
     own = next((r for r in ok if r["kind"] == "scenario"), None)
     sync = [r for r in uni if r["synchronized"] == "True"]
     st = np.array(sorted(_f(r["settle_s"]) for r in sync))
@@ -214,12 +252,16 @@ def summarize(rows: list[dict[str, str]], threshold: float, duration: float) -> 
     return {
         "threshold": threshold,
         "horizon_s": duration,
-        "uniform_draws": n,
+        "start": "uniform" if near is None else "near",
+        "near_rad": near,
+        "drawn": n,
         "synchronized": len(sync),
         "fraction": frac,
         "fraction_95ci": ci,
         "settle_s": q(st),
         "settle_01_s": q(st1),
+        # when max_k |R̄_k|_I first fell below 0.9: the escape from a start near the undesired set
+        "left_s": q(np.array(sorted(x for x in (_f(r.get("left_s", "")) for r in uni) if math.isfinite(x)))),
         "jumps": q(np.array([_f(r["jumps"]) for r in uni])),
         "scenario_start": None if own is None else {k: own[k] for k in ("synchronized", "settle_01_s", "settle_s", "final_max", "jumps")},
         "failed": len(rows) - len(ok),
@@ -232,7 +274,7 @@ def plot(out: Path, name: str, rows: list[dict[str, str]], summary: dict[str, An
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    uni = [r for r in rows if r["status"] == "ok" and r["kind"] == "uniform"]
+    uni = [r for r in rows if r["status"] == "ok" and r["kind"] != "scenario"]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
     for col, label in (("settle_01_s", "below 0.1"), ("settle_s", f"below {summary['threshold']:g}")):
         v = np.sort([_f(r[col]) for r in uni if math.isfinite(_f(r[col]))])
@@ -244,13 +286,13 @@ def plot(out: Path, name: str, rows: list[dict[str, str]], summary: dict[str, An
         if math.isfinite(x):
             a1.axvline(x, color="k", ls=ls, lw=0.8)
     a1.set_xlabel("settle time (s)")
-    a1.set_ylabel("fraction of uniform draws")
+    a1.set_ylabel(f"fraction of the {_what(summary)}")
     a1.set_xlim(0, summary["horizon_s"])
     a1.set_ylim(0, 1.02)
     if a1.get_legend_handles_labels()[1]:
         a1.legend(fontsize=8)
     a1.grid(alpha=0.3)
-    a1.set_title(f"{name}: {summary['synchronized']}/{summary['uniform_draws']} synchronized by {summary['horizon_s']:g} s", fontsize=9)
+    a1.set_title(f"{name}: {summary['synchronized']}/{summary['drawn']} synchronized by {summary['horizon_s']:g} s", fontsize=9)
     fm = np.array([_f(r["final_max"]) for r in uni])
     a2.hist(np.log10(np.maximum(fm, 1e-16)), bins=30)
     a2.axvline(math.log10(summary["threshold"]), color="r", lw=0.8)
@@ -265,6 +307,10 @@ def plot(out: Path, name: str, rows: list[dict[str, str]], summary: dict[str, An
     return p
 
 
+def _what(s: dict[str, Any]) -> str:
+    return "uniform draws" if s.get("start", "uniform") == "uniform" else f"starts {s['near_rad']:g} rad from the scenario's"
+
+
 def table(name: str, s: dict[str, Any]) -> str:
     def qs(q: dict[str, float] | None) -> str:
         return "n/a" if q is None else f"min {q['min']:.1f}, p10 {q['p10']:.1f}, median {q['median']:.1f}, p90 {q['p90']:.1f}, max {q['max']:.1f} s"
@@ -272,7 +318,7 @@ def table(name: str, s: dict[str, Any]) -> str:
     ci = s["fraction_95ci"]
     own = s["scenario_start"] or {}
     lines = [
-        f"{name}: {s['synchronized']} of {s['uniform_draws']} uniform draws synchronized (max_k |R̄_k|_I < {s['threshold']:g} from some t ≤ {s['horizon_s']:g} s on)"
+        f"{name}: {s['synchronized']} of {s['drawn']} {_what(s)} synchronized (max_k |R̄_k|_I < {s['threshold']:g} from some t ≤ {s['horizon_s']:g} s on)"
         + (f", 95 % CI {100 * ci[0]:.1f}-{100 * ci[1]:.1f} %" if ci else ""),
         f"  settle below {s['threshold']:g}: {qs(s['settle_s'])}",
         f"  settle below 0.1:  {qs(s['settle_01_s'])}",
@@ -283,8 +329,98 @@ def table(name: str, s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float) -> dict[str, Any]:
-    s = summarize(rows, threshold, duration)
+def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None) -> dict[str, Any]:
+    s = {"scenario": name, **summarize(rows, threshold, duration, near)}
     (out / "basin.json").write_text(json.dumps(s, indent=2) + "\n")
     plot(out, name, rows, s)
     return s
+
+
+def load_dir(d: Path) -> tuple[dict[str, Any], list[dict[str, str]]]:
+    """A basin folder's definition (basin_def.json) and rows; ValueError naming what is missing."""
+    spec_path, csv_path = d / "basin_def.json", d / "basin.csv"
+    for p in (spec_path, csv_path):
+        if not p.exists():
+            raise ValueError(f"{d}: no {p.name} (not a zswarm basin folder)")
+    try:
+        spec = json.loads(spec_path.read_text())
+        spec["scenario"], spec["threshold"], spec["duration_s"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{spec_path}: unreadable ({exc})") from exc
+    return spec, read_rows(csv_path)
+
+
+def compare(dirs: list[Path]) -> list[dict[str, Any]]:
+    """One summary per basin folder (its scenario, start and settle-time quantiles), plus its
+    drawn rows under ``"_rows"`` for the plot."""
+    out = []
+    for d in dirs:
+        spec, rows = load_dir(d)
+        s = {"scenario": spec["scenario"], "dir": str(d), **summarize(rows, spec["threshold"], spec["duration_s"], spec.get("near"))}
+        s["_rows"] = [r for r in rows if r["status"] == "ok" and r["kind"] != "scenario"]
+        out.append(s)
+    return out
+
+
+def compare_table(entries: list[dict[str, Any]]) -> str:
+    """A Markdown table: a row per basin folder."""
+
+    def q(x: dict[str, float] | None, *keys: str) -> str:
+        return "–" if x is None else " / ".join(f"{x[k]:.1f}" for k in keys)
+
+    lines = [
+        "| scenario | start | synchronized | 95 % CI | below threshold, min / median / p90 / max (s) | below 0.1, median (s) | below 0.9, median (s) | jumps, median / max | its own start, below threshold (s) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in entries:
+        ci = s["fraction_95ci"]
+        start = "uniform" if s["start"] == "uniform" else f"{s['near_rad']:g} rad from its own"
+        own = s["scenario_start"] or {}
+        lines.append(
+            f"| {s['scenario']} | {start} | {s['synchronized']} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
+            + (f"{100 * ci[0]:.1f}–{100 * ci[1]:.1f} %" if ci else "–")
+            + f" | {q(s['settle_s'], 'min', 'median', 'p90', 'max')} | {q(s['settle_01_s'], 'median')} | {q(s.get('left_s'), 'median')} | {q(s['jumps'], 'median', 'max')} | {own.get('settle_s') or 'never'} |"
+        )
+    return "\n".join(lines)
+
+
+def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
+    """Left: each folder's settle times (below its threshold) as a distribution; right (when
+    some folders start near the scenario's start): settle time against the distance ε."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    near = [s for s in entries if s["start"] == "near"]
+    fig, axes = plt.subplots(1, 2 if near else 1, figsize=(11 if near else 6.5, 4), squeeze=False)
+    a1 = axes[0][0]
+    for s in entries:
+        v = np.sort([_f(r["settle_s"]) for r in s["_rows"] if r["synchronized"] == "True"])
+        label = f"{s['scenario']}, " + ("uniform" if s["start"] == "uniform" else f"ε = {s['near_rad']:g}") + f" ({s['synchronized']}/{s['drawn']})"
+        a1.step(np.r_[0.0, v], np.r_[0.0, np.arange(1, len(v) + 1)] / max(1, s["drawn"]), where="post", label=label)
+    a1.set_xlabel("settle time below the threshold (s)")
+    a1.set_ylabel("fraction of the draws synchronized")
+    a1.set_xlim(0, max(s["horizon_s"] for s in entries))
+    a1.set_ylim(0, 1.02)
+    a1.grid(alpha=0.3)
+    a1.legend(fontsize=7)
+    if near:
+        a2 = axes[0][1]
+        for name in dict.fromkeys(s["scenario"] for s in near):
+            ss = sorted((s for s in near if s["scenario"] == name), key=lambda s: s["near_rad"])
+            eps = np.array([s["near_rad"] for s in ss])
+            med = np.array([math.nan if s["settle_s"] is None else s["settle_s"]["median"] for s in ss])
+            lo = np.array([math.nan if s["settle_s"] is None else s["settle_s"]["min"] for s in ss])
+            hi = np.array([math.nan if s["settle_s"] is None else s["settle_s"]["max"] for s in ss])
+            (ln,) = a2.plot(eps, med, "o-", label=f"{name} (median, min–max)")
+            a2.fill_between(eps, lo, hi, color=ln.get_color(), alpha=0.2)
+        a2.set_xscale("log")
+        a2.set_xlabel("ε: distance of the start from the scenario's own (rad)")
+        a2.set_ylabel("settle time below the threshold (s)")
+        a2.grid(alpha=0.3, which="both")
+        a2.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

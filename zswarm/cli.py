@@ -1,4 +1,4 @@
-"""The ``zswarm`` command: run, sim, sweep, basin, router, record, report, design-hybrid."""
+"""The ``zswarm`` command: run, sim, sweep, basin, basin-compare, router, record, report, design-hybrid."""
 
 from __future__ import annotations
 
@@ -99,7 +99,25 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--duration", type=procutil.positive_float, default=None, help="horizon, world seconds (default: the scenario's)")
     b.add_argument("--threshold", type=procutil.positive_float, default=0.01, help="max_k |R̄_k|_I that counts as synchronized (default 0.01)")
     b.add_argument("--jobs", type=procutil.positive_int, default=None, help="draws at a time (default: the number of cores)")
+    b.add_argument(
+        "--near",
+        type=procutil.positive_float,
+        default=None,
+        metavar="EPS",
+        help="instead of uniform draws, turn the scenario's own start by EPS rad about a uniform axis "
+        "(shows an almost-global law's slow escape from the undesired set)",
+    )
     b.add_argument("--out", type=Path, default=None, help="folder (default basins/<scenario>-<timestamp>/); the same folder resumes")
+
+    bc = sub.add_parser(
+        "basin-compare",
+        help="compare basin folders: a Markdown table and one figure",
+        description="Reads the basin.csv and basin_def.json of each folder written by zswarm basin and prints a Markdown "
+        "table (fraction synchronized with its 95 % interval, settle-time quantiles, jumps); writes one figure of the "
+        "settle-time distributions, and of settle time against ε for folders made with --near.",
+    )
+    bc.add_argument("dirs", nargs="+", type=Path, help="folders written by zswarm basin")
+    bc.add_argument("--out", type=Path, default=Path("basin-compare.png"), help="the figure (default basin-compare.png)")
 
     ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
     procutil.add_zenoh_args(ro, default_mode="router")
@@ -132,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
     return cmds[args.cmd](args)
 
 
@@ -273,7 +291,7 @@ def cmd_basin(args: argparse.Namespace) -> int:
     duration = sc.duration if args.duration is None else args.duration
     out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("basins"))
     out.mkdir(parents=True, exist_ok=True)
-    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold}
+    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near}
     spec_path = out / "basin_def.json"
     if spec_path.exists():
         old = json.loads(spec_path.read_text())
@@ -288,15 +306,29 @@ def cmd_basin(args: argparse.Namespace) -> int:
     print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) on sim, {jobs} at a time; {out}", file=sys.stderr)
     t0 = time.monotonic()
     rows, interrupted = basin.run_basin(
-        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True)
+        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near
     )
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
         return 130
-    s = basin.write(out, sc.name, rows, args.threshold, duration)
+    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near)
     print(basin.table(sc.name, s))
     print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")
     return 0 if not s["failed"] else 1
+
+
+def cmd_basin_compare(args: argparse.Namespace) -> int:
+    from zswarm import basin
+
+    try:
+        entries = basin.compare(args.dirs)
+    except ValueError as exc:
+        procutil.fail_usage(str(exc))
+    print(basin.compare_table(entries))
+    if args.out.parent != Path(""):
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+    print(f"figure: {basin.plot_compare(entries, args.out)}", file=sys.stderr)
+    return 0
 
 
 def cmd_router(args: argparse.Namespace) -> int:

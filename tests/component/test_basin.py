@@ -40,6 +40,31 @@ def test_draws_are_reproducible_and_cover_the_right_attitudes():
     assert np.allclose(R, np.array(a[2].value)) and abs(np.linalg.det(R) - 1) < 1e-12
 
 
+def test_near_draws_turn_the_scenarios_own_start_by_eps():
+    def angle(A, B):
+        return math.acos(np.clip((np.trace(A.T @ B) - 1) / 2, -1, 1))
+
+    law = load(TOPO / "thesis-5.6-velocity-free7.toml")
+    for eps in (1e-2, 1e-6):
+        ov = basin.draw_overrides(law, 1, 5, near=eps)
+        assert [o.field for o in ov] == [f for n in range(7) for f in (f"agents[{n}].R", f"agents[{n}].estimate.Q")]
+        for o in ov:
+            n = int(o.field[7])
+            own = law.agents[n].R_matrix if o.field.endswith("].R") else np.array(law.agents[n].estimate.Q).reshape(3, 3)
+            R = np.array(o.value)
+            # R = own·exp(ε[n]×): a rotation at geodesic distance ε from own (acos loses
+            # half the digits near 0: |Δθ| ≲ √(2·1e-16) ≈ 1.5e-8).
+            assert np.allclose(R.T @ R, np.eye(3), atol=1e-14)
+            assert angle(own, R) == pytest.approx(eps, abs=2e-8)
+    obs = load(TOPO / "thesis-4.5-hybrid5.toml")
+    for o in basin.draw_overrides(obs, 1, 2, near=0.1):
+        n = int(o.field[7])
+        assert angle(np.array(obs.agents[n].estimate.R_hat).reshape(3, 3), np.array(o.value)) == pytest.approx(0.1, abs=1e-12)
+    # The axes differ from draw to draw and from agent to agent.
+    a, b = basin.draw_overrides(law, 1, 5, near=0.1), basin.draw_overrides(law, 1, 6, near=0.1)
+    assert a[0].value != b[0].value and a[0].value != a[2].value
+
+
 def test_summary_counts_and_wilson_interval():
     rows = [{"draw": "0", "kind": "scenario", "status": "ok", "synchronized": "True", "settle_01_s": "50", "settle_s": "90", "final_max": "1e-3", "jumps": "8"}]
     rows += [
@@ -47,7 +72,7 @@ def test_summary_counts_and_wilson_interval():
         for d in range(1, 101)
     ]
     s = basin.summarize(rows, 0.01, 150.0)
-    assert s["uniform_draws"] == 100 and s["synchronized"] == 80 and s["fraction"] == 0.8
+    assert s["drawn"] == 100 and s["start"] == "uniform" and s["synchronized"] == 80 and s["fraction"] == 0.8
     lo, hi = s["fraction_95ci"]
     assert lo == pytest.approx(0.7112, abs=1e-3) and hi == pytest.approx(0.8666, abs=1e-3)  # Wilson, z = 1.96
     assert s["settle_s"]["min"] == 21 and s["settle_s"]["max"] == 119
@@ -67,7 +92,7 @@ def test_basin_end_to_end_resume_and_bad_input(tmp_path):
     # The hybrid observer is global: random R̂_i(0) synchronize too (Theorem 4.2).
     assert all(r["synchronized"] == "True" for r in rows)
     s = json.loads((out / "basin.json").read_text())
-    assert s["uniform_draws"] == 2 and s["synchronized"] == 2 and (out / "basin.png").exists()
+    assert s["drawn"] == 2 and s["scenario"] == "thesis-4.5-hybrid5" and s["synchronized"] == 2 and (out / "basin.png").exists()
     assert "2 of 2 uniform draws synchronized" in p.stdout
     # The same command resumes: nothing left to run.
     p2 = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
@@ -79,3 +104,17 @@ def test_basin_end_to_end_resume_and_bad_input(tmp_path):
     p4 = subprocess.run([sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-3.2-fixed8.toml"), "--out", str(tmp_path / "c")], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert p4.returncode == 2 and "covers the tree schemes" in p4.stderr
     assert math.isfinite(float(own["final_max"]))
+    # Starts 0.2 rad from the scenario's own, then both folders side by side.
+    near = tmp_path / "n"
+    p5 = subprocess.run([*cmd[:5], "--draws", "2", "--duration", "20", "--near", "0.2", "--jobs", "1", "--out", str(near)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert p5.returncode == 0, p5.stderr
+    assert "1 of 1 starts 0.2 rad from the scenario's synchronized" in p5.stdout
+    assert [r["kind"] for r in sorted(csv.DictReader(open(near / "basin.csv")), key=lambda r: r["draw"])] == ["scenario", "near"]
+    fig = tmp_path / "cmp" / "c.png"
+    p6 = subprocess.run([sys.executable, "-m", "zswarm", "basin-compare", str(out), str(near), "--out", str(fig)], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert p6.returncode == 0, p6.stderr
+    rows = [ln for ln in p6.stdout.splitlines() if ln.startswith("| thesis-4.5-hybrid5 |")]
+    assert len(rows) == 2 and "| uniform | 2 of 2 " in rows[0] and "| 0.2 rad from its own | 1 of 1 " in rows[1]
+    assert fig.stat().st_size > 10_000
+    p7 = subprocess.run([sys.executable, "-m", "zswarm", "basin-compare", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert p7.returncode == 2 and "no basin_def.json (not a zswarm basin folder)" in p7.stderr
