@@ -325,6 +325,8 @@ def cmd_basin_compare(args: argparse.Namespace) -> int:
     except ValueError as exc:
         procutil.fail_usage(str(exc))
     print(basin.compare_table(entries))
+    for line in basin.paired(entries):
+        print(f"\n{line}")
     if args.out.parent != Path(""):
         args.out.parent.mkdir(parents=True, exist_ok=True)
     print(f"figure: {basin.plot_compare(entries, args.out)}", file=sys.stderr)

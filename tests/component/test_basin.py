@@ -118,3 +118,18 @@ def test_basin_end_to_end_resume_and_bad_input(tmp_path):
     assert fig.stat().st_size > 10_000
     p7 = subprocess.run([sys.executable, "-m", "zswarm", "basin-compare", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert p7.returncode == 2 and "no basin_def.json (not a zswarm basin folder)" in p7.stderr
+
+
+def test_paired_differences_only_between_folders_that_drew_the_same_starts():
+    def entry(name, settle, draws=(1, "law")):
+        rows = [{"draw": str(d), "kind": "uniform", "status": "ok", "synchronized": "True", "settle_s": str(x), "settle_01_s": "", "jumps": "0"} for d, x in settle.items()]
+        return {"scenario": name, "_rows": rows, "_draws": (draws[0], None, draws[1])}
+
+    a = entry("hybrid", {1: 90.0, 2: 95.0, 3: 100.0})
+    b = entry("continuous", {1: 91.0, 2: 99.0, 3: 97.0, 4: 80.0})  # draw 4 has no partner
+    (line,) = basin.paired([a, b])
+    # differences −1, −4, +3: median −1, mean −2/3, hybrid earlier in 2 of 3
+    assert "paired on 3 identical starts: hybrid − continuous settle time: median -1.00 s, mean -0.67 s, from -4.00 to +3.00 s; hybrid earlier in 2 of 3" == line
+    assert basin.paired([a, entry("other seed", {1: 1.0}, draws=(2, "law"))]) == []
+    assert basin.paired([a, entry("vf", {1: 1.0}, draws=(1, "law+Q"))]) == []  # Q_i(0) drawn too: other starts
+    assert basin.paired([a, entry("hybrid", {1: 1.0})]) == []  # the same scheme twice: nothing to pair
