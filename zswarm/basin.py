@@ -35,6 +35,7 @@ import csv
 import json
 import math
 import multiprocessing
+import signal
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -150,10 +151,19 @@ def _kind(draw: int, near: float | None) -> str:
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:
+    """The rows of basin.csv, the newest per draw (a failed draw is run again on resume)."""
     if not path.exists():
         return []
     with open(path, newline="") as f:
-        return [r for r in csv.DictReader(f) if r.get("status")]
+        last = {r["draw"]: r for r in csv.DictReader(f) if r.get("status")}
+    return sorted(last.values(), key=lambda r: int(r["draw"]))
+
+
+def _worker_init() -> None:
+    """Draws run in workers that leave signals to the parent: Ctrl-C reaches the whole
+    process group, and the parent, not each worker, decides what is kept (it kills them)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
 
 
 def run_basin(
@@ -171,7 +181,7 @@ def run_basin(
     """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
     whether it was interrupted."""
     path = out / "basin.csv"
-    done = {int(r["draw"]) for r in read_rows(path)}
+    done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
     todo = [d for d in range(draws) if d not in done]
     new = not path.exists()
     columns = COLUMNS
@@ -185,7 +195,7 @@ def run_basin(
             w.writeheader()
             f.flush()
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(jobs, mp_context=ctx) as pool:
+        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_worker_init) as pool:
             pending = {}
             it = iter(todo)
 
@@ -211,10 +221,12 @@ def run_basin(
                         row = {"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]}
                     w.writerow({k: _fmt(row.get(k)) for k in columns})
                     f.flush()
-                    progress(f"draw {d}: {row.get('status')} settle {row.get('settle_s')} ({row.get('wall_s')} s)")
+                    progress(f"draw {d}: {row.get('status')}, settles at {_fmt(row.get('settle_s')) or 'never'} ({row.get('wall_s')} s)")
                     submit()
-            if interrupted:
-                pool.shutdown(wait=False, cancel_futures=True)
+            if interrupted:  # the draws under way are lost (they rerun on resume), not waited for
+                for proc in list((getattr(pool, "_processes", None) or {}).values()):  # the executor's own workers
+                    proc.kill()
+                pool.shutdown(wait=True, cancel_futures=True)
     return read_rows(path), interrupted
 
 

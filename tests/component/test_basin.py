@@ -3,8 +3,11 @@
 import csv
 import json
 import math
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -133,3 +136,35 @@ def test_paired_differences_only_between_folders_that_drew_the_same_starts():
     assert basin.paired([a, entry("other seed", {1: 1.0}, draws=(2, "law"))]) == []
     assert basin.paired([a, entry("vf", {1: 1.0}, draws=(1, "law+Q"))]) == []  # Q_i(0) drawn too: other starts
     assert basin.paired([a, entry("hybrid", {1: 1.0})]) == []  # the same scheme twice: nothing to pair
+
+
+def test_ctrl_c_keeps_the_rows_and_reaps_the_workers(tmp_path):
+    """Ctrl-C reaches the whole process group: the parent keeps every finished row, kills its
+    workers (the draws under way rerun on resume) and exits 130, without a traceback."""
+    out = tmp_path / "b"
+    cmd = [sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-4.5-hybrid5.toml"), "--draws", "40", "--duration", "20", "--jobs", "2", "--out", str(out)]
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and len(basin.read_rows(out / "basin.csv")) < 1:
+            assert p.poll() is None, p.communicate()
+            time.sleep(0.2)
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == 130 and "interrupted:" in err and "Traceback" not in err, err
+    rows = basin.read_rows(out / "basin.csv")
+    assert 1 <= len(rows) < 40 and all(r["status"] == "ok" for r in rows)  # no draw recorded as failed
+    # Nothing of the group is left (the executor's workers and resource tracker included). The
+    # tracker exits after its parent, so init reaps it: allow it a few seconds.
+    deadline = time.monotonic() + 15
+    while True:
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, subprocess.run(["ps", "-o", "pid,stat,args", "-g", str(p.pid)], capture_output=True, text=True).stdout
+        time.sleep(0.1)
