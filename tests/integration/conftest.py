@@ -103,6 +103,21 @@ def zswarm(*args: str) -> list[str]:
     return [sys.executable, "-m", "zswarm", *args]
 
 
+# The tail of a link when a run stops: messages a sender put after its receiver read its
+# last ones (counted sent, neither delivered nor dropped: "dropped" counts gaps in the
+# sequence numbers).  Each process reacts to the world's stop within its scheduling
+# latency: with one core kept busy and ~14 runnable processes CFS gives each a slice
+# about every 14 × 3 ms ≈ 40 ms, and the sender may stop a few such turns after the
+# receiver (60 ms measured under stress-ng --cpu 1).  0.2 s of messages bounds it; a
+# process that misses the stop sends for seconds.
+STOP_SKEW_S = 0.2
+
+
+def stop_tail(rate_hz: float) -> int:
+    """The most messages a link of ``rate_hz`` may leave undelivered at the stop."""
+    return max(1, round(rate_hz * STOP_SKEW_S))
+
+
 SIM_RUN_TOL = 3.0
 """``run`` ends within a factor 3 of ``sim`` on the final errors when it kept up.
 

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import wait_for, zswarm
+from tests.integration.conftest import stop_tail, wait_for, zswarm
 from zswarm import keys, wire
 from zswarm.bus import ZenohBus, zenoh_config
 from zswarm.report import make_report
@@ -75,8 +75,9 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
     # Command links: every agent's torques reached the world; latency measured.
     cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
     assert len(cmd) == 7
-    for v in cmd.values():
-        assert v["sent"] > 0.95 * sc.duration * 100 and v["dropped"] == 0 and v["latency_p50_ms"] < 20, v
+    for link, v in cmd.items():
+        _assert_commands_sent(s, link, v, sc.duration, 0.95)
+        assert v["latency_p50_ms"] < 20, v
     assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values())
 
     sim_out = tmp_path / "sim"
@@ -101,6 +102,17 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
     assert all(e["relative_attitude_error_final"] < 0.01 for e in s["edges"].values())
 
 
+def _assert_commands_sent(s: dict, link: str, v: dict, duration: float, share: float) -> None:
+    """Agent i -> world: a command per step that computed one (all but the steps before the first
+    measurements), none lost in between, only the stop's tail undelivered; at the configured
+    100 Hz when the run kept up (a run that did not skips ticks: the report flags it)."""
+    a = s["agents"][link.split("->")[0]]
+    assert 0.9 * a["steps"] <= v["sent"] <= a["steps"], (link, v, a["steps"])
+    assert v["dropped"] == 0 and v["delivered"] >= v["sent"] - stop_tail(100.0), (link, v)
+    if not s["overload"]["overloaded"]:
+        assert v["sent"] > share * duration * 100, (link, v)
+
+
 def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     """The velocity-free law (no gyro) over real processes, first 15 s: every ξ_k and every ζ_i
     jumps 0 -> 0.9π at the start (§5.6: Q̃_i(0) = Ra(π, e3) too), the filter (Q_i, ζ_i) then
@@ -122,5 +134,7 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
         assert a["Q_tilde_max_after_5s"] < 0.1, a
     assert s["jumps_total"] <= 14 and s["zeta_jumps_total"] <= 14
     cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
-    assert len(cmd) == 7 and all(v["sent"] > 0.9 * 15 * 100 and v["dropped"] == 0 for v in cmd.values())
+    assert len(cmd) == 7
+    for link, v in cmd.items():
+        _assert_commands_sent(s, link, v, 15.0, 0.9)  # 15 s: the start-up is a larger share
     assert s["commands"]["malformed"] == 0
