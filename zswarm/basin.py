@@ -32,6 +32,7 @@ settle-time quantiles) and ``basin.png`` (the settle times' distribution).
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import multiprocessing
@@ -275,7 +276,7 @@ def summarize(rows: list[dict[str, str]], threshold: float, duration: float, nea
         # when max_k |R̄_k|_I first fell below 0.9: the escape from a start near the undesired set
         "left_s": q(np.array(sorted(x for x in (_f(r.get("left_s", "")) for r in uni) if math.isfinite(x)))),
         "jumps": q(np.array([_f(r["jumps"]) for r in uni])),
-        "scenario_start": None if own is None else {k: own[k] for k in ("synchronized", "settle_01_s", "settle_s", "final_max", "jumps")},
+        "scenario_start": None if own is None else {k: own.get(k, "") for k in ("synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "jumps")},
         "failed": len(rows) - len(ok),
     }
 
@@ -382,7 +383,11 @@ def sc_kind(spec: dict[str, Any]) -> str:
         sc = load(spec["topology"])
     except Exception:  # noqa: BLE001 - moved or edited since: no pairing, the table still stands
         return "?"
-    return kind_of(sc) + ("+Q" if sc.info.params == "hybrid_vf" else "")
+    kind, vf = kind_of(sc), sc.info.params == "hybrid_vf"
+    # draw 0 and every --near draw start from the scenario's own attitudes: they must match too
+    own = [a.R if kind == "law" else a.estimate.R_hat for a in sc.agents] + ([a.estimate.Q for a in sc.agents] if vf else [])
+    digest = hashlib.sha256(np.round(np.array(own, dtype=float), 12).tobytes()).hexdigest()[:12]
+    return kind + ("+Q" if vf else "") + "@" + digest
 
 
 def paired(entries: list[dict[str, Any]]) -> list[str]:
@@ -397,8 +402,9 @@ def paired(entries: list[dict[str, Any]]) -> list[str]:
             sb = {r["draw"]: _f(r["settle_s"]) for r in b["_rows"]}
             d = np.array([sa[k] - sb[k] for k in sa.keys() & sb.keys() if math.isfinite(sa[k]) and math.isfinite(sb[k])])
             if len(d):
+                how = "" if a.get("near_rad") is None else f" {a['near_rad']:g} rad from their own"
                 lines.append(
-                    f"paired on {len(d)} identical starts: {a['scenario']} − {b['scenario']} settle time: median {np.median(d):+.2f} s, "
+                    f"paired on {len(d)} identical starts{how}: {a['scenario']} − {b['scenario']} settle time: median {np.median(d):+.2f} s, "
                     f"mean {d.mean():+.2f} s, from {d.min():+.2f} to {d.max():+.2f} s; {a['scenario']} earlier in {int((d < 0).sum())} of {len(d)}"
                 )
     return lines
@@ -407,8 +413,14 @@ def paired(entries: list[dict[str, Any]]) -> list[str]:
 def compare_table(entries: list[dict[str, Any]]) -> str:
     """A Markdown table: a row per basin folder."""
 
-    def q(x: dict[str, float] | None, *keys: str) -> str:
-        return "–" if x is None else " / ".join(f"{x[k]:.1f}" for k in keys)
+    def q(x: dict[str, float] | None, *keys: str, fmt: str = ".1f") -> str:
+        return "–" if x is None else " / ".join(format(x[k], fmt) for k in keys)
+
+    def own_settle(own: dict[str, Any]) -> str:
+        if not own:
+            return "–"
+        t = _f(own.get("settle_s", ""))
+        return f"{t:.2f}" if math.isfinite(t) else "never"
 
     lines = [
         "| scenario | start | synchronized | 95 % CI | below threshold, min / median / p90 / max (s) | below 0.1, median (s) | below 0.9, median (s) | jumps, median / max | its own start, below threshold (s) |",
@@ -421,7 +433,7 @@ def compare_table(entries: list[dict[str, Any]]) -> str:
         lines.append(
             f"| {s['scenario']} | {start} | {s['synchronized']} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
             + (f"{100 * ci[0]:.1f}–{100 * ci[1]:.1f} %" if ci else "–")
-            + f" | {q(s['settle_s'], 'min', 'median', 'p90', 'max')} | {q(s['settle_01_s'], 'median')} | {q(s.get('left_s'), 'median')} | {q(s['jumps'], 'median', 'max')} | {own.get('settle_s') or 'never'} |"
+            + f" | {q(s['settle_s'], 'min', 'median', 'p90', 'max')} | {q(s['settle_01_s'], 'median')} | {q(s.get('left_s'), 'median')} | {q(s['jumps'], 'median', 'max', fmt='g')} | {own_settle(own)} |"
         )
     return "\n".join(lines)
 
@@ -451,18 +463,26 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
     a1.grid(alpha=0.3)
     a1.legend(fontsize=7)
     if near:
+        # Right: how long each start took to leave the undesired set (max_k |R̄_k|_I < 0.9) against
+        # ε, which is what ε changes (a saddle's escape grows like ln 1/ε); the settle times are left.
         a2 = axes[0][1]
+
+        def band(ss: list[dict[str, Any]], key: str) -> tuple[np.ndarray, ...]:
+            return tuple(np.array([math.nan if s.get(key) is None else s[key][k] for s in ss]) for k in ("median", "min", "max"))
+
         for name in dict.fromkeys(s["scenario"] for s in near):
             ss = sorted((s for s in near if s["scenario"] == name), key=lambda s: s["near_rad"])
             eps = np.array([s["near_rad"] for s in ss])
-            med = np.array([math.nan if s["settle_s"] is None else s["settle_s"]["median"] for s in ss])
-            lo = np.array([math.nan if s["settle_s"] is None else s["settle_s"]["min"] for s in ss])
-            hi = np.array([math.nan if s["settle_s"] is None else s["settle_s"]["max"] for s in ss])
+            med, lo, hi = band(ss, "left_s")
             (ln,) = a2.plot(eps, med, "o-", label=f"{name} (median, min–max)")
             a2.fill_between(eps, lo, hi, color=ln.get_color(), alpha=0.2)
+            own = _f((ss[0]["scenario_start"] or {}).get("left_s", ""))
+            if math.isfinite(own):
+                a2.axhline(own, color=ln.get_color(), ls="-.", lw=1, label=f"{name}: its own start, {own:g} s")
         a2.set_xscale("log")
         a2.set_xlabel("ε: distance of the start from the scenario's own (rad)")
-        a2.set_ylabel("settle time below the threshold (s)")
+        a2.set_ylabel("time to leave: max_k |R̄_k|_I < 0.9 (s)")
+        a2.set_ylim(bottom=0)
         a2.grid(alpha=0.3, which="both")
         a2.legend(fontsize=7)
     fig.tight_layout()

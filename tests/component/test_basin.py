@@ -138,6 +138,20 @@ def test_paired_differences_only_between_folders_that_drew_the_same_starts():
     assert basin.paired([a, entry("hybrid", {1: 1.0})]) == []  # the same scheme twice: nothing to pair
 
 
+def test_folders_pair_only_when_their_own_starts_match(tmp_path):
+    """Draw 0 and every --near draw start from the scenario's own attitudes, so two scenarios
+    pair only when those match: the §5.6 continuous and hybrid laws do, a moved start does not."""
+    c7, h7 = TOPO / "thesis-5.6-continuous7.toml", TOPO / "thesis-5.6-hybrid7.toml"
+    kc, kh = basin.sc_kind({"topology": str(c7)}), basin.sc_kind({"topology": str(h7)})
+    assert kc == kh and kc.startswith("law@")
+    moved = tmp_path / "moved.toml"
+    text = c7.read_text()
+    assert text.count('R = { angle = "-pi/2", axis = [0, 0, 1] }') >= 1
+    moved.write_text(text.replace('R = { angle = "-pi/2", axis = [0, 0, 1] }', 'R = { angle = "-pi/3", axis = [0, 0, 1] }', 1))
+    assert basin.sc_kind({"topology": str(moved)}) not in (kc, "?")
+    assert basin.sc_kind({"topology": str(tmp_path / "gone.toml")}) == "?"
+
+
 def test_ctrl_c_keeps_the_rows_and_reaps_the_workers(tmp_path):
     """Ctrl-C reaches the whole process group: the parent keeps every finished row, kills its
     workers (the draws under way rerun on resume) and exits 130, without a traceback."""
