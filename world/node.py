@@ -13,7 +13,7 @@ import numpy as np
 
 from world import sensors
 from world.motion import PrescribedMotion
-from world.plant import CommandInbox, RigidBodyPlant
+from world.plant import CommandInbox, KinematicPlant, RigidBodyPlant
 from zswarm import keys, wire
 from zswarm.bus import Bus
 from zswarm.scenario import PLANT_INPUTS, Scenario
@@ -44,8 +44,14 @@ class World:
         self.now: Callable[[], float] = now if now is not None else self.next_time
         f = scenario.formation
         self.commands: CommandInbox | None = None
-        self.motion: PrescribedMotion | RigidBodyPlant
-        if scenario.plant == "rigid_body":
+        self.motion: PrescribedMotion | RigidBodyPlant | KinematicPlant
+        if scenario.plant == "kinematic":
+            self.commands = CommandInbox(
+                list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["kinematic"]
+            )
+            self.motion = KinematicPlant(np.array([a.R_matrix for a in scenario.agents]), np.array([a.p for a in scenario.agents]), scenario.step, self.commands)
+            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
+        elif scenario.plant == "rigid_body":
             self.commands = CommandInbox(
                 list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["rigid_body"]
             )
@@ -79,6 +85,7 @@ class World:
         self.velocity_std = math.sqrt(scenario.velocity_var)
         self.rel_att_std = math.sqrt(scenario.rel_att_var)
         self.attitude_std = math.sqrt(scenario.attitude_var)
+        self.rel_pos_std = math.sqrt(scenario.rel_pos_var)
         self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
         self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
         # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
@@ -112,9 +119,10 @@ class World:
             B = sensors.bearings(R, p, self._pair_i, self._pair_j)  # every agent's, at once
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
-        if self.commands is not None:
-            assert isinstance(self.motion, RigidBodyPlant)
+        if isinstance(self.motion, RigidBodyPlant):
             self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, tau=self.motion.tau))
+        elif isinstance(self.motion, KinematicPlant):
+            self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, u=self.motion.u))
         else:
             self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
         for i in self.ids:
@@ -140,6 +148,8 @@ class World:
                 m["R"] = sensors.attitude(R[a], self.attitude_std, rng)
             if "position" in want:
                 m["p"] = p[a]
+            if "rel_pos" in want:
+                m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.nbrs[i]}
             self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
         self.seq += 1
         self.samples += 1

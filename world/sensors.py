@@ -9,6 +9,9 @@
 * Own attitude (§5.6): ``R_i exp([n_R]^x)``, ``n_R ~ N(0, attitude_var)`` per axis.
 * Velocity (inertial (3.21) or body frame (4.30)): ``v + n``, ``n ~ N(0, velocity_var)``
   per axis (§3.3.4: "linear and angular velocity measurements ... variance of 0.1").
+* Relative position (De Carli et al. (2)): ``ⁱp_ij = R_i^T (p_j − p_i)`` plus
+  ``n ~ N(0, rel_pos_var)`` per axis (the paper states no noise model; this is the
+  simplest one for a range-and-bearing sensor such as an RGB-D camera).
 """
 
 from __future__ import annotations
@@ -68,3 +71,9 @@ def attitude(R: NDArray[np.float64], std: float, rng: np.random.Generator) -> ND
 def velocity(v: Vec3, std: float, rng: np.random.Generator) -> Vec3:
     """Velocity measurement ``v + n`` with ``n ~ N(0, std²)`` per axis."""
     return v + rng.normal(0.0, std, 3) if std > 0 else np.array(v, dtype=float)
+
+
+def relative_position(R_i: NDArray[np.float64], p_i: Vec3, p_j: Vec3, std: float, rng: np.random.Generator) -> Vec3:
+    """``ⁱp_ij = R_i^T (p_j − p_i)`` (De Carli et al. (2)) plus ``n ~ N(0, std²)`` per axis."""
+    d = R_i.T @ (p_j - p_i)
+    return d + rng.normal(0.0, std, 3) if std > 0 else d

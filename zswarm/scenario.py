@@ -15,8 +15,9 @@ Format (units: seconds, Hz, metres, radians)::
                 algorithm declares);
                 [world.formation] axis, rate: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis);
                 [world.commands] max_age (s), policy ("zero" | "hold"): stale commands (world/plant.py)
-    [noise]     gyro_var, bearing_var, velocity_var, rel_att_var, attitude_var (variances, as
-                the papers state them; attitude: R_i exp([n_R]^x), §5.6)
+    [noise]     gyro_var, bearing_var, velocity_var, rel_att_var, attitude_var, rel_pos_var
+                (variances, as the papers state them; attitude: R_i exp([n_R]^x), §5.6;
+                rel_pos: ⁱp_ij + n per axis, m², De Carli et al. (2))
     [clock]     rate (Hz), jitter (s, std of tick times), drift_ppm, offset (s): defaults for agents
     [graph]     edges = [[head, tail], ...]: the oriented tree of §4, edge k is the k-th
     [[agents]]  id, role, p (at t = 0), R, omega = [3 expressions in t], v = [3 expressions
@@ -55,8 +56,10 @@ from zswarm.links import JITTER_KINDS, LinkSpec
 
 # The world's plants and command policy (world/plant.py); imported lazily there to keep
 # the loader free of the world package's numerics.
-PLANTS = ("prescribed", "rigid_body")
-PLANT_INPUTS: Mapping[str, Mapping[str, tuple[int, ...]]] = MappingProxyType({"prescribed": {}, "rigid_body": {"tau": (3,)}})
+PLANTS = ("prescribed", "rigid_body", "kinematic")
+PLANT_INPUTS: Mapping[str, Mapping[str, tuple[int, ...]]] = MappingProxyType(
+    {"prescribed": {}, "rigid_body": {"tau": (3,)}, "kinematic": {"vel": (3,), "yaw_rate": ()}}
+)
 COMMAND_POLICIES = ("zero", "hold")
 
 
@@ -177,6 +180,7 @@ class Scenario:
     commands: CommandPolicy = CommandPolicy()  # [world.commands]
     command_links: LinkSpec = LinkSpec()  # [links.commands]: the agent→world command links' model
     attitude_var: float = 0.0
+    rel_pos_var: float = 0.0  # [noise] rel_pos_var: body-frame relative positions (m² per axis)
     sensors_fitted: frozenset[str] | None = None  # [world] sensors (None: what the algorithms declare)
     module: ModuleType | None = field(default=None, repr=False)  # the algorithm (zswarm.algorithm interface)
     leader_module: ModuleType | None = field(default=None, repr=False)  # what agents with role "leader" run
@@ -221,7 +225,7 @@ class Scenario:
 
     @property
     def moving(self) -> bool:
-        return self.formation is not None or any(a.velocity is not None for a in self.agents)
+        return self.plant == "kinematic" or self.formation is not None or any(a.velocity is not None for a in self.agents)
 
     def agent(self, i: int) -> AgentSpec:
         for a in self.agents:
@@ -520,12 +524,13 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         formation = Formation((float(ax[0]), float(ax[1]), float(ax[2])), rate)
     plant, commands, fitted = _plant(c, w, info, algo, formation is not None)
 
-    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var", "velocity_var", "rel_att_var", "attitude_var"})
+    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var", "velocity_var", "rel_att_var", "attitude_var", "rel_pos_var"})
     gyro_var = c.num(nz.get("gyro_var", 0.0), "noise.gyro_var", nonneg=True)
     bearing_var = c.num(nz.get("bearing_var", 0.0), "noise.bearing_var", nonneg=True)
     velocity_var = c.num(nz.get("velocity_var", 0.0), "noise.velocity_var", nonneg=True)
     rel_att_var = c.num(nz.get("rel_att_var", 0.0), "noise.rel_att_var", nonneg=True)
     attitude_var = c.num(nz.get("attitude_var", 0.0), "noise.attitude_var", nonneg=True)
+    rel_pos_var = c.num(nz.get("rel_pos_var", 0.0), "noise.rel_pos_var", nonneg=True)
 
     default_clock = _clock(c, doc.get("clock", {}), "clock", ClockSpec())
 
@@ -624,6 +629,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         commands=commands,
         command_links=command_links,
         attitude_var=attitude_var,
+        rel_pos_var=rel_pos_var,
         sensors_fitted=fitted,
         module=module,
         leader_module=leader_module,
@@ -845,13 +851,18 @@ def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
 
 
 def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpec, gains: Mapping[str, float], leaders: bool, plant: str = "prescribed") -> AgentSpec:
-    rigid = plant == "rigid_body"
+    rigid, kin = plant == "rigid_body", plant == "kinematic"
     d = c.table(
         d,
         f,
         {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()),
-        ({"id", "omega"} if rigid else {"id", "p", "omega"}) | ({"role"} if info.graph == "leader_follower" else set()),
+        ({"id", "omega"} if rigid else {"id", "p"} if kin else {"id", "p", "omega"}) | ({"role"} if info.graph == "leader_follower" else set()),
     )
+    if kin:
+        for key in ("omega", "v"):
+            if key in d:
+                raise c.err(f"{f}.{key}", "the kinematic plant moves each vehicle by its commands (De Carli et al. (1)): no prescribed motion", d[key])
+        d = dict(d, omega=["0", "0", "0"])
     aid = c.integer(d["id"], f"{f}.id")
     if aid < 1:
         raise c.err(f"{f}.id", "must be >= 1", aid)
@@ -869,6 +880,8 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
             raise c.err(f"{f}.J", "missing: the rigid_body plant needs each agent's inertia (3 principal moments, or a 3x3 list of rows)")
         J = _inertia(c, d["J"], f"{f}.J")
     R = c.rotation(d.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.R")
+    if kin and abs(R[8] - 1.0) > 1e-9:
+        raise c.err(f"{f}.R", "a vehicle of the kinematic plant has a yaw only: R must be a rotation about e3", d.get("R"))
     om = d["omega"]
     if not isinstance(om, list) or len(om) != 3:
         raise c.err(f"{f}.omega", "must be a list of 3 expressions in t", om)

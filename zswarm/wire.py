@@ -28,8 +28,9 @@ class MessageError(ValueError):
 # {int: float}, "jumps" for [[edge k, t, ξ before, ξ after], ...], "any" (msgpack-native, small)
 SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij,
-    # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p
-    "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,)},
+    # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p;
+    # body-frame relative positions ⁱp_ij (rel_pos, De Carli et al. (2))
+    "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,), "rel_pos": "vecmap"},
     # agent j -> agent i along edge j->i: the sender's clock, then the fields its
     # algorithm writes on out-edges (SPEC.edge_out: numbers or float64 arrays by
     # name; OPEN below), validated by the receiver against its SPEC.edge_in
@@ -42,8 +43,9 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # below and validated by the world against the plant's inputs
     "cmd": {"t_local": "float"},
     # world -> recorder: ids[k] has attitude R[k], position p[k], true angular velocity w[k]
-    # (and, for a rigid-body plant, the torque tau[k] it applied over the last world step)
-    "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3), "tau": (-1, 3)},
+    # (and, for a rigid-body plant, the torque tau[k] it applied over the last world step;
+    # for a kinematic plant, u[k] = [v (body frame), yaw rate] it applied)
+    "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3), "tau": (-1, 3), "u": (-1, 4)},
     # counters of a process
     "stats": {"role": "str", "counters": "any"},
     # run control
@@ -54,7 +56,7 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
 _F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
-OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau"}}
+OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
 # Types whose other keys are named values (a finite number or a float64 array), at most
 # MAX_OPEN of them: what an algorithm declares, which the receiver validates.
 OPEN = frozenset({"edge", "cmd"})
