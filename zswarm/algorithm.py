@@ -55,7 +55,7 @@ SENSORS: Mapping[str, str] = MappingProxyType(
         "velocity_body": "vel_body",  # body-frame v_i^i
         "attitude": "R",  # own attitude R_i
         "position": "p",  # own position p_i
-        "rel_pos": "rel_pos",  # {j: ⁱp_ij = R_i^T (p_j − p_i)} toward every graph neighbour (De Carli et al. (2))
+        "rel_pos": "rel_pos",  # {j: ⁱp_ij = R_i^T (p_j − p_i)} toward the robots i senses, agents[].neighbors (De Carli et al. (2))
     }
 )
 GRAPHS = ("any", "leader_follower", "tree")

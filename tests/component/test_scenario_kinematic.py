@@ -38,19 +38,23 @@ def test_a_kinematic_plant_refuses_prescribed_motions_and_non_yaw_attitudes():
 
 
 def test_world_on_a_kinematic_plant_measures_relative_positions():
-    text = re.sub(r"(?m)^omega = .*\n", "", _text()).replace("[world]\n", '[world]\nsensors = ["rel_att", "gyro", "rel_pos"]\n', 1)
+    """§3.2's eight agents (a directed leader-follower graph) on the kinematic plant: agent 3
+    senses 1 and 2 (its neighbours) and is sensed by 4 and 7; ⁱp_ij goes only toward the
+    robots it senses."""
+    text = (TOPO / "thesis-3.2-fixed8.toml").read_text()
+    text = re.sub(r"(?m)^omega = .*\n", "", text).replace("[world]\n", '[world]\nplant = "kinematic"\n', 1)
     sc = loads(text, "k.toml")
+    assert sc.agent(3).neighbors == (1, 2) and set(sc.graph_neighbors(3)) == {1, 2, 4, 7}
     bus = MemoryBus()
     got = {}
-    bus.subscribe(keys.sense("r", 1), lambda key, payload: got.setdefault("m", payload))
+    bus.subscribe(keys.sense("r", 3), lambda key, payload: got.setdefault("m", payload))
     w = World(sc, bus, "r", seed=1)
     w.sensors = {i: s | {"rel_pos"} for i, s in w.sensors.items()}  # this observer declares no rel_pos; fit it
     assert isinstance(w.motion, KinematicPlant)
     w.sample()  # MemoryBus delivers synchronously
     m = wire.decode(got["m"], "sense")
-    a = sc.agent(1)
-    R1 = np.array(a.R_matrix).reshape(3, 3)
-    assert set(m["rel_pos"]) == set(sc.graph_neighbors(1)) and m["rel_pos"]
+    a = sc.agent(3)
+    R3 = np.array(a.R_matrix).reshape(3, 3)
+    assert set(m["rel_pos"]) == {1, 2}
     for j, d in m["rel_pos"].items():
-        pj = np.array(sc.agent(j).p)
-        assert np.allclose(d, R1.T @ (pj - np.array(a.p)), atol=1e-12)
+        assert np.allclose(d, R3.T @ (np.array(sc.agent(j).p) - np.array(a.p)), atol=1e-12)
