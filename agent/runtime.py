@@ -283,6 +283,7 @@ class TickView:
         self.id = node.id
         self.role = a.role
         self.neighbors = a.neighbors
+        self.senses = sc.sensed(node.id)
         self.k_neighbors = a.k_neighbors
         self.out_neighbors = node.out
         self.tree_edges = node.tree_edges

@@ -88,7 +88,7 @@ class World:
         self.rel_pos_std = math.sqrt(scenario.rel_pos_var)
         self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
         self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
-        self.sensed = {i: scenario.agent(i).neighbors for i in self.ids}
+        self.sensed = {i: scenario.sensed(i) for i in self.ids}
         # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
         pairs = [(i, j) for i in self.ids for j in self.nbrs[i]]
         self._pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
@@ -150,7 +150,7 @@ class World:
             if "position" in want:
                 m["p"] = p[a]
             if "rel_pos" in want:
-                # toward the robots i senses (its agents[].neighbors): the sensing graph is directed
+                # toward the robots i senses (Scenario.sensed): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
             self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
         self.seq += 1

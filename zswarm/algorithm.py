@@ -58,7 +58,7 @@ SENSORS: Mapping[str, str] = MappingProxyType(
         "rel_pos": "rel_pos",  # {j: ⁱp_ij = R_i^T (p_j − p_i)} toward the robots i senses, agents[].neighbors (De Carli et al. (2))
     }
 )
-GRAPHS = ("any", "leader_follower", "tree")
+GRAPHS = ("any", "leader_follower", "tree", "sensing")
 RESERVED = frozenset({"v", "type", "src", "seq", "t", "t_local", "rx"})  # message envelope and runtime keys
 PARAMS = ("", "A", "hybrid", "hybrid_vf")
 
@@ -119,7 +119,7 @@ class AlgorithmSpec:
     edge_out: Mapping[str, Field]  # fields written on each out-edge
     parts: tuple[Part, ...]  # empty: the agent only publishes what it measures (a leader)
     command: Mapping[str, Field] = field(default_factory=dict)  # sent to the world on cmd/<i> (observers: none)
-    graph: str = "any"  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2) | "any"
+    graph: str = "any"  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2) | "sensing" (De Carli et al.: directed sensing, undirected communication) | "any"
     params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P) | "hybrid_vf" (and δ_Q̃, Π of Condition 5.1)
     stale: StalePolicy = StalePolicy(0.2, "drop")
     leader: str | None = None  # the algorithm agents with role "leader" run (None: no leaders)
@@ -192,7 +192,8 @@ class View(Protocol):
 
     id: int
     role: str
-    neighbors: tuple[int, ...]  # in-neighbours N_i
+    neighbors: tuple[int, ...]  # in-neighbours N_i (a "sensing" graph: the robots i senses and those sensing i)
+    senses: tuple[int, ...]  # the robots whose relative positions i measures (sensor rel_pos)
     k_neighbors: tuple[float, ...]  # k_ij, same order
     out_neighbors: tuple[int, ...]
     tree_edges: Mapping[int, tuple[int, bool]]  # tree neighbour j -> (edge k, this agent heads k)

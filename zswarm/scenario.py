@@ -139,6 +139,7 @@ class AgentSpec:
     velocity: tuple[Expr, Expr, Expr] | None = None  # inertial velocity v_i(t), m/s (None: fixed or formation)
     gains: Mapping[str, float] = field(default_factory=dict)  # the algorithm's gains for this agent
     J: tuple[float, ...] | None = None  # inertia, row-major 3×3 (rigid_body plant)
+    senses: tuple[int, ...] = ()  # a "sensing" graph's robots this agent senses (then neighbors: both ways)
 
     @property
     def R_matrix(self) -> np.ndarray:
@@ -244,6 +245,12 @@ class Scenario:
 
     def out_neighbors(self, j: int) -> tuple[int, ...]:
         return tuple(i for (s, i) in self.edges if s == j)
+
+    def sensed(self, i: int) -> tuple[int, ...]:
+        """The robots agent ``i`` measures relative positions of: its sensing out-edges for a
+        "sensing" graph (De Carli et al.), else its neighbours."""
+        a = self.agent(i)
+        return a.senses if self.info.graph == "sensing" else a.neighbors
 
     def graph_neighbors(self, i: int) -> tuple[int, ...]:
         """In- and out-neighbours of ``i``: the agents it measures bearings to."""
@@ -574,6 +581,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             )
         except GraphError as exc:
             raise ScenarioError(f"{path}: {exc}") from None
+    elif info.graph == "sensing":
+        agents = _sensing(c, doc, algo, agents, seen)
     else:
         oriented, oriented_from = _tree(c, doc.get("graph"), agents, seen)
         nbrs = {a.id: tuple(sorted({t for h, t in oriented if h == a.id} | {h for h, t in oriented if t == a.id})) for a in agents}
@@ -848,6 +857,37 @@ def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
         raise c.err(f"{f}.drift_ppm", "must be within ±100000 ppm", drift)
     offset = c.num(d.get("offset", base.offset), f"{f}.offset")
     return ClockSpec(rate, jitter, drift, offset)
+
+
+def _sensing(c: _Ctx, doc: Mapping[str, Any], algo: str, agents: list[AgentSpec], seen: Mapping[int, str]) -> list[AgentSpec]:
+    """A directed sensing graph (De Carli et al. §II): ``agents[].neighbors`` lists the robots
+    each one senses; communication is its undirected counterpart, so every agent's
+    neighbours become the robots it senses and those that sense it (``senses`` keeps the
+    first).  Every robot needs a sensing edge, and the undirected graph must be connected."""
+    if "graph" in doc:
+        raise c.err("graph", f"{algo} takes its directed sensing graph from agents[].neighbors (the robots each one senses), not [graph]")
+    ids = {a.id for a in agents}
+    sensed_by: dict[int, set[int]] = {a.id: set() for a in agents}
+    for a in agents:
+        for j in a.neighbors:
+            if j not in ids:
+                raise c.err(f"{seen[a.id]}.neighbors", f"unknown agent {j}", list(a.neighbors))
+            if j == a.id:
+                raise c.err(f"{seen[a.id]}.neighbors", f"agent {a.id} cannot sense itself", list(a.neighbors))
+            sensed_by[j].add(a.id)
+    for a in agents:
+        if not a.neighbors and not sensed_by[a.id]:
+            raise c.err(f"{seen[a.id]}.neighbors", f"robot {a.id} has no sensing edge: it senses no robot and no robot senses it", [])
+    comm = {a.id: set(a.neighbors) | sensed_by[a.id] for a in agents}
+    start = agents[0].id
+    reached, todo = {start}, [start]
+    while todo:
+        for j in comm[todo.pop()] - reached:
+            reached.add(j)
+            todo.append(j)
+    if reached != ids:
+        raise c.err("agents[].neighbors", f"the sensing graph's undirected version is disconnected: {sorted(reached)} do not reach {sorted(ids - reached)}")
+    return [replace(a, senses=a.neighbors, neighbors=tuple(sorted(comm[a.id])), k_neighbors=(1.0,) * len(comm[a.id])) for a in agents]
 
 
 def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpec, gains: Mapping[str, float], leaders: bool, plant: str = "prescribed") -> AgentSpec:
