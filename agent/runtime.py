@@ -401,11 +401,13 @@ class TickView:
 class _PartState:
     """A part's schedule: when it last stepped (own clock) and how long it waits between steps."""
 
-    __slots__ = ("part", "last", "min_gap")
+    __slots__ = ("part", "last", "min_gap", "steps", "t_first")
 
     def __init__(self, part: Part, clock_rate: float) -> None:
         self.part = part
         self.last = 0.0
+        self.steps = 0  # steps taken after the first tick (the achieved rate, in the stats)
+        self.t_first: float | None = None
         # A part with its own rate steps when a step ends at least this long after
         # its last one: its period less half a clock period, so that step ends
         # jittered by the sensor grid do not make it skip a whole tick.  0: every step.
@@ -428,6 +430,7 @@ class AgentNode:
         if scenario.params is not None:
             pr = scenario.params
             values.update(A=pr.A_matrix, u=np.array(pr.u), gamma=pr.gamma, delta=pr.delta, Xi=pr.Xi, delta_Q=pr.delta_Q, Pi=pr.Pi)
+            values["p_star"] = {a.id: np.array(pr.p_star[n]) for n, a in enumerate(scenario.agents)} if pr.p_star else {}
         self.gains = make_gains(self.algo, values)
         # Tree edges (§4): neighbour j -> (edge index k, whether this agent heads k and owns ξ_k).
         self.tree_edges: dict[int, tuple[int, bool]] = {}
@@ -444,6 +447,8 @@ class AgentNode:
             {k: float(scenario.agent(scenario.oriented[k - 1][0]).estimate.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if not head},
             np.array(est.Q).reshape(3, 3),
             est.zeta,
+            seed,
+            np.array(self.spec.p),
         )
         self.state = self.algo.initial_state(init, self.gains)
         self.parts = [_PartState(p, self.spec.clock.rate) for p in self.aspec.parts]
@@ -549,6 +554,9 @@ class AgentNode:
                         continue
                     dt, ps.last = t_e - ps.last, t_e
                     outputs = self._step_part(ps, dt) or outputs
+                    ps.steps += 1
+                    if ps.t_first is None:
+                        ps.t_first = t_e
                 self.t_step = t_e
         pub: Publish | None = self.algo.publish(self.state, outputs, view)
         if pub is None:
@@ -670,6 +678,15 @@ class AgentNode:
                 "stale_terms": {f"{j}->{self.id}": n for j, n in sorted(self.stale_terms.items())},
             }
         )
+        if len(self.parts) > 1:  # what each part achieved on this agent's clock (De Carli: 200/100/50 Hz)
+            c["parts"] = {
+                ps.part.name: {
+                    "steps": ps.steps,
+                    "rate_hz": (ps.steps - 1) / (ps.last - ps.t_first) if ps.t_first is not None and ps.last > ps.t_first else 0.0,
+                    "configured_hz": ps.part.rate if ps.part.rate is not None else self.spec.clock.rate,
+                }
+                for ps in self.parts
+            }
         if self.jump_count:
             c["jumps"] = {str(k): n for k, n in sorted(self.jump_count.items())}
         if self.agent_jump_count:

@@ -60,7 +60,7 @@ SENSORS: Mapping[str, str] = MappingProxyType(
 )
 GRAPHS = ("any", "leader_follower", "tree", "sensing")
 RESERVED = frozenset({"v", "type", "src", "seq", "t", "t_local", "rx"})  # message envelope and runtime keys
-PARAMS = ("", "A", "hybrid", "hybrid_vf")
+PARAMS = ("", "A", "hybrid", "hybrid_vf", "formation")
 
 
 class AlgorithmError(ValueError):
@@ -120,7 +120,7 @@ class AlgorithmSpec:
     parts: tuple[Part, ...]  # empty: the agent only publishes what it measures (a leader)
     command: Mapping[str, Field] = field(default_factory=dict)  # sent to the world on cmd/<i> (observers: none)
     graph: str = "any"  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2) | "sensing" (De Carli et al.: directed sensing, undirected communication) | "any"
-    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P) | "hybrid_vf" (and δ_Q̃, Π of Condition 5.1)
+    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P) | "hybrid_vf" (and δ_Q̃, Π of Condition 5.1) | "formation" (p*_i)
     stale: StalePolicy = StalePolicy(0.2, "drop")
     leader: str | None = None  # the algorithm agents with role "leader" run (None: no leaders)
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
@@ -155,6 +155,8 @@ class Initial:
     xi_in: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of every edge k this agent is the tail of
     Q: np.ndarray = field(default_factory=lambda: np.eye(3))  # Q_i(0) (velocity-free law, §5.4)
     zeta: float = 0.0  # ζ_i(0)
+    seed: int = 0  # the run's seed: for initial estimates drawn as a paper draws them (De Carli et al. §IV)
+    p0: np.ndarray = field(default_factory=lambda: np.zeros(3))  # true p_i(0), for estimates drawn around it
 
 
 @dataclass(frozen=True, slots=True)
@@ -347,6 +349,7 @@ PARAM_NAMES: Mapping[str, frozenset[str]] = MappingProxyType(
         "A": frozenset({"A"}),
         "hybrid": frozenset({"A", "u", "gamma", "delta", "Xi"}),
         "hybrid_vf": frozenset({"A", "u", "gamma", "delta", "Xi", "delta_Q", "Pi"}),
+        "formation": frozenset({"p_star"}),  # {agent id: p*_i} (De Carli et al. (30))
     }
 )
 

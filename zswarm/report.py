@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import report_sync, so3, wire
+from zswarm import report_formation, report_sync, so3, wire
 from zswarm.record import ALIVE_CHANNEL, read, unpack
 from zswarm.scenario import Scenario
 
@@ -391,6 +391,8 @@ def summarize(
             "malformed_received": int(st.get("malformed", 0)),
             "stale_terms": int(sum(st.get("stale_terms", {}).values())),
         }
+        if "parts" in st:  # each part's achieved rate on the agent's clock
+            agents[str(a.id)]["parts"] = st["parts"]
         for link, c in st.get("links", {}).items():
             links[link] = {"sent": sent.get(link, 0), **c}
     world = rec.stats.get(("world", 0), {})
@@ -405,6 +407,10 @@ def summarize(
         sm = report_sync.sync_metrics(sc, rec) if sm is None else sm
         extra = report_sync.summary(sc, rec, sm, agents)
         conv = report_sync.convergence(sm, duration, thresholds)
+    elif report_formation.is_formation(sc):
+        fm = report_formation.formation_metrics(sc, rec)
+        extra = report_formation.summary(sc, rec, fm, agents)
+        conv = report_formation.convergence(fm, duration)
     elif sc.info.graph == "tree":
         tm = tree_metrics(sc, rec) if tm is None else tm
         extra = _tree_summary(sc, rec, agents, t_end, tm)
@@ -418,9 +424,9 @@ def summarize(
         "completed": rec.stop_seen,
         "agents": agents,
         "links": dict(sorted(links.items())),
-        "mean_attitude_error_final": _nanmean([f["attitude_error_final"] for f in followers]) if conv is None else extra["mean_relative_attitude_error_final"],
+        "mean_attitude_error_final": _nanmean([f["attitude_error_final"] for f in followers]) if conv is None or "formation" in extra else extra["mean_relative_attitude_error_final"],
         "mean_position_error_final": _nanmean([f["position_error_final"] for f in followers]),
-        "mean_over": "edges: |R̄_k|_I of the truth" if conv is not None else "followers" if sc.info.graph != "tree" else "agents (up to a common frame)",
+        "mean_over": "robots: |R̂_i R_i^T|_I and |p̂_i − p_i| as they stand, without the common rotation (see formation)" if "formation" in extra else "edges: |R̄_k|_I of the truth" if conv is not None else "followers" if sc.info.graph != "tree" else "agents (up to a common frame)",
         "final_window_s": 1.0,
         "convergence": convergence(sc, errs, tm, duration, thresholds) if conv is None else conv,
         "stale_policy": {"policy": sc.stale.policy, "max_age_s": sc.stale.max_age},
@@ -546,6 +552,9 @@ def make_report(
     write_errors_csv(out_dir / "errors.csv", errs)
     if tm is not None:
         write_edges_csv(out_dir / "edges.csv", sc, tm, rec)
+    fm = report_formation.formation_metrics(sc, rec) if report_formation.is_formation(sc) else None
+    if fm is not None:
+        report_formation.write_csv(out_dir / "formation.csv", fm)
     if sm is not None:
         report_sync.write_edges_csv(out_dir / "edges.csv", sc, sm, rec)
         report_sync.write_agents_csv(out_dir / "agents.csv", sc, sm)
@@ -553,6 +562,9 @@ def make_report(
     if plots:
         if sm is not None:
             report_sync.plot(out_dir / "plots", sc, sm, rec)
+        elif fm is not None:
+            report_formation.plot(out_dir / "plots", sc, fm)
+            plot(out_dir / "plots", sc, errs)
         elif tm is None:
             plot(out_dir / "plots", sc, errs)
         else:
@@ -664,6 +676,16 @@ def table(summary: dict[str, Any]) -> str:
             f"{_e(a['position_error_final']):>10} {a['steps']:>6} {a['step_rate_hz']:>8.2f} {a['missed_deadlines']:>6}"
         )
     drops = sum(v.get("dropped", 0) for v in summary["links"].values())
+    if "formation" in summary:
+        lines.append("(att.err / pos.err as they stand; up to the common rotation and translation:)")
+        lines += report_formation.table_lines(summary)
+        parts = {n: [] for a in summary["agents"].values() for n in a.get("parts", {})}
+        for a in summary["agents"].values():
+            for n, v in a.get("parts", {}).items():
+                parts[n].append(v["rate_hz"])
+        if parts:
+            lines.append("part rates (Hz, min-max over robots): " + ", ".join(f"{n} {min(v):.1f}-{max(v):.1f}" for n, v in parts.items()))
+        tree = False
     if tree:
         lines.append("(agent errors are up to a common frame; see summary.json errors_up_to)")
         lines.append(f"{'edge':>5} {'head->tail':<10} {'|R̄_k|_I':>10} {'rel.pos':>10} {'jumps':>6} {'ξ final':>9}")

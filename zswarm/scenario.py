@@ -92,6 +92,8 @@ class Params:
     # The velocity-free law's auxiliary hybrid variable ζ_i (§5.4, Condition 5.1): its δ_Q̃ and Π.
     delta_Q: float = 0.0
     Pi: tuple[float, ...] = ()
+    # De Carli et al. (30): the desired offsets p*_i, one per agent in the agents' order.
+    p_star: tuple[tuple[float, float, float], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -552,6 +554,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         if agents[-1].id in seen:
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
+    if params is not None and info.params == "formation" and len(params.p_star) != len(agents):
+        raise c.err("algorithm.params.p_star", f"lists {len(params.p_star)} offsets for {len(agents)} agents (one per agent, in the agents' order)")
     ids = sorted(seen)
     if ids != list(range(1, len(ids) + 1)):
         raise c.err("agents", "ids must be 1..n, each once", ids)
@@ -761,6 +765,12 @@ def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
         if d is not None:
             raise c.err(f, "this algorithm takes no params")
         return None
+    if info.params == "formation":
+        d = c.table(d if d is not None else {}, f, {"p_star"}, {"p_star"})
+        ps = d["p_star"]
+        if not isinstance(ps, list) or not ps:
+            raise c.err(f"{f}.p_star", "must be a list of desired offsets [x, y, z] (m), one per agent in the agents' order", ps)
+        return Params((1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), p_star=tuple(c.vec3(x, f"{f}.p_star[{n}]") for n, x in enumerate(ps)))
     allowed = {"A"} if info.params == "A" else {"A", "u", "gamma", "delta", "Xi"} | ({"delta_Q", "Pi"} if info.params == "hybrid_vf" else set())
     d = c.table(d if d is not None else {}, f, allowed, allowed)
     a = d["A"]

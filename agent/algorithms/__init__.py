@@ -25,6 +25,7 @@ BUILTIN: MappingProxyType[str, str] = MappingProxyType(
             "attitude_sync_continuous",
             "attitude_sync_hybrid",
             "attitude_sync_velocity_free",
+            "common_frame_formation",
         )
     }
 )

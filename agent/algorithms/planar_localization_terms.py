@@ -164,3 +164,27 @@ def formation_velocity(
     k = 1.0 if n <= nu_max else nu_max / n
     return k_c * k * mu, mu
 
+
+
+def position_step(
+    p_hat_i: Vec3,
+    R_hat_i: Mat3,
+    v_i: Vec3,
+    out_terms: list[tuple[Vec3, Vec3]],
+    in_terms: list[tuple[Vec3, Mat3, Vec3]],
+    k_p: float,
+    dt: float,
+) -> Vec3:
+    """(21) over ``dt`` with everything but p̂_i held: ``p̂̇_i = −k_p d_i p̂_i + b``, d_i the
+    number of terms, solved exactly (``p̂(dt) = e^{−k_p d_i dt} p̂ + (1 − e^{−k_p d_i dt})/(k_p d_i) · b``)."""
+    d = len(out_terms) + len(in_terms)
+    b = R_hat_i @ v_i
+    for p_hat_j, p_ij in out_terms:
+        b = b + k_p * (p_hat_j - R_hat_i @ p_ij)
+    for p_hat_j, R_hat_j, p_ji in in_terms:
+        b = b + k_p * (p_hat_j + R_hat_j @ p_ji)
+    if d == 0:
+        return p_hat_i + dt * b
+    a = k_p * d
+    e = math.exp(-a * dt)
+    return e * p_hat_i + (1.0 - e) / a * b

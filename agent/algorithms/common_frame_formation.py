@@ -1,0 +1,356 @@
+"""De Carli, Restrepo and Robuffo Giordano (IEEE L-CSS 2024): cooperative localization in a
+common frame from body-frame relative positions, feeding formation control.
+
+Four parts, each at its own rate on the agent's clock (the paper's §IV rates):
+
+* ``relative`` (200 Hz): the adaptive relative-state observer (7) on every edge (i, j)
+  robot i senses; (8) when j senses i too.  (8) is one system per bidirectional edge
+  (p̂_ij, p̂_ji, one ẑ_ψij): the robot with the smaller id runs all of it, with j's
+  measurement ʲp_ji received on the edge, and sends ẑ_ψij; the other takes
+  ẑ_ψji = Z ẑ_ψij.  Two copies of ẑ, one per robot, each fed the other's error
+  ʲe_pji held over a step, drift apart: their difference is a neutral mode of (8)
+  (ḋ = Ω d) that the held errors drive unstable at k_ψ|v|²dt ≈ 2 (measured: 0.4 apart
+  at t = 0, 11 at 18 s); exchanging errors with one owner still leaves a loop through
+  the network (residual 0.02–0.05 against 2e-3 for (7) alone);
+* ``yaw`` (100 Hz): the common-frame yaw observer (13) over the communication
+  neighbours, with z_ij from the renormalised ẑ_ψij (Remark 3) — i's own when it senses j,
+  else the conjugate of the one j sends (Remark 4);
+* ``position`` (50 Hz): the common-frame position observer (21), R̂_i = R_z(∠ẑ_i);
+* ``control`` (every agent step): the formation law (30) with the saturation k_i
+  (ν_max), its second sum turned into i's frame (planar_localization_terms), and the
+  yaw rate from a smooth random spline (seeded per robot), as in §IV.
+
+The commands go to the world's kinematic plant (1) on cmd/<i>: ``vel`` (body frame) and
+``yaw_rate``.  The observers use the measured own velocity (sensor ``velocity_body``)
+and yaw rate (gyro, e3 component): what the vehicle does, not what it was told.
+
+Choices the paper leaves open (stated in the README too): p̂_i(0) = p_i(0) + N(0, σ² I)
+with σ = ``p0_std`` (1 m) and ẑ_i(0) = e^{ιθ}, θ uniform on (−π, π], both drawn from
+the run's seed and the robot's id, so robot i can re-draw a neighbour's ẑ_j(0) and start
+ẑ_ψij(0) = z̄̂_i(0) ẑ_j(0), consistent around every cycle; ⁱp̂_ij(0) is the first
+measurement ⁱp_ij (e_p = 0: only ẑ_ψij has to be learned).  The yaw spline: knots every
+``yaw_knot`` s with values uniform in ±``yaw_rate_max``, joined by a C¹ cubic
+(Catmull–Rom).
+
+Symbols -> names: see planar_localization_terms; p*_i ``p_star[i]`` ([algorithm.params]).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from agent.algorithms import planar_localization_terms as pl
+from zswarm.algorithm import AlgorithmSpec, Field, Initial, Part, Publish, StalePolicy, View
+
+EDGE_OUT = {
+    "vel": Field((3,), doc="v_i, body frame (m/s): V̄_i for the neighbour's (7)"),
+    "yaw_rate": Field((), doc="ω_i (rad/s): Ω_ij"),
+    "zc": Field((2,), doc="ẑ_i = [Re, Im] (13)"),
+    "p_hat": Field((3,), doc="p̂_i (21)"),
+    "p_meas": Field((3,), optional=True, doc="ⁱp_ij when i senses the receiver j: (21)/(30)'s in-terms there"),
+    "z_rel": Field((2,), optional=True, doc="ẑ_ψij when i senses j: z_ji at j (Remark 4)"),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Gains:
+    k_pe: float
+    k_psi: float
+    k_z: float
+    k_p: float
+    k_c: float
+    nu_max: float
+    p0_std: float
+    yaw_rate_max: float
+    yaw_knot: float
+    p_star: Mapping[int, np.ndarray]
+
+
+@dataclass(frozen=True, slots=True)
+class State:
+    id: int
+    seed: int
+    p_rel: Mapping[int, np.ndarray]  # ⁱp̂_ij of the edges i senses
+    z_rel: Mapping[int, np.ndarray]  # ẑ_ψij of the edges i senses (2-vectors, not renormalised)
+    zc: complex  # ẑ_i
+    p_hat: np.ndarray  # p̂_i
+    yaw_knots: np.ndarray  # ω at t = 0, yaw_knot, 2 yaw_knot, ...
+    e_p: Mapping[int, np.ndarray] = field(default_factory=dict)  # ⁱe_pij after the last relative step
+    p_rev: Mapping[int, np.ndarray] = field(default_factory=dict)  # ʲp̂_ji of the bidirectional edges this robot runs (8) for
+    v_cmd: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    w_cmd: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Outputs:
+    v: np.ndarray
+    w: float
+    mu: np.ndarray
+
+
+def _draw(seed: int, i: int) -> tuple[float, np.ndarray]:
+    """Robot i's initial yaw-estimate angle and position-estimate noise (unit std)."""
+    rng = np.random.default_rng([seed % (1 << 63), i, 0xDC])
+    theta = math.pi - 2.0 * math.pi * float(rng.random())  # uniform on (−π, π]
+    return theta, rng.normal(size=3)
+
+
+def initial_state(init: Initial, gains: Gains) -> State:
+    theta, n = _draw(init.seed, init.id)
+    rng = np.random.default_rng([init.seed % (1 << 63), init.id, 0x5B])
+    knots = rng.uniform(-gains.yaw_rate_max, gains.yaw_rate_max, size=4096)
+    knots[0] = 0.0  # start at rest in yaw, like the vehicle
+    return State(init.id, init.seed, {}, {}, complex(math.cos(theta), math.sin(theta)), np.asarray(init.p0, dtype=float) + gains.p0_std * n, knots)
+
+
+def yaw_rate(state: State, t: float, gains: Gains) -> float:
+    """The C¹ Catmull–Rom spline through the knots at multiples of ``yaw_knot``."""
+    h = gains.yaw_knot
+    k = min(int(max(t, 0.0) / h), len(state.yaw_knots) - 3)
+    s = max(t, 0.0) / h - k
+    y = state.yaw_knots
+    p0, p1, p2, p3 = y[max(k - 1, 0)], y[k], y[k + 1], y[k + 2]
+    return float(0.5 * ((2 * p1) + (-p0 + p2) * s + (2 * p0 - 5 * p1 + 4 * p2 - p3) * s**2 + (-p0 + 3 * p1 - 3 * p2 + p3) * s**3))
+
+
+def _own(view: View) -> tuple[np.ndarray, float]:
+    s = view.sense
+    v = np.asarray(s.get("vel_body", np.zeros(3)), dtype=float)
+    g = s.get("gyro")
+    return v, float(g[2]) if g is not None else 0.0
+
+
+# --------------------------------------------------------------------------- (7)/(8), 200 Hz
+
+
+@dataclass(frozen=True, slots=True)
+class RelInputs:
+    v_i: np.ndarray
+    w_i: float
+    # (j, ⁱp_ij, v_j, ω_j, ʲp_ji when i runs (8) for the edge, ẑ_ψji as sent by j when j does)
+    edges: tuple[tuple[int, np.ndarray, np.ndarray, float, np.ndarray | None, np.ndarray | None], ...]
+
+
+def relative_inputs(view: View, gains: Gains) -> RelInputs:
+    v_i, w_i = _own(view)
+    meas = view.sense.get("rel_pos", {})
+    edges = []
+    for j in view.senses:
+        p_ij = meas.get(j)
+        m = view.neighbor(j)
+        if p_ij is None or m is None:
+            continue  # no measurement or nothing heard from j yet: (7) needs v_j, ω_j
+        f = m.fields
+        both = f.get("p_meas") is not None  # j senses i too: (8), run by the smaller id
+        p_ji = np.asarray(f["p_meas"], dtype=float) if both and view.id < j else None
+        z_ji = np.asarray(f["z_rel"], dtype=float) if both and j < view.id and f.get("z_rel") is not None else None
+        edges.append((j, np.asarray(p_ij, dtype=float), np.asarray(f["vel"], dtype=float), float(f["yaw_rate"]), p_ji, z_ji))
+    return RelInputs(v_i, w_i, tuple(edges))
+
+
+def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> tuple[State, None]:
+    """(7) per sensed edge, (8) for the bidirectional edges this robot runs; RK4 with the
+    measurements and the neighbour's velocities held over the step."""
+    p_rel, p_rev, z_rel, e_out = dict(state.p_rel), dict(state.p_rev), dict(state.z_rel), {}
+    v_i, w_i, k_pe, k_psi = inputs.v_i, inputs.w_i, gains.k_pe, gains.k_psi
+    for j, p_ij, v_j, w_j, p_ji, z_from_j in inputs.edges:
+        if z_from_j is not None:  # j runs (8) for this edge: ẑ_ψij = Z ẑ_ψji
+            z_rel[j] = pl.Z @ z_from_j
+            p_rel.pop(j, None)
+            continue
+        if j not in p_rel:  # first measurement of edge (i, j): stated initialisation
+            p_rel[j] = p_ij.copy()
+            if j not in z_rel:
+                theta_j, _ = _draw(state.seed, j)
+                z_ij = state.zc.conjugate() * complex(math.cos(theta_j), math.sin(theta_j)) / abs(state.zc)
+                z_rel[j] = np.array([z_ij.real, z_ij.imag])
+        if p_ji is None:
+            x = np.concatenate([p_rel[j], z_rel[j]])
+
+            def f(x: np.ndarray, p_ij: np.ndarray = p_ij, v_j: np.ndarray = v_j, w_j: float = w_j) -> np.ndarray:
+                dp, dz = pl.relative_state_rates(x[:3], x[3:], p_ij, v_i, w_i, v_j, w_j, k_pe, k_psi)
+                return np.concatenate([dp, dz])
+
+        else:  # (8): x = [ⁱp̂_ij, ʲp̂_ji, ẑ_ψij]
+            if j not in p_rev:
+                p_rev[j] = p_ji.copy()
+            x = np.concatenate([p_rel[j], p_rev[j], z_rel[j]])
+
+            def f(x: np.ndarray, p_ij: np.ndarray = p_ij, v_j: np.ndarray = v_j, w_j: float = w_j, p_ji: np.ndarray = p_ji) -> np.ndarray:
+                dp_ji, _ = pl.relative_state_rates(x[3:6], pl.Z @ x[6:], p_ji, v_j, w_j, v_i, w_i, k_pe, k_psi)
+                dp, dz = pl.relative_state_rates(x[:3], x[6:], p_ij, v_i, w_i, v_j, w_j, k_pe, k_psi, (x[3:6] - p_ji, v_i))
+                return np.concatenate([dp, dp_ji, dz])
+
+        k1 = f(x)
+        k2 = f(x + 0.5 * dt * k1)
+        k3 = f(x + 0.5 * dt * k2)
+        k4 = f(x + dt * k3)
+        x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        p_rel[j], z_rel[j] = x[:3], x[-2:]
+        if p_ji is not None:
+            p_rev[j] = x[3:6]
+        e_out[j] = x[:3] - p_ij
+    return replace(state, p_rel=p_rel, p_rev=p_rev, z_rel=z_rel, e_p=e_out), None
+
+
+# --------------------------------------------------------------------------- (13), 100 Hz
+
+
+@dataclass(frozen=True, slots=True)
+class YawInputs:
+    w_i: float
+    nbrs: tuple[tuple[int, complex, np.ndarray | None], ...]  # (j, ẑ_j, ẑ_ψji when j senses i)
+
+
+def yaw_inputs(view: View, gains: Gains) -> YawInputs:
+    _, w_i = _own(view)
+    nbrs = []
+    for j in view.neighbors:
+        m = view.neighbor(j)
+        if m is None:
+            continue
+        z_ji = m.fields.get("z_rel")
+        nbrs.append((j, complex(*np.asarray(m.fields["zc"], dtype=float)), None if z_ji is None else np.asarray(z_ji, dtype=float)))
+    return YawInputs(w_i, tuple(nbrs))
+
+
+def yaw_step(state: State, inputs: YawInputs, dt: float, gains: Gains) -> tuple[State, None]:
+    terms = []
+    for j, zc_j, z_ji in inputs.nbrs:
+        if j in state.z_rel:
+            terms.append((pl.relative_yaw(state.z_rel[j]), zc_j))  # i's own estimate of edge (i, j)
+        elif z_ji is not None:
+            terms.append((pl.relative_yaw(z_ji).conjugate(), zc_j))  # z_ij = z̄_ji (Remark 4)
+    return replace(state, zc=pl.common_yaw_step(state.zc, inputs.w_i, terms, gains.k_z, dt)), None
+
+
+# --------------------------------------------------------------------------- (21), 50 Hz
+
+
+@dataclass(frozen=True, slots=True)
+class PosInputs:
+    v_i: np.ndarray
+    out_terms: tuple[tuple[np.ndarray, np.ndarray], ...]  # (p̂_j, ⁱp_ij)
+    in_terms: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]  # (p̂_j, R̂_j, ʲp_ji)
+
+
+def _rz(zc: complex) -> np.ndarray:
+    return pl.Rz(math.atan2(zc.imag, zc.real))
+
+
+def position_inputs(view: View, gains: Gains) -> PosInputs:
+    v_i, _ = _own(view)
+    meas = view.sense.get("rel_pos", {})
+    out_t, in_t = [], []
+    for j in view.neighbors:
+        m = view.neighbor(j)
+        if m is None:
+            continue
+        f = m.fields
+        p_hat_j = np.asarray(f["p_hat"], dtype=float)
+        if j in view.senses and meas.get(j) is not None:
+            out_t.append((p_hat_j, np.asarray(meas[j], dtype=float)))
+        if f.get("p_meas") is not None:  # j senses i
+            in_t.append((p_hat_j, _rz(complex(*np.asarray(f["zc"], dtype=float))), np.asarray(f["p_meas"], dtype=float)))
+    return PosInputs(v_i, tuple(out_t), tuple(in_t))
+
+
+def position_step(state: State, inputs: PosInputs, dt: float, gains: Gains) -> tuple[State, None]:
+    p = pl.position_step(state.p_hat, _rz(state.zc), inputs.v_i, list(inputs.out_terms), list(inputs.in_terms), gains.k_p, dt)
+    return replace(state, p_hat=p), None
+
+
+# --------------------------------------------------------------------------- (30), every step
+
+
+@dataclass(frozen=True, slots=True)
+class CtrlInputs:
+    t: float
+    out_terms: tuple[tuple[int, np.ndarray], ...]  # (j, ⁱp_ij)
+    in_terms: tuple[tuple[int, complex, np.ndarray], ...]  # (j, ẑ_j, ʲp_ji)
+
+
+def control_inputs(view: View, gains: Gains) -> CtrlInputs:
+    meas = view.sense.get("rel_pos", {})
+    out_t = tuple((j, np.asarray(meas[j], dtype=float)) for j in view.senses if meas.get(j) is not None)
+    in_t = []
+    for j in view.neighbors:
+        m = view.neighbor(j)
+        if m is not None and m.fields.get("p_meas") is not None:
+            in_t.append((j, complex(*np.asarray(m.fields["zc"], dtype=float)), np.asarray(m.fields["p_meas"], dtype=float)))
+    return CtrlInputs(view.t, out_t, tuple(in_t))
+
+
+def control_step(state: State, inputs: CtrlInputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
+    ps = gains.p_star
+    me = ps[state.id]
+    v, mu = pl.formation_velocity(
+        _rz(state.zc),
+        me,
+        [(ps[j], p_ij) for j, p_ij in inputs.out_terms],
+        [(ps[j], _rz(zc_j), p_ji) for j, zc_j, p_ji in inputs.in_terms],
+        gains.k_c,
+        gains.nu_max,
+    )
+    w = yaw_rate(state, inputs.t, gains)
+    return replace(state, v_cmd=v, w_cmd=w), Outputs(v, w, mu)
+
+
+# --------------------------------------------------------------------------- publishing
+
+
+def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
+    v_i, w_i = _own(view)
+    zc = np.array([state.zc.real, state.zc.imag])
+    meas = view.sense.get("rel_pos", {})
+    edges: dict[int, dict[str, Any]] = {}
+    for j in view.out_neighbors:
+        e: dict[str, Any] = {"vel": v_i, "yaw_rate": w_i, "zc": zc, "p_hat": state.p_hat}
+        if j in state.z_rel and meas.get(j) is not None:
+            e.update(p_meas=np.asarray(meas[j], dtype=float), z_rel=state.z_rel[j])
+        edges[j] = e
+    est: dict[str, Any] = {"R_hat": _rz(state.zc), "p_hat": state.p_hat, "zc": zc}
+    for j, z in state.z_rel.items():
+        est[f"z_rel_{j}"] = z
+    command = None
+    if outputs is not None:
+        est.update(v_cmd=outputs.v, w_cmd=outputs.w, mu=outputs.mu)
+        command = {"vel": outputs.v, "yaw_rate": outputs.w}
+    return Publish(edges, est, command)
+
+
+COMMAND = {"vel": Field((3,), doc="v_i, body frame (m/s), De Carli (1)"), "yaw_rate": Field((), doc="ω_i (rad/s)")}
+
+SPEC = AlgorithmSpec(
+    description="De Carli et al. (7)/(8), (13), (21) at 200/100/50 Hz and formation control (30)",
+    gains={
+        "k_pe": 20.0,
+        "k_psi": 600.0,
+        "k_z": 40.0,
+        "k_p": 1.0,
+        "k_c": 0.5,
+        "nu_max": 1.0,
+        "p0_std": 1.0,
+        "yaw_rate_max": 0.5,
+        "yaw_knot": 2.0,
+    },
+    sensors=frozenset({"rel_pos", "velocity_body", "gyro"}),
+    edge_in=EDGE_OUT,
+    edge_out=EDGE_OUT,
+    parts=(
+        Part("relative", relative_inputs, relative_step, 200.0),
+        Part("yaw", yaw_inputs, yaw_step, 100.0),
+        Part("position", position_inputs, position_step, 50.0),
+        Part("control", control_inputs, control_step),
+    ),
+    command=COMMAND,
+    graph="sensing",
+    params="formation",
+    stale=StalePolicy(0.2, "hold"),
+    sensor_use={"rel_pos": "ⁱp_ij (2), every part", "velocity_body": "v_i in (7) and (21)", "gyro": "ω_i in (7) and (13)"},
+)

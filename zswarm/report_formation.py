@@ -1,0 +1,191 @@
+"""Metrics and plots of De Carli et al.'s Fig. 2 for a "sensing"-graph run (common_frame_formation).
+
+On a 10 ms grid, from the truth and each robot's newest estimate at or before it:
+
+(a) relative yaw, per sensing edge (i, j): ``‖ẑ_ψij − z_ψij‖`` (the chordal error e_ψij of
+    (9), ẑ_ψij as the observer holds it, not renormalised);
+(b) common-frame yaw, per robot, up to the common rotation α: ``|ẑ_i/|ẑ_i| · z̄_i · e^{−ια} − 1|``
+    with ``e^{ια} ∝ Σ_i ẑ_i z̄_i/|ẑ_i|`` (the best common rotation; Theorem 2's limit has ẑ_i ∝ α z_i);
+(c) common-frame position, per robot, up to the common rotation and translation:
+    ``‖e_i − ē‖`` with ``e_i = p̂_i − R_z(α) p_i`` (Theorem 3: p̂_i → p̄ + R_αᵀ p_i, R_αᵀ = R_z(α));
+(d) formation, per robot: ``‖(p_i − p̄) − R_z(−α)(p*_i − p̄*)‖`` (bars: means over the
+    robots): (30) drives p_j − p_i to R_α(p*_j − p*_i) in the estimated frame.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zswarm.report_sync import _final, _held, settle_time
+from zswarm.scenario import Scenario
+
+GRID_S = 0.01
+THRESHOLDS = {"relative_yaw": 0.05, "yaw": 0.05, "position_m": 0.1, "formation_m": 0.1}
+
+
+def is_formation(sc: Scenario) -> bool:
+    return sc.info.graph == "sensing"
+
+
+@dataclass
+class FormationMetrics:
+    t: np.ndarray
+    rel_yaw: dict[tuple[int, int], np.ndarray]  # (i, j) -> (a)
+    yaw: dict[int, np.ndarray]  # (b)
+    position: dict[int, np.ndarray]  # (c)
+    formation: dict[int, np.ndarray]  # (d)
+    alpha: np.ndarray  # the common rotation (rad)
+
+
+def _extra_series(rec: Any, i: int, key: str, grid: np.ndarray, width: int) -> np.ndarray:
+    rows = [(t, x[key]) for t, x in rec.extra.get(i, []) if key in x]
+    if not rows:
+        return np.full((len(grid), width), np.nan)
+    return _held(np.array([t for t, _ in rows]), np.array([np.asarray(v, dtype=float).reshape(width) for _, v in rows]), grid)
+
+
+def formation_metrics(sc: Scenario, rec: Any, step: float = GRID_S) -> FormationMetrics:
+    t_end = float(rec.truth_t[-1])
+    grid = np.arange(0.0, t_end + 1e-9, step)
+    ids = list(rec.truth_ids)
+    psi = np.arctan2(rec.truth_R[:, :, 1, 0], rec.truth_R[:, :, 0, 0])
+    Psi = _held(rec.truth_t, psi, grid)  # (T, n)
+    P = _held(rec.truth_t, rec.truth_p, grid)  # (T, n, 3)
+    zc = np.stack([_extra_series(rec, i, "zc", grid, 2) for i in ids], axis=1)  # (T, n, 2)
+    Z = (zc[..., 0] + 1j * zc[..., 1]) / np.abs(zc[..., 0] + 1j * zc[..., 1])
+    Y = Z * np.exp(-1j * Psi)  # ẑ_i z̄_i, unit
+    s = np.nansum(Y, axis=1)
+    alpha = np.angle(s)
+    yaw = {i: np.abs(Y[:, n] * np.exp(-1j * alpha) - 1.0) for n, i in enumerate(ids)}
+    rel: dict[tuple[int, int], np.ndarray] = {}
+    for a in sc.agents:
+        n = ids.index(a.id)
+        for j in sc.sensed(a.id):
+            z = _extra_series(rec, a.id, f"z_rel_{j}", grid, 2)
+            d = Psi[:, ids.index(j)] - Psi[:, n]
+            rel[(a.id, j)] = np.hypot(z[:, 0] - np.cos(d), z[:, 1] - np.sin(d))
+    ph = np.stack([_held(np.array([e[0] for e in rec.est.get(i, [(0.0, None, np.full(3, np.nan))])]), np.array([e[2] for e in rec.est.get(i, [(0.0, None, np.full(3, np.nan))])]), grid) for i in ids], axis=1)
+    c, sn = np.cos(alpha), np.sin(alpha)
+    rp = np.stack([c[:, None] * P[..., 0] - sn[:, None] * P[..., 1], sn[:, None] * P[..., 0] + c[:, None] * P[..., 1], P[..., 2]], axis=-1)  # R_z(α) p
+    e = ph - rp
+    e = e - np.nanmean(e, axis=1, keepdims=True)
+    position = {i: np.linalg.norm(e[:, n], axis=-1) for n, i in enumerate(ids)}
+    pstar = np.array(sc.params.p_star if sc.params is not None and sc.params.p_star else np.zeros((len(ids), 3)))
+    pstar = pstar[[ [a.id for a in sc.agents].index(i) for i in ids]] - pstar.mean(axis=0)
+    # R_z(−α)(p*_i − p̄*)
+    ds = np.stack([c[:, None] * pstar[None, :, 0] + sn[:, None] * pstar[None, :, 1], -sn[:, None] * pstar[None, :, 0] + c[:, None] * pstar[None, :, 1], np.broadcast_to(pstar[None, :, 2], (len(grid), len(ids)))], axis=-1)
+    f = (P - P.mean(axis=1, keepdims=True)) - ds
+    formation = {i: np.linalg.norm(f[:, n], axis=-1) for n, i in enumerate(ids)}
+    return FormationMetrics(grid, rel, yaw, position, formation, alpha)
+
+
+def _max(series: dict[Any, np.ndarray]) -> np.ndarray:
+    """The max over edges / robots at each grid time (NaN before any estimate)."""
+    x = np.stack(list(series.values()))
+    out = np.full(x.shape[1], np.nan)
+    ok = ~np.all(np.isnan(x), axis=0)
+    out[ok] = np.nanmax(x[:, ok], axis=0)
+    return out
+
+
+def summary(sc: Scenario, rec: Any, m: FormationMetrics, agents: dict[str, Any]) -> dict[str, Any]:
+    """The De Carli part of summary.json: per edge (a), per robot (b)-(d) (in ``agents``), settle times."""
+    edges = {
+        f"{i}->{j}": {
+            "bidirectional": i in sc.sensed(j),
+            "relative_yaw_error_final": _final(m.t, v),
+            "relative_yaw_error_max_last_10s": float(np.nanmax(v[m.t >= m.t[-1] - 10.0])),
+            f"settles_below_{THRESHOLDS['relative_yaw']:g}_at": settle_time(m.t, v, THRESHOLDS["relative_yaw"]),
+        }
+        for (i, j), v in m.rel_yaw.items()
+    }
+    for i in m.yaw:
+        a = agents[str(i)]
+        a["yaw_error_final"] = _final(m.t, m.yaw[i])
+        a["common_frame_position_error_final"] = _final(m.t, m.position[i])
+        a["formation_error_final"] = _final(m.t, m.formation[i])
+    settle = {
+        "relative_yaw_max": settle_time(m.t, _max(m.rel_yaw), THRESHOLDS["relative_yaw"]),
+        "yaw_max": settle_time(m.t, _max(m.yaw), THRESHOLDS["yaw"]),
+        "position_max": settle_time(m.t, _max(m.position), THRESHOLDS["position_m"]),
+        "formation_max": settle_time(m.t, _max(m.formation), THRESHOLDS["formation_m"]),
+    }
+    return {
+        "edges": edges,
+        "formation": {
+            "thresholds": THRESHOLDS,
+            "settle_s": settle,  # the first time after which the max over edges / robots stays below
+            "relative_yaw_error_max_final": _final(m.t, _max(m.rel_yaw)),
+            "yaw_error_max_final": _final(m.t, _max(m.yaw)),
+            "position_error_max_final_m": _final(m.t, _max(m.position)),
+            "formation_error_max_final_m": _final(m.t, _max(m.formation)),
+            "common_rotation_alpha_final_rad": float(m.alpha[-1]),
+        },
+    }
+
+
+def convergence(m: FormationMetrics, duration: float) -> dict[str, Any]:
+    s = {k: settle_time(m.t, _max(v), thr) for k, v, thr in (("yaw", m.yaw, THRESHOLDS["yaw"]), ("position", m.position, THRESHOLDS["position_m"]))}
+    return {"attitude_below": THRESHOLDS["yaw"], "position_below": THRESHOLDS["position_m"], "attitude_converged_at": s["yaw"], "position_converged_at": s["position"], "over": "max over robots, up to the common rotation (and translation)"}
+
+
+def write_csv(path: Path, m: FormationMetrics) -> None:
+    keys = [f"rel_yaw_{i}_{j}" for i, j in m.rel_yaw] + [f"{what}_{i}" for what in ("yaw", "position", "formation") for i in m.yaw]
+    cols = list(m.rel_yaw.values()) + [d[i] for d in (m.yaw, m.position, m.formation) for i in m.yaw]
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["t", "alpha", *keys])
+        for k in range(0, len(m.t), 10):  # 10 Hz rows
+            w.writerow([f"{m.t[k]:.2f}", f"{m.alpha[k]:.6f}", *(f"{c[k]:.6e}" for c in cols)])
+
+
+def plot(out: Path, sc: Scenario, m: FormationMetrics) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    panels = (
+        (axes[0][0], m.rel_yaw, "(a) relative yaw ‖ẑ_ψij − z_ψij‖", lambda k: f"{k[0]}→{k[1]}"),
+        (axes[0][1], m.yaw, "(b) yaw in the common frame (up to α)", str),
+        (axes[1][0], m.position, "(c) position in the common frame (up to rotation, translation), m", str),
+        (axes[1][1], m.formation, "(d) formation error, m", str),
+    )
+    for ax, series, title, label in panels:
+        for k, v in series.items():
+            ax.semilogy(m.t, np.maximum(v, 1e-6), lw=0.8, label=label(k))
+        ax.set_title(title, fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=6, ncol=2)
+    for ax in axes[1]:
+        ax.set_xlabel("t (s)")
+    fig.suptitle(f"{sc.name}: De Carli et al. Fig. 2", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "formation.png", dpi=110)
+    plt.close(fig)
+
+
+def table_lines(summary: dict[str, Any]) -> list[str]:
+    f = summary.get("formation", {})
+    s = f.get("settle_s", {})
+
+    def g(x: float | None) -> str:
+        return "never" if x is None else f"{x:.2f} s"
+
+    def e(x: float | None) -> str:
+        return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.2e}"
+
+    return [
+        f"relative yaw (max over edges): final {e(f.get('relative_yaw_error_max_final'))}, below {THRESHOLDS['relative_yaw']:g} from {g(s.get('relative_yaw_max'))}",
+        f"common-frame yaw (max over robots, up to α): final {e(f.get('yaw_error_max_final'))}, below {THRESHOLDS['yaw']:g} from {g(s.get('yaw_max'))}",
+        f"common-frame position (up to rotation and translation): final {e(f.get('position_error_max_final_m'))} m, below {THRESHOLDS['position_m']:g} m from {g(s.get('position_max'))}",
+        f"formation error (max over robots): final {e(f.get('formation_error_max_final_m'))} m, below {THRESHOLDS['formation_m']:g} m from {g(s.get('formation_max'))}",
+    ]
