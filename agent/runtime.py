@@ -401,17 +401,18 @@ class TickView:
 class _PartState:
     """A part's schedule: when it last stepped (own clock) and how long it waits between steps."""
 
-    __slots__ = ("part", "last", "min_gap", "steps", "t_first")
+    __slots__ = ("part", "rate", "last", "min_gap", "steps", "t_first")
 
-    def __init__(self, part: Part, clock_rate: float) -> None:
+    def __init__(self, part: Part, clock_rate: float, scale: float = 1.0) -> None:
         self.part = part
+        self.rate = part.rate * scale if part.rate is not None else None  # Hz (Scenario.part_rate_scale)
         self.last = 0.0
         self.steps = 0  # steps taken after the first tick (the achieved rate, in the stats)
         self.t_first: float | None = None
         # A part with its own rate steps when a step ends at least this long after
         # its last one: its period less half a clock period, so that step ends
         # jittered by the sensor grid do not make it skip a whole tick.  0: every step.
-        self.min_gap = 1.0 / part.rate - 0.5 / clock_rate if part.rate is not None else 0.0
+        self.min_gap = 1.0 / self.rate - 0.5 / clock_rate if self.rate is not None else 0.0
 
 
 class AgentNode:
@@ -451,7 +452,7 @@ class AgentNode:
             np.array(self.spec.p),
         )
         self.state = self.algo.initial_state(init, self.gains)
-        self.parts = [_PartState(p, self.spec.clock.rate) for p in self.aspec.parts]
+        self.parts = [_PartState(p, self.spec.clock.rate, scenario.part_rate_scale) for p in self.aspec.parts]
         self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
         self.jump_count: dict[int, int] = {}
         self.agent_jumps: list[tuple[int, float, float, float]] = []  # (this id, t, ζ before, ζ after) not yet published
@@ -683,7 +684,7 @@ class AgentNode:
                 ps.part.name: {
                     "steps": ps.steps,
                     "rate_hz": (ps.steps - 1) / (ps.last - ps.t_first) if ps.t_first is not None and ps.last > ps.t_first else 0.0,
-                    "configured_hz": ps.part.rate if ps.part.rate is not None else self.spec.clock.rate,
+                    "configured_hz": ps.rate if ps.rate is not None else self.spec.clock.rate,
                 }
                 for ps in self.parts
             }

@@ -184,6 +184,7 @@ class Scenario:
     command_links: LinkSpec = LinkSpec()  # [links.commands]: the agent→world command links' model
     attitude_var: float = 0.0
     rel_pos_var: float = 0.0  # [noise] rel_pos_var: body-frame relative positions (m² per axis)
+    part_rate_scale: float = 1.0  # every part's declared rate times this (zswarm.study.refine: the dt → 0 reference)
     sensors_fitted: frozenset[str] | None = None  # [world] sensors (None: what the algorithms declare)
     module: ModuleType | None = field(default=None, repr=False)  # the algorithm (zswarm.algorithm interface)
     leader_module: ModuleType | None = field(default=None, repr=False)  # what agents with role "leader" run
@@ -204,7 +205,7 @@ class Scenario:
     @property
     def part_rates(self) -> tuple[float, ...]:
         """The declared rates (Hz) of the algorithm's parts that have their own."""
-        return tuple(p.rate for p in self.info.parts if p.rate is not None)
+        return tuple(p.rate * self.part_rate_scale for p in self.info.parts if p.rate is not None)
 
     def link_spec(self, name: str) -> LinkSpec:
         """The model of link ``name`` ("world->3", "1->3", "3->world")."""

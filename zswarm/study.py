@@ -19,14 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import report
+from zswarm import report, report_formation
 from zswarm.scenario import Scenario
 
 
 def refine(sc: Scenario, agent_rate: float = 1000.0, sensor_rate: float = 2000.0) -> Scenario:
-    """The same scenario with every agent ticking at ``agent_rate`` and sensors at ``sensor_rate``."""
+    """The same scenario with every agent ticking at ``agent_rate`` and sensors at ``sensor_rate``;
+    parts with rates of their own (De Carli's 200/100/50 Hz) speed up with the agent's clock."""
+    scale = agent_rate / max(a.clock.rate for a in sc.agents)
     agents = tuple(dataclasses.replace(a, clock=dataclasses.replace(a.clock, rate=agent_rate)) for a in sc.agents)
-    return dataclasses.replace(sc, agents=agents, sensor_rate=sensor_rate, step=min(sc.step, 1.0 / sensor_rate))
+    return dataclasses.replace(sc, agents=agents, sensor_rate=sensor_rate, step=min(sc.step, 1.0 / sensor_rate), part_rate_scale=sc.part_rate_scale * scale)
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,10 @@ def run(sc: Scenario, out_dir: Path) -> Series:
     assert isinstance(msgs, list)
     s = report.make_report(out_dir, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs)
     rec = report.load_recording(msgs)
+    if report_formation.is_formation(sc):  # De Carli: max over robots, up to the common rotation (and translation)
+        fm = report_formation.formation_metrics(sc, rec)
+        f = s["formation"]
+        return Series(fm.t, report_formation._max(fm.yaw), report_formation._max(fm.position), float(f["yaw_error_max_final"]), float(f["position_error_max_final_m"]))
     tm = report.tree_metrics(sc, rec) if sc.info.graph == "tree" else None
     t, att, pos = report.mean_error_series(sc, report.errors(rec), tm, sc.duration)
     if tm is not None:

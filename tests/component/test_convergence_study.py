@@ -57,9 +57,19 @@ def results(tmp_path_factory):
 CLOSED_LOOP = {"thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7"}
 
 
+# Not yet at the equations (issue 11, open): De Carli et al. at the paper's 200/100/50 Hz
+# against the same at 1000/500/250 Hz (zswarm.study.refine scales part rates), 12 s,
+# measured: max yaw error up to α 4.6e-3 against 7.8e-4 at 12 s, below 0.01 from 3.38 s
+# against 0.51 s; position up to rotation and translation 3.6e-2 m against 9.5e-3 m,
+# below 0.1 m from 2.61 s against 2.26 s.  The floors come from inputs held over the
+# slow parts' steps (the 50 Hz position part alone: 3.6e-2 → 9.1e-3 m at 250 Hz); the
+# fix is integrating the own-motion terms over the sensor history, not a looser bound.
+NOT_YET_AT_THE_EQUATIONS = {"decarli-8-formation"}
+
+
 def test_the_shipped_scenarios_are_all_in_the_study():
     shipped = {p.stem for p in TOPO.glob("*.toml") if "noisy" not in p.stem}
-    assert shipped == set(SCENARIOS) | CLOSED_LOOP
+    assert shipped == set(SCENARIOS) | CLOSED_LOOP | NOT_YET_AT_THE_EQUATIONS
 
 
 @pytest.mark.parametrize("name", SCENARIOS)
