@@ -165,7 +165,6 @@ def formation_velocity(
     return k_c * k * mu, mu
 
 
-
 def position_step(
     p_hat_i: Vec3,
     R_hat_i: Mat3,
