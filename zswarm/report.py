@@ -434,7 +434,7 @@ def summarize(
         "overload": overload(agents, world),
         "recorded_messages": rec.counts,
         "malformed_in_recording": rec.malformed,
-    } | ({"warnings": list(sc.warnings)} if sc.warnings else {})
+    } | ({"warnings": list(sc.warnings) + extra.get("warnings", [])} if sc.warnings or extra.get("warnings") else {})
 
 
 def _tree_summary(sc: Scenario, rec: Recording, agents: dict[str, Any], t_end: float, tm: TreeMetrics | None) -> dict[str, Any]:

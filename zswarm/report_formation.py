@@ -26,6 +26,11 @@ from zswarm.report_sync import _final, _held, settle_time
 from zswarm.scenario import Scenario
 
 GRID_S = 0.01
+# Persistent excitation of edge (i, j) (Theorem 1, (10), Remark 2): ∫ |v_j,xy|² dt over a window
+# must stay ≥ μ > 0.  Below this over the run's last 10 s we warn that (7)/(8) cannot converge
+# there (1e-6 m²/s: a planar speed under ≈ 0.3 mm/s on average).
+PE_WINDOW_S = 10.0
+PE_MIN = 1e-6
 THRESHOLDS = {"relative_yaw": 0.05, "yaw": 0.05, "position_m": 0.1, "formation_m": 0.1}
 
 
@@ -41,6 +46,7 @@ class FormationMetrics:
     position: dict[int, np.ndarray]  # (c)
     formation: dict[int, np.ndarray]  # (d)
     alpha: np.ndarray  # the common rotation (rad)
+    excitation: dict[tuple[int, int], float]  # (i, j) -> ∫ |v_j,xy|² dt over the last PE_WINDOW_S
 
 
 def _extra_series(rec: Any, i: int, key: str, grid: np.ndarray, width: int) -> np.ndarray:
@@ -82,7 +88,16 @@ def formation_metrics(sc: Scenario, rec: Any, step: float = GRID_S) -> Formation
     ds = np.stack([c[:, None] * pstar[None, :, 0] + sn[:, None] * pstar[None, :, 1], -sn[:, None] * pstar[None, :, 0] + c[:, None] * pstar[None, :, 1], np.broadcast_to(pstar[None, :, 2], (len(grid), len(ids)))], axis=-1)
     f = (P - P.mean(axis=1, keepdims=True)) - ds
     formation = {i: np.linalg.norm(f[:, n], axis=-1) for n, i in enumerate(ids)}
-    return FormationMetrics(grid, rel, yaw, position, formation, alpha)
+    # planar speeds from the truth (finite differences of p at the truth's samples)
+    tt = np.asarray(rec.truth_t, dtype=float)
+    last = tt >= tt[-1] - PE_WINDOW_S
+    vxy2 = np.zeros((max(len(tt) - 1, 0), len(ids)))
+    if len(tt) > 1:
+        dp = np.diff(rec.truth_p[:, :, :2], axis=0) / np.diff(tt)[:, None, None]
+        vxy2 = np.sum(dp**2, axis=-1)
+    w = np.diff(tt) * last[1:]
+    exc = {(i, j): float(np.sum(w * vxy2[:, ids.index(j)])) for (i, j) in rel}
+    return FormationMetrics(grid, rel, yaw, position, formation, alpha, exc)
 
 
 def _max(series: dict[Any, np.ndarray]) -> np.ndarray:
@@ -116,7 +131,14 @@ def summary(sc: Scenario, rec: Any, m: FormationMetrics, agents: dict[str, Any])
         "position_max": settle_time(m.t, _max(m.position), THRESHOLDS["position_m"]),
         "formation_max": settle_time(m.t, _max(m.formation), THRESHOLDS["formation_m"]),
     }
-    return {
+    weak = [f"{i}->{j}" for (i, j), x in m.excitation.items() if x < PE_MIN]
+    for (i, j), x in m.excitation.items():
+        edges[f"{i}->{j}"]["excitation_last_10s"] = x
+    warnings = [
+        f"edge {e}: no persistent excitation over the last {PE_WINDOW_S:g} s (∫|v_j,xy|² dt < {PE_MIN:g} m²/s: robot {e.split('->')[1]} hardly moves in the plane), so (7)/(8) cannot converge on it (Theorem 1, Remark 2)"
+        for e in weak
+    ]
+    return ({"warnings": warnings} if warnings else {}) | {
         "edges": edges,
         "formation": {
             "thresholds": THRESHOLDS,
@@ -175,6 +197,7 @@ def plot(out: Path, sc: Scenario, m: FormationMetrics) -> None:
 
 def table_lines(summary: dict[str, Any]) -> list[str]:
     f = summary.get("formation", {})
+    pe = [w for w in summary.get("warnings", []) if "persistent excitation" in w]
     s = f.get("settle_s", {})
 
     def g(x: float | None) -> str:
@@ -188,4 +211,4 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
         f"common-frame yaw (max over robots, up to α): final {e(f.get('yaw_error_max_final'))}, below {THRESHOLDS['yaw']:g} from {g(s.get('yaw_max'))}",
         f"common-frame position (up to rotation and translation): final {e(f.get('position_error_max_final_m'))} m, below {THRESHOLDS['position_m']:g} m from {g(s.get('position_max'))}",
         f"formation error (max over robots): final {e(f.get('formation_error_max_final_m'))} m, below {THRESHOLDS['formation_m']:g} m from {g(s.get('formation_max'))}",
-    ]
+    ] + [f"WARNING: {w}" for w in pe]

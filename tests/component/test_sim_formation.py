@@ -43,3 +43,24 @@ def test_the_three_observers_converge_and_the_formation_error_falls(summary):
     assert all(a["formation_error_final"] < 5.0 for a in summary["agents"].values())
     assert all(e["settles_below_0.05_at"] is not None for e in summary["edges"].values())
     assert summary["edges"]["3->7"]["bidirectional"] and not summary["edges"]["1->2"]["bidirectional"]
+
+
+def test_an_edge_without_persistent_excitation_is_named_in_a_warning(tmp_path):
+    """With ν_max = 1e-9 m/s nobody moves in the plane: every sensing edge loses the excitation
+    (10) needs, and the summary says so per edge (the run itself goes on: accepted, warned)."""
+    from zswarm.scenario import parse_override
+
+    sc = load(TOPO / "decarli-8-formation.toml", [parse_override("algorithm.gains.nu_max=1e-9", "--set")])
+    simulate(sc, tmp_path, 2.0, sc.seed, lean=True)
+    s = make_report(tmp_path, sc, "sim", 2.0, 0.0, sc.seed, plots=False)
+    warned = {w.split(":")[0] for w in s["warnings"]}
+    assert warned == {f"edge {e}" for e in s["edges"]} and len(warned) == 13  # the 13 directed sensing edges
+    assert all(e["excitation_last_10s"] < 1e-6 for e in s["edges"].values())
+    assert all(e["excitation_last_10s"] > 1e-2 for e in summary_moving(tmp_path)["edges"].values())
+
+
+def summary_moving(tmp_path):
+    sc = load(TOPO / "decarli-8-formation.toml")
+    (tmp_path / "m").mkdir()
+    simulate(sc, tmp_path / "m", 2.0, sc.seed, lean=True)
+    return make_report(tmp_path / "m", sc, "sim", 2.0, 0.0, sc.seed, plots=False)
