@@ -109,11 +109,14 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def yaw_rate(state: State, t: float, gains: Gains) -> float:
-    """The C¹ Catmull–Rom spline through the knots at multiples of ``yaw_knot``."""
+    """The C¹ Catmull–Rom spline through the knots at multiples of ``yaw_knot``; past the
+    last knot (8190 s at the default 2 s) the rate holds that knot's value."""
     h = gains.yaw_knot
-    k = min(int(max(t, 0.0) / h), len(state.yaw_knots) - 3)
-    s = max(t, 0.0) / h - k
     y = state.yaw_knots
+    k = int(max(t, 0.0) / h)
+    if k > len(y) - 3:
+        return float(y[-2])
+    s = max(t, 0.0) / h - k
     p0, p1, p2, p3 = y[max(k - 1, 0)], y[k], y[k + 1], y[k + 2]
     return float(0.5 * ((2 * p1) + (-p0 + p2) * s + (2 * p0 - 5 * p1 + 4 * p2 - p3) * s**2 + (-p0 + 3 * p1 - 3 * p2 + p3) * s**3))
 
