@@ -148,8 +148,20 @@ def summary(sc: Scenario, rec: Any, m: FormationMetrics, agents: dict[str, Any])
             "position_error_max_final_m": _final(m.t, _max(m.position)),
             "formation_error_max_final_m": _final(m.t, _max(m.formation)),
             "common_rotation_alpha_final_rad": float(m.alpha[-1]),
+            # (13) keeps α constant once the yaw errors are small (Theorem 2's limit is set by
+            # ẑ(0)); how far it wandered after the yaw settled says whether the coupling is
+            # Hermitian in practice (message ages, copies of an edge's estimate)
+            "common_rotation_alpha_drift_rad": _drift(m.t, m.alpha, settle["yaw_max"]),
         },
     }
+
+
+def _drift(t: np.ndarray, alpha: np.ndarray, t0: float | None) -> float | None:
+    """max − min of the (unwrapped) common rotation from ``t0`` on; None before it settles."""
+    if t0 is None:
+        return None
+    a = np.unwrap(alpha[t >= t0])
+    return float(a.max() - a.min()) if a.size else None
 
 
 def convergence(m: FormationMetrics, duration: float) -> dict[str, Any]:
