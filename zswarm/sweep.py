@@ -59,6 +59,15 @@ COLUMNS_RESULT = (
     "jumps",
     "stale_terms",
     "missed_deadlines",
+    "rel_late_max_mean",
+    "rel_settle_s",
+    "yaw_late_max_mean",
+    "yaw_settle_s",
+    "pos_late_max_mean",
+    "pos_settle_s",
+    "form_late_max_mean",
+    "form_settle_s",
+    "alpha_drift_rad",
     "wall_s",
 )
 
@@ -205,7 +214,36 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
         "jumps": s.get("jumps_total"),
         "stale_terms": sum(int(a.get("stale_terms", 0)) for a in s["agents"].values()),
         "missed_deadlines": sum(int(a.get("missed_deadlines", 0)) for a in s["agents"].values()),
-    }
+    } | _formation_columns(folder, s)
+
+
+FORMATION_PARTS = (("rel", "relative_yaw", "rel_yaw_"), ("yaw", "yaw", "yaw_"), ("pos", "position", "position_"), ("form", "formation", "formation_"))
+
+
+def _formation_columns(folder: Path, s: dict[str, Any]) -> dict[str, Any]:
+    """De Carli runs (summary.json "formation"): per stage — relative yaw (7)/(8), common-frame
+    yaw (13), position (21), formation (30) — the max over edges/robots averaged over the last
+    quarter of the run (a floor, less noisy than the last sample), its settle time, and the
+    drift of the common rotation α."""
+    f = s.get("formation")
+    if f is None:
+        return {}
+    with open(folder / "formation.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    t = np.array([float(r["t"]) for r in rows])
+    late = t >= 0.75 * t[-1]
+    out: dict[str, Any] = {}
+    for short, key, prefix in FORMATION_PARTS:
+        cols = [c for c in rows[0] if c.startswith(prefix)]
+        m = np.array([[float(r[c]) for c in cols] for r in rows])
+        m = np.where(np.isfinite(m), m, -np.inf)  # an edge not measured yet has no error
+        mx = m.max(axis=1) if cols else np.full(len(t), -np.inf)
+        mx[~np.isfinite(mx)] = np.nan
+        tail = mx[late & np.isfinite(mx)]
+        out[f"{short}_late_max_mean"] = float(tail.mean()) if tail.size else None
+        out[f"{short}_settle_s"] = f["settle_s"].get(f"{key}_max")
+    out["alpha_drift_rad"] = f.get("common_rotation_alpha_drift_rad")
+    return out
 
 
 def _series(folder: Path, sc: Scenario, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -301,8 +339,10 @@ def run_sweep(
     new_file = not csv_path.exists() or csv_path.stat().st_size == 0
     if not new_file:
         _repair_tail(csv_path)
+        with open(csv_path, newline="") as fh:
+            header = next(csv.reader(fh), header)  # a folder begun by an older zswarm keeps its columns
     f = open(csv_path, "a", newline="")  # noqa: SIM115 - closed below
-    w = csv.DictWriter(f, fieldnames=header)
+    w = csv.DictWriter(f, fieldnames=header, extrasaction="ignore")
     if new_file:
         w.writeheader()
         f.flush()
@@ -417,9 +457,22 @@ METRICS_SYNC = (
 )
 
 
+# De Carli et al. (summary.json "formation"): each stage's floor, so a figure shows which of the
+# three observers and the controller suffers first.
+METRICS_FORMATION = (
+    ("rel_late_max_mean", "relative yaw (7)/(8), max over edges", True),
+    ("yaw_late_max_mean", "common-frame yaw (13), max over robots", True),
+    ("pos_late_max_mean", "common-frame position (21), max (m)", True),
+    ("form_late_max_mean", "formation error (30), max (m)", True),
+)
+
+
 def metrics_for(rows: list[dict[str, str]]) -> tuple[tuple[str, str, bool], ...]:
-    """The four metrics the sweep figures show: the observers' errors and times, or for a
-    closed loop (rows with command links) its relative attitudes, jumps and settle times."""
+    """The four metrics the sweep figures show: the observers' errors and times, for a De
+    Carli run each stage's error over the last quarter of the run, or for a closed loop
+    (rows with command links) its relative attitudes, jumps and settle times."""
+    if any(r.get("form_late_max_mean") not in (None, "") for r in rows):
+        return METRICS_FORMATION
     return METRICS_SYNC if any(r.get("cmd_sent") not in (None, "") for r in rows) else METRICS
 
 
