@@ -146,8 +146,9 @@ def _own(view: View) -> tuple[np.ndarray, float]:
 class RelInputs:
     v_i: np.ndarray
     w_i: float
-    # (j, ⁱp_ij, v_j, ω_j, ʲp_ji when i runs (8) for the edge, ẑ_ψji as sent by j when j does)
-    edges: tuple[tuple[int, np.ndarray, np.ndarray, float, np.ndarray | None, np.ndarray | None], ...]
+    # (j, ⁱp_ij, v_j, ω_j, ʲp_ji when i runs (8) for the edge, ẑ_ψji as sent by j when j does,
+    # the age of j's message)
+    edges: tuple[tuple[int, np.ndarray, np.ndarray, float, np.ndarray | None, np.ndarray | None, float], ...]
 
 
 def relative_inputs(view: View, gains: Gains) -> RelInputs:
@@ -169,7 +170,7 @@ def relative_inputs(view: View, gains: Gains) -> RelInputs:
         c, sn = math.cos(w_j * a), math.sin(w_j * a)
         vx, vy, vz = (float(x) for x in f["vel"])
         v_j = np.array([c * vx + sn * vy, -sn * vx + c * vy, vz])
-        edges.append((j, np.asarray(p_ij, dtype=float), v_j, w_j, p_ji, z_ji))
+        edges.append((j, np.asarray(p_ij, dtype=float), v_j, w_j, p_ji, z_ji, a))
     return RelInputs(v_i, w_i, tuple(edges))
 
 
@@ -186,7 +187,7 @@ def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> t
     prev = dict(state.prev)
     k_pe, k_psi = gains.k_pe, gains.k_psi
     v_i, w_i = inputs.v_i, inputs.w_i
-    for j, p_ij, v_j, w_j, p_ji, z_from_j in inputs.edges:
+    for j, p_ij, v_j, w_j, p_ji, z_from_j, age in inputs.edges:
         if z_from_j is not None:  # j runs (8) for this edge: ẑ_ψij = Z ẑ_ψji
             z_rel[j] = pl.Z @ z_from_j
             p_rel.pop(j, None)
@@ -207,6 +208,14 @@ def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> t
                 return np.concatenate([dp, dz])
 
         else:  # (8): x = [ⁱp̂_ij, ʲp̂_ji, ẑ_ψij]
+            # ʲp_ji was measured ``age`` before t: brought to t along (1),
+            # ʲṗ_ji = −ω_j e3 × ʲp_ji − v_j + R_z(ψ_ji) v_i with R_z(ψ_ji) = R_z(ψ̂_ij)ᵀ (first
+            # order in the age; left as measured, it misleads (8) by |ʲṗ_ji|·a — measured over
+            # Zenoh: edge 3–7 stuck at 0.055 while every (7) edge was below 0.007)
+            zr = z_rel[j]
+            c, sn = float(zr[0]) / max(float(np.hypot(zr[0], zr[1])), 1e-12), float(zr[1]) / max(float(np.hypot(zr[0], zr[1])), 1e-12)
+            v_i_in_j = np.array([c * v_i[0] + sn * v_i[1], -sn * v_i[0] + c * v_i[1], v_i[2]])
+            p_ji = p_ji + age * (np.array([w_j * p_ji[1], -w_j * p_ji[0], 0.0]) - v_j + v_i_in_j)
             if j not in p_rev:
                 p_rev[j] = p_ji.copy()
             r0 = prev.get(("r", j), p_ji)
