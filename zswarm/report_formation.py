@@ -64,7 +64,9 @@ def formation_metrics(sc: Scenario, rec: Any, step: float = GRID_S) -> Formation
     Psi = _held(rec.truth_t, psi, grid)  # (T, n)
     P = _held(rec.truth_t, rec.truth_p, grid)  # (T, n, 3)
     zc = np.stack([_extra_series(rec, i, "zc", grid, 2) for i in ids], axis=1)  # (T, n, 2)
-    Z = (zc[..., 0] + 1j * zc[..., 1]) / np.abs(zc[..., 0] + 1j * zc[..., 1])
+    zz = zc[..., 0] + 1j * zc[..., 1]
+    with np.errstate(invalid="ignore", divide="ignore"):  # before a robot's first estimate: NaN, left out below
+        Z = zz / np.abs(zz)
     Y = Z * np.exp(-1j * Psi)  # ẑ_i z̄_i, unit
     s = np.nansum(Y, axis=1)
     alpha = np.angle(s)

@@ -55,6 +55,8 @@ EDGE_OUT = {
     "p_hat": Field((3,), doc="p̂_i (21)"),
     "p_meas": Field((3,), optional=True, doc="ⁱp_ij when i senses the receiver j: (21)/(30)'s in-terms there"),
     "z_rel": Field((2,), optional=True, doc="ẑ_ψij when i senses j: z_ji at j (Remark 4)"),
+    "vel_next": Field((3,), optional=True, doc="the command just sent: v_i from this tick on (vel is v_i up to it)"),
+    "yaw_rate_next": Field((), optional=True, doc="the same for ω_i"),
 }
 
 
@@ -132,6 +134,23 @@ def _turn(z: np.ndarray, angle: float) -> np.ndarray:
     return np.array([c * z[0] - s * z[1], s * z[0] + c * z[1]])
 
 
+def _nbr_motion(f: Mapping[str, Any], a: float, period: float) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """Neighbour j's body velocity and yaw rate from its message ``a`` old: (their means over
+    the step just elapsed, (t − period, t]; their values since the message, (t − a, t]).
+
+    On the kinematic plant (1) a robot moves at its command, held: ``vel`` is what it moved
+    at up to its message (measured then), ``vel_next`` the command it sent with it, in force
+    from then on.  A message from this very tick (a ≈ 0) describes the step with ``vel``;
+    one from the previous tick (a ≈ period) with ``vel_next``.  Using ``vel`` for both lags
+    half the edges by a step: relative-yaw floors of 3–8e-3 there, 1e-6 on the others."""
+    v, w = np.asarray(f["vel"], dtype=float), float(f["yaw_rate"])
+    if f.get("vel_next") is None:
+        return v, w, v, w
+    vn, wn = np.asarray(f["vel_next"], dtype=float), float(f["yaw_rate_next"])
+    k = min(a / period, 1.0) if period > 0.0 else 1.0
+    return v + k * (vn - v), w + k * (wn - w), vn, wn
+
+
 def _own(view: View) -> tuple[np.ndarray, float]:
     s = view.sense
     v = np.asarray(s.get("vel_body", np.zeros(3)), dtype=float)
@@ -146,9 +165,9 @@ def _own(view: View) -> tuple[np.ndarray, float]:
 class RelInputs:
     v_i: np.ndarray
     w_i: float
-    # (j, ⁱp_ij, v_j, ω_j, ʲp_ji when i runs (8) for the edge, ẑ_ψji as sent by j when j does,
-    # the age of j's message)
-    edges: tuple[tuple[int, np.ndarray, np.ndarray, float, np.ndarray | None, np.ndarray | None, float], ...]
+    # (j, ⁱp_ij, v_j, ω_j over the step, ʲp_ji when i runs (8) for the edge, ẑ_ψji as sent by j
+    # when j does, the age a of j's message, v_j and ω_j since it)
+    edges: tuple[tuple[int, np.ndarray, np.ndarray, float, np.ndarray | None, np.ndarray | None, float, np.ndarray, float], ...]
 
 
 def relative_inputs(view: View, gains: Gains) -> RelInputs:
@@ -163,14 +182,10 @@ def relative_inputs(view: View, gains: Gains) -> RelInputs:
         f = m.fields
         both = f.get("p_meas") is not None  # j senses i too: (8), run by the smaller id
         p_ji = np.asarray(f["p_meas"], dtype=float) if both and view.id < j else None
-        z_ji = _turn(np.asarray(f["z_rel"], dtype=float), (w_i - float(f["yaw_rate"])) * max(m.age, 0.0)) if both and j < view.id and f.get("z_rel") is not None else None
-        # v_j brought to ⁱp_ij's time (t): j's body frame turned by ω_j over the message's
-        # age while its world-frame velocity held, v_j(t) = R_z(−ω_j a) v_j(t − a)
-        w_j, a = float(f["yaw_rate"]), max(m.age, 0.0)
-        c, sn = math.cos(w_j * a), math.sin(w_j * a)
-        vx, vy, vz = (float(x) for x in f["vel"])
-        v_j = np.array([c * vx + sn * vy, -sn * vx + c * vy, vz])
-        edges.append((j, np.asarray(p_ij, dtype=float), v_j, w_j, p_ji, z_ji, a))
+        a = max(m.age, 0.0)
+        v_j, w_j, v_a, w_a = _nbr_motion(f, a, view.period)
+        z_ji = _turn(np.asarray(f["z_rel"], dtype=float), (w_i - w_a) * a) if both and j < view.id and f.get("z_rel") is not None else None
+        edges.append((j, np.asarray(p_ij, dtype=float), v_j, w_j, p_ji, z_ji, a, v_a, w_a))
     return RelInputs(v_i, w_i, tuple(edges))
 
 
@@ -187,7 +202,7 @@ def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> t
     prev = dict(state.prev)
     k_pe, k_psi = gains.k_pe, gains.k_psi
     v_i, w_i = inputs.v_i, inputs.w_i
-    for j, p_ij, v_j, w_j, p_ji, z_from_j, age in inputs.edges:
+    for j, p_ij, v_j, w_j, p_ji, z_from_j, age, v_a, w_a in inputs.edges:
         if z_from_j is not None:  # j runs (8) for this edge: ẑ_ψij = Z ẑ_ψji
             z_rel[j] = pl.Z @ z_from_j
             p_rel.pop(j, None)
@@ -215,7 +230,7 @@ def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> t
             zr = z_rel[j]
             c, sn = float(zr[0]) / max(float(np.hypot(zr[0], zr[1])), 1e-12), float(zr[1]) / max(float(np.hypot(zr[0], zr[1])), 1e-12)
             v_i_in_j = np.array([c * v_i[0] + sn * v_i[1], -sn * v_i[0] + c * v_i[1], v_i[2]])
-            p_ji = p_ji + age * (np.array([w_j * p_ji[1], -w_j * p_ji[0], 0.0]) - v_j + v_i_in_j)
+            p_ji = p_ji + age * (np.array([w_a * p_ji[1], -w_a * p_ji[0], 0.0]) - v_a + v_i_in_j)
             if j not in p_rev:
                 p_rev[j] = p_ji.copy()
             r0 = prev.get(("r", j), p_ji)
@@ -258,7 +273,8 @@ def yaw_inputs(view: View, gains: Gains) -> YawInputs:
         if m is None:
             continue
         z_ji = m.fields.get("z_rel")
-        a, w_j = max(m.age, 0.0), float(m.fields["yaw_rate"])
+        a = max(m.age, 0.0)
+        _, _, _, w_j = _nbr_motion(m.fields, a, view.period)
         # ẑ_j brought to this step: it turned by ω_j (its own term of (13)) since it was sent;
         # so did ẑ_ψji, by ω_i − ω_j.  Left as sent, i's term z̄_ij ẑ_j and j's own copy of the
         # edge disagree by (ω_i − ω_j)·a: (13)'s coupling is then no longer Hermitian and turns
@@ -311,7 +327,7 @@ def position_inputs(view: View, gains: Gains) -> PosInputs:
         zc_j = complex(*np.asarray(f["zc"], dtype=float))
         R_j, p_hat_j, a = _rz(zc_j), np.asarray(f["p_hat"], dtype=float), max(m.age, 0.0)
         if j in view.senses and meas.get(j) is not None:
-            out_t.append((p_hat_j + a * (R_j @ np.asarray(f["vel"], dtype=float)), np.asarray(meas[j], dtype=float)))
+            out_t.append((p_hat_j + a * (R_j @ _nbr_motion(f, a, view.period)[2]), np.asarray(meas[j], dtype=float)))
         if f.get("p_meas") is not None:  # j senses i
             in_t.append((p_hat_j, R_j, np.asarray(f["p_meas"], dtype=float), a))
     return PosInputs(view.t, v_i, w_i, tuple(out_t), tuple(in_t))
@@ -392,6 +408,8 @@ def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
     if outputs is not None:
         est.update(v_cmd=outputs.v, w_cmd=outputs.w, mu=outputs.mu)
         command = {"vel": outputs.v, "yaw_rate": outputs.w}
+        for e in edges.values():
+            e.update(vel_next=outputs.v, yaw_rate_next=outputs.w)
     return Publish(edges, est, command)
 
 

@@ -185,25 +185,29 @@ def position_step(
     dt: float,
     w_i: float = 0.0,
 ) -> Vec3:
-    """(21) from ``t − dt`` to ``t``, the arguments their values at ``t``: ``p̂̇_i = −k_p d_i p̂_i + b``,
-    d_i the number of terms, solved exactly with the neighbours' terms held and R̂_i turning
-    at ``w_i`` (R̂_i(t − u) = R̂_i R_z(−ω_i u), as (13) turns it) under the held body
-    velocity ``v_i``: ``p̂(t) = e^{−a dt} p̂ + (1 − e^{−a dt})/a · b_nbrs + R̂_i ∫₀^dt e^{−a u} R_z(−ω_i u) du v_i``,
-    ``a = k_p d_i``.  With ``w_i = 0`` the drift R̂_i v_i is held too."""
+    """(21) from ``t − dt`` to ``t``, the arguments their values at ``t``.
+
+    Each term ``q_ij = p̂_j − R̂_i ⁱp_ij`` (or ``p̂_j + R̂_j ʲp_ji``) estimates p_i, so over the
+    step it moves with robot i: ``q(s) = q(t) − ∫_s^t R̂_i v_i``.  With that, and R̂_i turning
+    at ``w_i`` (R̂_i(t − u) = R̂_i R_z(−ω_i u), as (13) turns it) under the held body velocity
+    ``v_i``, (21) is solved exactly:
+    ``p̂(t) = e^{−a dt} (p̂(t − dt) + Δ) + (1 − e^{−a dt})/a · b``, ``a = k_p d_i``,
+    ``b = k_p Σ q``, ``Δ = R̂_i ∫₀^dt R_z(−ω_i u) du v_i`` the robot's own displacement.
+    On the consensus set (every q = p_i(t)) the step is exact for any dt; holding the
+    terms at their end values instead leads p_i by ≈ |v| dt/2 (5 mm at 50 Hz and 0.5 m/s,
+    the floor measured before)."""
     d = len(out_terms) + len(in_terms)
     b = np.zeros(3)
     for p_hat_j, p_ij in out_terms:
         b = b + k_p * (p_hat_j - R_hat_i @ p_ij)
     for p_hat_j, R_hat_j, p_ji in in_terms:
         b = b + k_p * (p_hat_j + R_hat_j @ p_ji)
-    a = k_p * d
-    # ∫₀^dt e^{−a u} e^{−ι ω u} du on the plane, ∫₀^dt e^{−a u} du along z
-    s = complex(a, w_i) * dt
+    s = complex(0.0, w_i) * dt  # ∫₀^dt e^{−ι ω u} du = dt (1 − e^{−ι ω dt})/(ι ω dt)
     phi_xy = dt if abs(s) < 1e-12 else dt * (1.0 - cmath.exp(-s)) / s
-    phi_z = dt if a * dt < 1e-12 else -math.expm1(-a * dt) / a
     vc = complex(float(v_i[0]), float(v_i[1])) * phi_xy
-    drift = R_hat_i @ np.array([vc.real, vc.imag, float(v_i[2]) * phi_z])
-    if d == 0:
-        return p_hat_i + drift
+    disp = R_hat_i @ np.array([vc.real, vc.imag, float(v_i[2]) * dt])
+    a = k_p * d
+    if a * dt < 1e-12:
+        return p_hat_i + disp + dt * b
     e = math.exp(-a * dt)
-    return e * p_hat_i + phi_z * b + drift
+    return e * (p_hat_i + disp) + (-math.expm1(-a * dt) / a) * b

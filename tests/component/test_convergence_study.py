@@ -95,11 +95,10 @@ def test_moving5_final_position_is_the_equations(results):
 
 
 def test_decarli_is_first_order_in_the_step(results):
-    """De Carli et al. at the paper's rates against 5× faster ones.  Its observers do not
-    settle to zero error at a finite step: the robots keep turning (the yaw splines) and
-    moving, and the relative observer (7) integrates velocities that are commands held
-    between samples, so the floor is the step's first-order error, ∝ dt (its unit tests
-    show (7) and the held (13) step first order; test_planar_localization).  What the study
+    """De Carli et al. at the paper's rates against 5× faster ones.  The robots keep turning
+    (the yaw splines) and moving, so a finite step leaves a floor: (7) and (13) are at
+    round-off there (their inputs are brought to each step's time), (21) at 50 Hz keeps a
+    first-order one, ∝ dt.  What the study
     accepts, and why:
 
     * every threshold at least 3× above the default run's final error (its floor, which
@@ -107,9 +106,10 @@ def test_decarli_is_first_order_in_the_step(results):
       + one 0.1 s grid step, as for the other scenarios (the transients are the
       equations', not the step's).  Thresholds nearer the floor are the floor's business:
     * the final errors shrink with the step: default/fine between 5/2 and 5·2 for a step
-      ratio of 5 (first order, with the ×2 allowance the other scenarios get).  A floor
-      that is not discretisation (a bias, a timing bug) would not shrink: ratio ≈ 1.
-      Measured: 5.0 (yaw), 5.0 (position)."""
+      ratio of 5 (first order, with the ×2 allowance the other scenarios get), or both
+      below 1e-5 (as for the other scenarios).  A floor that is not discretisation (a
+      bias, a timing bug) would not shrink: ratio ≈ 1.  Measured: yaw 9.2e-6 against
+      2.0e-6; position 1.04e-3 against 2.2e-4 m (4.7), from the 50 Hz part's step."""
     name = "decarli-8-formation"
     rows = study.compare(results[(name, False)], results[(name, True)])
     finals = {r["what"].split()[1][:3]: r["default"] for r in rows if r["what"].startswith("final")}
@@ -119,4 +119,5 @@ def test_decarli_is_first_order_in_the_step(results):
         assert r["default"] is not None and abs(r["default"] - r["fine"]) <= 0.10 * r["fine"] + 0.1, (name, r)
     for r in rows:
         if r["what"].startswith("final"):
-            assert 5 / 2 <= r["default"] / r["fine"] <= 5 * 2, (name, r)
+            d, f = r["default"], r["fine"]
+            assert (d < 1e-5 and f < 1e-5) or 5 / 2 <= d / f <= 5 * 2, (name, r)

@@ -30,8 +30,8 @@ def test_the_three_observers_converge_and_the_formation_error_falls(summary):
     so an O(1) relative-yaw error is below 0.05 within ≈ 0.3 s of excitation; (13) then
     follows at k_z λ₂ = 40 · 2 /s and (21) at k_p λ₂(L̄) = 2 /s (λ₂ = 2 for this graph's
     L̄ = E Eᵀ): ≈ 10 m to 0.1 m in ln(100)/2 = 2.3 s, after the yaw transient (< 0.5 s):
-    below 4 s leaves room for the time-varying inputs.  What is left is the floor of the
-    held 200 Hz inputs (≈ 1e-2, README).  The formation error must have shrunk: (30)
+    below 4 s leaves room for the time-varying inputs.  What is left is the 50 Hz
+    position part's first-order floor (≈ 1e-3 m; the yaws are at ≈ 1e-5, README).  The formation error must have shrunk: (30)
     saturates at k_c ν_max = 0.5 m/s, so 12 s closes at most 6 m of the ≈ 10 m initial
     errors; we ask for every robot below 5 m."""
     s = summary["formation"]["settle_s"]

@@ -6,7 +6,7 @@ Eight agents stepping at 200 Hz are more than two cores keep up with in real tim
 at time scale 1: 20 % missed ticks, the run flags itself OVERLOADED), so the run goes at
 time scale 0.25: the world's clock at a quarter of the wall clock, so the agents' ticks,
 part rates and deadlines are the scenario's in world time with room for one busy core.
-The first 12 s cover the three observers' transients (the formation itself needs ≈ 18 s).
+The first 8 s cover the three observers' transients (the formation itself needs ≈ 18 s).
 
 What is compared, and why these bounds:
 
@@ -38,7 +38,7 @@ from zswarm.sim import simulate
 
 pytestmark = pytest.mark.integration
 NAME = "decarli-8-formation"
-DURATION, SCALE = 12.0, 0.25
+DURATION, SCALE = 8.0, 0.25
 
 
 def test_decarli_over_zenoh_matches_sim(procs, tmp_path):

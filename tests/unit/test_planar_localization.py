@@ -298,10 +298,9 @@ def test_formation_law_is_the_gradient_of_the_formation_error_in_the_body_frame(
         assert np.allclose(mu_and_v(formed, i)[1], 0, atol=1e-12)
 
 
-def test_the_exact_position_step_is_the_rate_over_a_short_step_and_exact_for_held_terms():
-    """position_step solves (21) with the neighbours' terms held: its difference quotient
-    tends to position_rate (error O(k_p d dt) ≈ 3e-6 relative at dt = 1e-6 s with k_p d = 3: we check 1e-5), and two
-    half steps equal one whole (exact solution of a linear ODE: round-off, 1e-13)."""
+def test_the_exact_position_step_is_the_rate_over_a_short_step():
+    """position_step's difference quotient tends to position_rate (error O(k_p d dt) ≈ 3e-6
+    relative at dt = 1e-6 s with k_p d = 3: we check 1e-5), turning or not."""
     p, psi, v, R_hat = _scene(0.4)
     p_hat = rng0.normal(size=(N, 3))
     i = 2
@@ -309,47 +308,34 @@ def test_the_exact_position_step_is_the_rate_over_a_short_step_and_exact_for_hel
     n = [(p_hat[a], R_hat[a], rel(p[a], psi[a], p[i])) for (a, b) in SENSE if b == i]
     rate = pl.position_rate(p_hat[i], R_hat[i], v[i], o, n, K_P)
     dt = 1e-6
-    q = (pl.position_step(p_hat[i], R_hat[i], v[i], o, n, K_P, dt) - p_hat[i]) / dt
-    assert np.allclose(q, rate, rtol=1e-5, atol=1e-5)
-    whole = pl.position_step(p_hat[i], R_hat[i], v[i], o, n, K_P, 0.02)
-    half = pl.position_step(pl.position_step(p_hat[i], R_hat[i], v[i], o, n, K_P, 0.01), R_hat[i], v[i], o, n, K_P, 0.01)
-    assert np.allclose(whole, half, atol=1e-13)
+    for w in (0.0, 0.5):
+        q = (pl.position_step(p_hat[i], R_hat[i], v[i], o, n, K_P, dt, w) - p_hat[i]) / dt
+        assert np.allclose(q, rate, rtol=1e-5, atol=1e-5)
 
 
-def test_the_position_step_turns_the_drift_with_the_robot():
-    """With ω_i ≠ 0, position_step integrates R̂_i(s) v_i with R̂_i turning at ω_i up to the
-    step's end value (what (13) does to R̂_i): against RK4 of the same ODE at 1e-5 s (error
-    O(dt⁴) ≈ 1e-20 relative, we check 1e-11: round-off over 2000 steps); two half steps
-    compose exactly (R̂_i at the half step turned back by ω_i dt/2); and holding R̂_i v_i
-    instead misses it by ≈ |v| ω dt²/2 (2.5e-5 m here: the test could not pass with it)."""
-    p, psi, v, R_hat = _scene(0.4)
-    p_hat = rng0.normal(size=(N, 3))
-    i, w, dt = 2, 0.5, 0.02
-    o = [(p_hat[j], rel(p[i], psi[i], p[j])) for (a, j) in SENSE if a == i]
-    n = [(p_hat[a], R_hat[a], rel(p[a], psi[a], p[i])) for (a, b) in SENSE if b == i]
-    R_end = R_hat[i]
-    b = sum((K_P * (pj - R_end @ pij) for pj, pij in o), np.zeros(3)) + sum((K_P * (pj + Rj @ pji) for pj, Rj, pji in n), np.zeros(3))
-    a = K_P * (len(o) + len(n))
-
-    def f(s, x):  # s: time since the step's start
-        return -a * x + b + R_end @ pl.Rz(-w * (dt - s)) @ v[i]
-
-    x, h = p_hat[i].copy(), 1e-5
-    for k in range(round(dt / h)):
-        s = k * h
-        k1 = f(s, x)
-        k2 = f(s + h / 2, x + h / 2 * k1)
-        k3 = f(s + h / 2, x + h / 2 * k2)
-        k4 = f(s + h, x + h * k3)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    got = pl.position_step(p_hat[i], R_end, v[i], o, n, K_P, dt, w)
-    assert np.allclose(got, x, rtol=0, atol=1e-11)
-    held = pl.position_step(p_hat[i], R_end, v[i], o, n, K_P, dt)
-    assert np.linalg.norm(held - x) > 1e-6
-    # the neighbours' terms are held at their end values over both halves: b is the same
-    b_mid = [(pj, pl.Rz(w * dt / 2) @ pij) for pj, pij in o]  # R̂_mid Rz(ω dt/2) ⁱp_ij = R_end ⁱp_ij
-    mid = pl.position_step(p_hat[i], R_end @ pl.Rz(-w * dt / 2), v[i], b_mid, n, K_P, dt / 2, w)
-    assert np.allclose(pl.position_step(mid, R_end, v[i], o, n, K_P, dt / 2, w), got, atol=1e-13)
+def test_the_position_step_is_exact_on_the_consensus_set():
+    """Robot i turning at ω with a held body velocity (the kinematic plant (1)), every
+    neighbour's estimate consistent with the truth (the consensus set of (21) with α = 0):
+    from p̂_i = p_i(t − dt) the step lands on p_i(t) to round-off (1e-12) for any dt, because
+    it moves the terms with the robot and turns its displacement with R̂_i.  Holding the
+    terms at their end values instead is off by k_p d dt · |v| dt/2 in one step, ≈ |v| dt/2
+    in steady state."""
+    p, psi, v, R_hat = _scene(0.0)
+    i, w = 2, 0.5
+    for dt in (0.005, 0.02, 0.1):
+        # i's truth over the step: ψ(s) = ψ_i − ω (dt − s), p(t) = p(t − dt) + ∫ R_z(ψ(s)) v ds
+        psi0 = psi[i] - w * dt
+        z = complex(v[i][0], v[i][1]) * cmath.exp(1j * psi0) * (cmath.exp(1j * w * dt) - 1) / (1j * w)
+        p_start = p[i] - np.array([z.real, z.imag, v[i][2] * dt])
+        o = [(p[j], rel(p[i], psi[i], p[j])) for (a, j) in SENSE if a == i]
+        n = [(p[a], pl.Rz(psi[a]), rel(p[a], psi[a], p[i])) for (a, b) in SENSE if b == i]
+        got = pl.position_step(p_start, pl.Rz(psi[i]), v[i], o, n, K_P, dt, w)
+        assert np.allclose(got, p[i], rtol=0, atol=1e-12), (dt, got - p[i])
+        d = len(o) + len(n)
+        e = math.exp(-K_P * d * dt)
+        held = e * p_start + (1 - e) * p[i] + (1 - e) / (K_P * d) * (pl.Rz(psi[i]) @ v[i])
+        # one step of it: k_p d dt · |v| dt/2 (steps in a row add up to |v| dt/2)
+        assert np.linalg.norm(held - p[i]) > 0.5 * K_P * d * dt * np.linalg.norm(v[i]) * dt / 2
 
 
 def test_the_common_yaw_step_is_exact_on_the_fixed_points():
