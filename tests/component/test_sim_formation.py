@@ -47,10 +47,11 @@ def test_the_three_observers_converge_and_the_formation_error_falls(summary):
 
 def test_the_common_rotation_stays_put(summary):
     """Theorem 2: ẑ(t) → (zᴴ(0)ẑ(0)/N) z(t), a common rotation α fixed by the start.  With
-    every robot's copy of an edge agreeing ((13)'s coupling Hermitian) the sum of the
-    coupling's phase torques is zero and α moves only with the relative-yaw errors
-    themselves (≤ 1e-2 at 200 Hz, first order): 1e-2 rad over the run.  Neighbours' ẑ_ψji
-    used as sent, (ω_i − ω_j)·a stale, turned it by 0.2 rad in 40 s (measured)."""
+    every robot's copy of an edge agreeing ((13)'s coupling Hermitian) the coupling's phase
+    torques cancel and α moves only with the relative-yaw errors themselves (1e-5 here):
+    summary.json measures it over the run's second half, 1e-2 rad leaves room for the
+    position and formation transients still under way at 6–12 s.  Neighbours' ẑ_ψji used
+    as sent, (ω_i − ω_j)·a stale, turned it by 0.2 rad in 40 s (measured)."""
     drift = summary["formation"]["common_rotation_alpha_drift_rad"]
     assert drift is not None and drift < 1e-2, drift
 
