@@ -85,7 +85,7 @@ class State:
     yaw_knots: np.ndarray  # ω at t = 0, yaw_knot, 2 yaw_knot, ...
     e_p: Mapping[int, np.ndarray] = field(default_factory=dict)  # ⁱe_pij after the last relative step
     p_rev: Mapping[int, np.ndarray] = field(default_factory=dict)  # ʲp̂_ji of the bidirectional edges this robot runs (8) for
-    prev: Mapping[Any, Any] = field(default_factory=dict)  # the last relative step's measurements and own v_i, ω_i
+    prev: Mapping[Any, Any] = field(default_factory=dict)  # the last relative step's measurements ⁱp_ij, ʲp_ji
     t_yaw: float = 0.0  # agent-clock time of the last yaw step (ẑ_i is as of then)
     t_pos: float = 0.0  # ... and of the last position step (p̂_i)
     v_cmd: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -193,11 +193,11 @@ def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> t
     """(7) per sensed edge, (8) for the bidirectional edges this robot runs; RK4 from the last
     step to this one (t) with the measurements ⁱp_ij (and ʲp_ji) linear between the two
     steps' values (second order in dt for the smooth relative positions, where holding them
-    is first order), and the velocities held at their values at t: on the kinematic plant (1)
-    a body velocity is a command held from its arrival, which follows the previous
-    measurement by the command's transit, so the value measured at t is the one in force
-    over nearly the whole step (interpolating it instead was measured 4× worse: relative-yaw
-    floor 3.2e-3 against 8.1e-4, mean over 8–12 s)."""
+    is first order), and the velocities held over the step: the robot's own at its value
+    measured at t (on the kinematic plant (1) a body velocity is a command held from its
+    arrival, which follows the previous measurement by the command's transit, so the value
+    measured at t is the one in force over nearly the whole step; interpolating it instead
+    was measured 4× worse), the neighbour's as _nbr_motion reads it from j's message."""
     p_rel, p_rev, z_rel, e_out = dict(state.p_rel), dict(state.p_rev), dict(state.z_rel), {}
     prev = dict(state.prev)
     k_pe, k_psi = gains.k_pe, gains.k_psi
