@@ -46,6 +46,15 @@ def build_parser() -> argparse.ArgumentParser:
     _common_run_args(r)
     r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
+    r.add_argument(
+        "--live",
+        nargs="?",
+        type=procutil.host_port,
+        const=procutil.host_port(procutil.LIVE_DEFAULT),
+        default=None,
+        metavar="HOST:PORT",
+        help=f"serve the recording's channels on a Foxglove WebSocket server while the run goes on (default {procutil.LIVE_DEFAULT}; open it in Foxglove or Lichtblick)",
+    )
 
     s = sub.add_parser("sim", help="run the same world and agents in one process on a virtual clock")
     _common_run_args(s)
@@ -126,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("topology", help="scenario TOML file")
     rec.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
     rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end")
+    rec.add_argument("--live", type=procutil.host_port, default=None, metavar="HOST:PORT", help="also serve the channels on a Foxglove WebSocket server")
     procutil.add_run_args(rec)
     procutil.add_zenoh_args(rec)
 
@@ -159,7 +169,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     sc = _load(args)
     _warn(sc)
-    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet)
+    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live)
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -362,7 +372,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     start: dict[str, object] = {}
     with ZenohBus(conf) as bus:
         stop = procutil.stop_on_signals()
-        rec = Recorder(bus, run, out / "recording.mcap", metadata={"engine": "run", "scenario": sc.name, "run": run})
+        rec = Recorder(bus, run, out / "recording.mcap", metadata={"engine": "run", "scenario": sc.name, "run": run}, scenario=sc, live=args.live)
 
         def on_start(key: str, payload: bytes) -> None:
             if not start:
@@ -392,7 +402,7 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from zswarm import report, wire
-    from zswarm.record import read
+    from zswarm.record import decode, read
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
     rec_path = args.results / "recording.mcap"
@@ -401,7 +411,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     start = None
     for topic, payload, _t in read(rec_path):
         if topic == "ctl/start":
-            start = wire.decode(payload, "start")
+            try:
+                start = decode(payload, "start")
+            except wire.MessageError:
+                continue
             break
     prev = {}
     if (args.results / "summary.json").exists():

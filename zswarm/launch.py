@@ -128,6 +128,7 @@ def run(
     seed: int | None,
     quiet: bool = False,
     startup_timeout: float = 60.0,
+    live: tuple[str, int] | None = None,
 ) -> int:
     """Run the scenario over real processes; return the exit code for the CLI."""
     duration = sc.duration if duration is None else duration
@@ -169,7 +170,10 @@ def run(
             bus.watch_alive(keys.alive_all(run_id), on_alive)
             bus.subscribe(keys.ctl(run_id, "progress"), on_progress)
             say(f"zswarm run: {sc.name}: router on {endpoint}, results in {out}")
-            la.spawn("recorder", "recorder", 0, [py, "-m", "zswarm", "record", topology, "--out", str(out), "--no-report", *common])
+            live_args = [] if live is None else ["--live", f"{live[0]}:{live[1]}"]
+            la.spawn("recorder", "recorder", 0, [py, "-m", "zswarm", "record", topology, "--out", str(out), "--no-report", *live_args, *common])
+            if live is not None:
+                say(f"zswarm run: live view on ws://{live[0]}:{live[1]} (Foxglove or Lichtblick: open connection, Foxglove WebSocket)")
             for i in sc.ids:
                 la.spawn(f"agent-{i}", "agent", i, [py, "-m", "agent", "--topology", topology, "--id", str(i), *common])
             la.spawn(

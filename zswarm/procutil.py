@@ -84,6 +84,18 @@ def positive_int(s: str) -> int:
     return v
 
 
+LIVE_DEFAULT = "127.0.0.1:8765"
+
+
+def host_port(s: str) -> tuple[str, int]:
+    """``HOST:PORT`` (``[v6]:PORT`` too) for a server to listen on; port 0 picks a free one."""
+    host, sep, port = s.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, e.g. {LIVE_DEFAULT} (got {s!r})")
+    return host, int(port)
+
+
 def positive_float(s: str) -> float:
     try:
         v = float(s)

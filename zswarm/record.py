@@ -1,14 +1,29 @@
-"""Recording of a run into an MCAP file: one channel per stream, raw msgpack payloads.
+"""Recording of a run into an MCAP file that Foxglove and Lichtblick open.
 
-Channels are the keys without the ``zswarm/<run>/`` prefix (``truth``,
-``est/3``, ``sense/3``, ``edge/1/3``, ``stats/agent/3``, ``ctl/start``, …) plus
-``events/alive`` (liveliness changes, msgpack ``{"key", "alive", "t_wall"}``).
-Message ``log_time`` is the receive time in ns: Unix time for ``run``, world
-time for ``sim``.  Read it back with :func:`read` (or any MCAP reader).
+Every message of the run is written as JSON with a JSON schema per message
+type (``zswarm.truth``, ``zswarm.est``, … from :func:`zswarm.wire.json_schema`)
+on a channel named after its key without the ``zswarm/<run>`` prefix:
+``/truth``, ``/est/3``, ``/sense/3``, ``/edge/1/3``, ``/cmd/3``,
+``/stats/agent/3``, ``/ctl/start``, … plus ``/events/alive`` (liveliness
+changes) and ``/events/malformed`` (what arrived under the run's keys and was
+not a valid message: counted and described, never written raw).  Beside them,
+:class:`zswarm.viz.Views` derives the viewer channels: ``/tf``
+(``foxglove.FrameTransforms``), ``/scene`` (``foxglove.SceneUpdate``),
+``/errors/…``, ``/hybrid/…`` and ``/links/…``.  The same channels can be
+served live on a Foxglove WebSocket server (``live=(host, port)``).
+
+Log times (MCAP ``log_time``) are the receive time in ns: Unix time for
+``zswarm run``, world time for ``zswarm sim`` (so a sim recording starts at
+1970-01-01 in a viewer); the header metadata ``zswarm.log_time`` says which.
+Every message also carries its world time ``t`` (s).
+
+Read it back with :func:`read` (or any MCAP reader with a protobuf decoder and
+a JSON parser).  Recordings of zswarm < 0.2 (msgpack payloads) are read too.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -16,22 +31,57 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
+import orjson
 from mcap.reader import NonSeekingReader
-from mcap.writer import CompressionType, Writer
 
-from zswarm import keys
+from zswarm import keys, wire
 from zswarm.bus import Bus
+from zswarm.scenario import Scenario
 
-ENCODING = "msgpack"
+log = logging.getLogger("zswarm.record")
+
 ALIVE_CHANNEL = "events/alive"
+MALFORMED_CHANNEL = "events/malformed"
+# The message type(s) each stream kind carries.
+STREAM_TYPES: dict[str, str | tuple[str, ...]] = {
+    "truth": "truth",
+    "est": "est",
+    "sense": "sense",
+    "edge": "edge",
+    "cmd": "cmd",
+    "stats": "stats",
+    "ctl": ("start", "stop", "progress"),
+}
+ALIVE_SCHEMA = {
+    "title": "zswarm.Alive",
+    "description": "A process's liveliness token appeared (alive) or went away",
+    "type": "object",
+    "properties": {"key": {"type": "string"}, "alive": {"type": "boolean"}, "t_wall": {"type": "number"}},
+    "required": ["key", "alive", "t_wall"],
+    "additionalProperties": False,
+}
+MALFORMED_SCHEMA = {
+    "title": "zswarm.Malformed",
+    "description": "A payload under the run's keys that is not a valid zswarm message (dropped)",
+    "type": "object",
+    "properties": {"stream": {"type": "string"}, "reason": {"type": "string"}, "size": {"type": "integer"}},
+    "required": ["stream", "reason", "size"],
+    "additionalProperties": False,
+}
+
+
+def _dumps(obj: Any) -> bytes:
+    return orjson.dumps(obj, option=orjson.OPT_NON_STR_KEYS)
 
 
 class Recorder:
-    """Subscribes to everything of a run and writes it to ``path``.
+    """Subscribes to everything of a run and writes it to ``path`` (and/or serves it live).
 
     Callbacks only append to a buffer; :meth:`flush` (called by the owner's
-    loop, at least every second) writes the buffer and ends an MCAP chunk, so
-    a file cut short by a crash is readable up to the last flush.
+    loop, at least every second) decodes the buffer, writes it and ends an
+    MCAP chunk, so a file cut short by a crash is readable up to the last
+    flush.  ``path`` None and no ``live``: keep the raw messages in memory
+    (``messages``) instead (``zswarm sweep``, the step-size study).
     """
 
     def __init__(
@@ -42,29 +92,54 @@ class Recorder:
         now_ns: Callable[[], int] | None = None,
         metadata: dict[str, str] | None = None,
         skip: tuple[str, ...] = (),
+        scenario: Scenario | None = None,
+        live: tuple[str, int] | None = None,
     ) -> None:
         self.run = run
         # Keys of the stream prefixes not written (e.g. "sense/", "edge/" for a lean recording).
         self._skip_keys = tuple(keys.stream_key(run, s) for s in skip)
-        # path None: keep the messages in memory (``messages``) instead of writing a file.
         self.path = None if path is None else Path(path)
         self.messages: list[tuple[str, bytes, int]] = []
         self.now_ns = now_ns or time.time_ns
-        self._buf: list[tuple[str, bytes, int]] = []
+        self._buf: list[tuple[str, bytes | dict[str, Any], int]] = []
         self._lock = threading.Lock()
-        self._f = None if self.path is None else open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        self._w = None if self._f is None else Writer(self._f, compression=CompressionType.ZSTD, chunk_size=4 << 20)
-        if self._w is not None:
-            self._w.start(profile="zswarm", library="zswarm")
-            if metadata:
-                self._w.add_metadata("zswarm", metadata)
-        self._channels: dict[str, int] = {}
+        self._channels: dict[str, Any] = {}
         self.count = 0
+        self.malformed = 0
         self.alive: dict[str, bool] = {}
         self.stopped = threading.Event()
         self._closed = False
+        self._ctx: Any = None
+        self._writer: Any = None
+        self.server: Any = None
+        self.views: Any = None
+        if self.path is not None or live is not None:
+            import foxglove
+            from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+            from zswarm.viz import Views
+
+            self._ctx = foxglove.Context()
+            if self.path is not None:
+                opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=4 << 20, profile="")
+                self._writer = foxglove.open_mcap(self.path, allow_overwrite=True, context=self._ctx, writer_options=opts)
+                meta = dict(metadata or {})
+                meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
+                self._writer.write_metadata("zswarm", meta)
+            if live is not None:
+                self.server = foxglove.start_server(name=f"zswarm {run}", host=live[0], port=live[1], context=self._ctx)
+            self.views = Views(self._ctx, self._json_channel, scenario)
         bus.subscribe(keys.everything(run), self._on_data)
         bus.watch_alive(keys.alive_all(run), self._on_alive)
+
+    @property
+    def live_port(self) -> int | None:
+        return None if self.server is None else int(self.server.port)
+
+    def _json_channel(self, topic: str, schema: dict[str, Any]) -> Any:
+        import foxglove
+
+        return foxglove.Channel(topic, schema=schema, context=self._ctx)
 
     def _on_data(self, key: str, payload: bytes) -> None:
         if self._skip_keys and key.startswith(self._skip_keys):
@@ -78,28 +153,49 @@ class Recorder:
 
     def _on_alive(self, key: str, alive: bool) -> None:
         t = self.now_ns()
-        payload = msgpack.packb({"key": key, "alive": alive, "t_wall": time.time()})
+        event = {"key": key, "alive": alive, "t_wall": time.time()}
         with self._lock:
             self.alive[key] = alive
-            self._buf.append((ALIVE_CHANNEL, payload, t))
+            self._buf.append((ALIVE_CHANNEL, event if self._ctx is not None else msgpack.packb(event), t))
 
     def flush(self) -> None:
         with self._lock:
             buf, self._buf = self._buf, []
             if self._closed:
                 return
-            if self._w is None:
-                self.messages.extend(buf)
+            if self._ctx is None:
+                self.messages.extend(buf)  # type: ignore[arg-type] - raw payloads only without a context
                 self.count += len(buf)
                 return
-            for topic, payload, t in buf:
-                ch = self._channels.get(topic)
-                if ch is None:
-                    ch = self._w.register_channel(topic, ENCODING, 0)
-                    self._channels[topic] = ch
-                self._w.add_message(ch, log_time=t, data=payload, publish_time=t)
-                self.count += 1
-            self._w.flush()
+            for stream, payload, t in buf:
+                self._write(stream, payload, t)
+            if self._writer is not None:
+                self._writer.flush()
+
+    def _write(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
+        if isinstance(payload, dict):  # a liveliness event
+            self._log(ALIVE_CHANNEL, ALIVE_SCHEMA, _dumps(payload), t)
+            return
+        expect = STREAM_TYPES.get(stream.split("/", 1)[0])
+        try:
+            if expect is None:
+                raise wire.MessageError("not a zswarm stream")
+            m = wire.decode(payload, expect)
+        except wire.MessageError as exc:
+            self.malformed += 1
+            if self.malformed <= 10 or self.malformed % 1000 == 0:
+                log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
+            self._log(MALFORMED_CHANNEL, MALFORMED_SCHEMA, _dumps({"stream": stream[:256], "reason": str(exc)[:256], "size": len(payload)}), t)
+            return
+        self._log(stream, wire.json_schema(m["type"]), _dumps(wire.to_json(m)), t)
+        self.views.on_message(stream, m, t)
+
+    def _log(self, stream: str, schema: dict[str, Any], data: bytes, t: int) -> None:
+        ch = self._channels.get(stream)
+        if ch is None:
+            ch = self._channels[stream] = self._json_channel("/" + stream, schema)
+        ch.log(data, log_time=t)
+        self.count += 1
 
     def close(self) -> None:
         self.flush()
@@ -107,22 +203,30 @@ class Recorder:
             if self._closed:
                 return
             self._closed = True
-            if self._w is not None and self._f is not None:
-                self._w.finish()
-                self._f.close()
+            if self.server is not None:
+                self.server.stop()
+            if self._writer is not None:
+                self._writer.close()
 
 
-def read(path: str | Path) -> Iterator[tuple[str, bytes, int]]:
-    """Yield ``(channel, payload, log_time_ns)`` in file order.
+def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:
+    """Yield ``(stream, message, log_time_ns)`` of the run's messages in file order.
 
-    Uses the streaming reader, so a file cut short (no summary section) is read
-    up to its last complete chunk instead of failing.
+    ``message`` is the JSON object as written (:func:`zswarm.wire.from_json`
+    validates it), or the msgpack payload (bytes) of an old recording.  The
+    derived viewer channels are left out.  Uses the streaming reader, so a
+    file cut short (no summary section) is read up to its last complete chunk
+    instead of failing.
     """
     with open(path, "rb") as f:
         reader = NonSeekingReader(f)
         try:
             for _schema, channel, message in reader.iter_messages():
-                yield channel.topic, message.data, message.log_time
+                topic = channel.topic
+                if channel.message_encoding == "msgpack":
+                    yield topic, message.data, message.log_time
+                elif channel.message_encoding == "json" and topic[1:].split("/", 1)[0] in STREAM_TYPES | {"events": 0}:
+                    yield topic[1:], orjson.loads(message.data), message.log_time
         except Exception as exc:  # noqa: BLE001 - a truncated tail ends the stream
             if not _is_truncation(exc):
                 raise
@@ -133,5 +237,11 @@ def _is_truncation(exc: Exception) -> bool:
     return name in ("EndOfFile", "InvalidMagic", "RecordLengthLimitExceeded") or isinstance(exc, (EOFError, ValueError))
 
 
-def unpack(payload: bytes) -> Any:
-    return msgpack.unpackb(payload, raw=False, strict_map_key=False)
+def decode(message: bytes | dict[str, Any], expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
+    """A message as :func:`read` (or an in-memory recording) gives it, decoded and validated."""
+    return wire.decode(message, expect) if isinstance(message, bytes) else wire.from_json(message, expect)
+
+
+def unpack(payload: bytes | dict[str, Any]) -> Any:
+    """An ``events/…`` entry: JSON as written, or msgpack of an old recording."""
+    return payload if isinstance(payload, dict) else msgpack.unpackb(payload, raw=False, strict_map_key=False)

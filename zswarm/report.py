@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import report_formation, report_sync, so3, wire
-from zswarm.record import ALIVE_CHANNEL, read, unpack
+from zswarm.record import ALIVE_CHANNEL, decode, read, unpack
 from zswarm.scenario import Scenario
 
 
@@ -62,7 +62,7 @@ class Recording:
     truth_tau: np.ndarray | None = None  # (T, n, 3): the torques the plant applied (rigid bodies)
 
 
-def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
+def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
     """Decode a recording file, or the messages of an in-memory recording."""
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
@@ -85,7 +85,7 @@ def load_recording(path: Path | Iterable[tuple[str, bytes, int]]) -> Recording:
         if kind not in ("truth", "est", "stats", "ctl"):
             continue
         try:
-            m = wire.decode(payload)
+            m = decode(payload)
         except wire.MessageError:
             malformed += 1
             continue

@@ -51,6 +51,7 @@ def simulate(
         now_ns=lambda: int(round(t_now[0] * 1e9)),
         metadata={"engine": "sim", "scenario": scenario.name},
         skip=LEAN_SKIP if lean else (),
+        scenario=scenario,
     )
     world = World(scenario, bus, run, seed, now=lambda: t_now[0])
     agents = {i: AgentNode(scenario, i, bus, run, seed, now=lambda: t_now[0]) for i in scenario.ids}

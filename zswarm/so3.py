@@ -171,3 +171,30 @@ def is_rotation(R: Mat3, tol: float = 1e-9) -> bool:
 def geodesic_interp(R0: Mat3, R1: Mat3, s: float) -> Mat3:
     """Point at fraction ``s`` of the geodesic from ``R0`` to ``R1`` (``R0 exp(s log(R0^T R1))``)."""
     return R0 @ exp(s * log(R0.T @ R1))
+
+
+def quaternion(R: Mat3) -> tuple[float, float, float, float]:
+    """The unit quaternion ``(x, y, z, w)`` of a rotation, with ``w >= 0`` (Shepperd's method).
+
+    Picks the largest of ``w², x², y², z²`` to divide by, so it is accurate for
+    every rotation (the naive ``w = sqrt(1 + tr R)/2`` loses all digits near π).
+    """
+    m = R
+    tr = float(m[0, 0] + m[1, 1] + m[2, 2])
+    d = (tr, float(m[0, 0]), float(m[1, 1]), float(m[2, 2]))
+    k = max(range(4), key=d.__getitem__)
+    if k == 0:
+        s = 2.0 * math.sqrt(max(1.0 + tr, 0.0))
+        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif k == 1:
+        s = 2.0 * math.sqrt(max(1.0 + m[0, 0] - m[1, 1] - m[2, 2], 0.0))
+        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif k == 2:
+        s = 2.0 * math.sqrt(max(1.0 - m[0, 0] + m[1, 1] - m[2, 2], 0.0))
+        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * math.sqrt(max(1.0 - m[0, 0] - m[1, 1] + m[2, 2], 0.0))
+        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    sign = 1.0 if w >= 0 else -1.0
+    return (sign * float(x) / n, sign * float(y) / n, sign * float(z) / n, sign * float(w) / n)

@@ -94,3 +94,19 @@ def test_geodesic_interp_endpoints_and_midpoint():
     assert np.allclose(so3.geodesic_interp(R0, R1, 0.0), R0, atol=1e-12)
     assert np.allclose(so3.geodesic_interp(R0, R1, 1.0), R1, atol=1e-12)
     assert np.allclose(so3.geodesic_interp(R0, R1, 0.5), so3.Ra(0.7, np.array([1.0, 0, 0])), atol=1e-12)
+
+
+@given(angle, axis)
+@settings(max_examples=300)
+def test_quaternion_matches_scipy_and_rebuilds_R(theta, v):
+    """The (x, y, z, w), w ≥ 0 quaternion of Ra(θ, v) is scipy's up to sign and gives
+    back R; near θ = π too (1e-12: Shepperd's method divides by the largest of
+    4w², 4x², 4y², 4z², which is ≥ 1, so nothing is ill-conditioned)."""
+    R = so3.Ra(theta, v / np.linalg.norm(v))
+    q = np.array(so3.quaternion(R))
+    ref = Rotation.from_matrix(R).as_quat()  # (x, y, z, w)
+    ref = ref if ref[3] > 0 or (ref[3] == 0 and q @ ref > 0) else -ref
+    assert q[3] >= 0.0
+    assert abs(np.linalg.norm(q) - 1.0) < 1e-12
+    assert min(np.max(np.abs(q - ref)), np.max(np.abs(q + ref))) < 1e-12
+    assert np.max(np.abs(Rotation.from_quat(q).as_matrix() - R)) < 1e-12
