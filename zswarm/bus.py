@@ -21,7 +21,7 @@ class Publisher(Protocol):
 
 
 class Bus(Protocol):
-    def publisher(self, key: str) -> Publisher: ...
+    def publisher(self, key: str, block: bool = False) -> Publisher: ...
     def subscribe(self, key_expr: str, callback: DataCallback) -> None: ...
     def declare_token(self, key: str) -> None: ...
     def watch_alive(self, key_expr: str, callback: AliveCallback) -> None: ...
@@ -65,7 +65,7 @@ class MemoryBus:
         self._tokens: set[str] = set()
         self._cache: dict[str, list[DataCallback]] = {}
 
-    def publisher(self, key: str) -> Publisher:
+    def publisher(self, key: str, block: bool = False) -> Publisher:
         bus = self
 
         class _Pub:
@@ -169,6 +169,7 @@ class ZenohBus:
         self._z = zenoh
         self.session = zenoh.open(conf)
         self._objs: list[Any] = []
+        self._tokens: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._closed = False
 
@@ -178,12 +179,14 @@ class ZenohBus:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def publisher(self, key: str) -> Publisher:
+    def publisher(self, key: str, block: bool = False) -> Publisher:
+        """``block``: ``CongestionControl.BLOCK`` and data priority, for what is not
+        a control path and must lose nothing (``zswarm replay``)."""
         z = self._z
         pub = self.session.declare_publisher(
             key,
-            congestion_control=z.CongestionControl.DROP,
-            priority=z.Priority.REAL_TIME,
+            congestion_control=z.CongestionControl.BLOCK if block else z.CongestionControl.DROP,
+            priority=z.Priority.DATA if block else z.Priority.REAL_TIME,
             express=False,
         )
         self._objs.append(pub)
@@ -195,8 +198,40 @@ class ZenohBus:
 
         self._objs.append(self.session.declare_subscriber(key_expr, _cb))
 
+    def subscribe_polled(self, key_expr: str, capacity: int = 1 << 18) -> Callable[[], list[tuple[str, bytes]]]:
+        """Samples of ``key_expr`` queued on Zenoh's side (a FIFO channel, no Python
+        callback); the returned function takes what has arrived.
+
+        For a subscriber that does real work per message (the recorder): it never
+        holds the GIL against Zenoh's threads, which a callback would have to wait
+        for (up to the 5 ms switch interval each) while the main thread computes.
+        When the FIFO is full Zenoh waits, and the router drops for this
+        subscriber only (DROP congestion control).
+        """
+        sub = self.session.declare_subscriber(key_expr, self._z.handlers.FifoChannel(capacity))
+        self._objs.append(sub)
+
+        def drain(limit: int = 100_000) -> list[tuple[str, bytes]]:
+            out = []
+            for _ in range(limit):
+                sample = sub.try_recv()
+                if sample is None:
+                    break
+                out.append((str(sample.key_expr), sample.payload.to_bytes()))
+            return out
+
+        return drain
+
     def declare_token(self, key: str) -> None:
-        self._objs.append(self.session.liveliness().declare_token(key))
+        token = self.session.liveliness().declare_token(key)
+        self._objs.append(token)
+        self._tokens[key] = token
+
+    def undeclare_token(self, key: str) -> None:
+        token = self._tokens.pop(key, None)
+        if token is not None:
+            self._objs.remove(token)
+            token.undeclare()
 
     def watch_alive(self, key_expr: str, callback: AliveCallback) -> None:
         z = self._z

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -139,6 +140,34 @@ def build_parser() -> argparse.ArgumentParser:
     procutil.add_run_args(rec)
     procutil.add_zenoh_args(rec)
 
+    rp = sub.add_parser(
+        "replay",
+        help="play a results folder back: on a Foxglove WebSocket server (--live) or onto a Zenoh network as the original messages",
+        description="Plays RESULTS/recording.mcap back at --speed times its pace.  With --live, serves every channel "
+        "(the run's messages, /tf, /scene, /errors, ...) on a Foxglove WebSocket server; with --connect/--listen, "
+        "publishes every message on its original key under --run-id (default: the recorded one), liveliness included, "
+        "for zswarm record or your own subscribers.  Both at once work too.",
+    )
+    rp.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
+    rp.add_argument(
+        "--live",
+        nargs="?",
+        type=procutil.host_port,
+        const=procutil.host_port(procutil.LIVE_DEFAULT),
+        default=None,
+        metavar="HOST:PORT",
+        help=f"serve on a Foxglove WebSocket server (default {procutil.LIVE_DEFAULT})",
+    )
+    rp.add_argument("--speed", type=procutil.positive_float_or_inf, default=1.0, help="times the recording's pace (default 1; 'inf': as fast as possible)")
+    rp.add_argument("--run-id", default=None, help="run id to publish under on Zenoh (default: the recorded run's)")
+    rp.add_argument("--wait-for-recorder", action="store_true", help="on Zenoh: start once a zswarm recorder of --run-id is alive")
+    rp.add_argument("--hold", action="store_true", help="with --live: keep serving after the end until Ctrl-C")
+    g = rp.add_argument_group("zenoh (give an endpoint to replay onto a Zenoh network)")
+    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="endpoint to connect to (repeatable)")
+    g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
+    g.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config file")
+    g.add_argument("--mode", choices=("client", "peer", "router"), default="client", help="Zenoh session mode (default client)")
+
     rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
 
@@ -160,7 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "record": cmd_record, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
     return cmds[args.cmd](args)
 
 
@@ -384,13 +413,22 @@ def cmd_record(args: argparse.Namespace) -> int:
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.declare_token(keys.alive(run, "recorder", 0))
         log.info("recording run %r into %s", run, out / "recording.mcap")
+        if args.live is not None:
+            log.info("live view on ws://%s:%d (Foxglove or Lichtblick: open connection, Foxglove WebSocket)", args.live[0], rec.live_port)
         try:
+            next_flush = time.monotonic() + 0.5
             while not stop.is_set() and not rec.stopped.is_set():
-                stop.wait(0.5)
-                rec.flush()
+                stop.wait(0.01)
+                rec.poll()
+                if time.monotonic() >= next_flush:
+                    rec.flush()
+                    next_flush += 0.5
             if rec.stopped.is_set() and not stop.is_set():
                 # The run ended: give the agents' final stats a moment to arrive.
-                stop.wait(1.0)
+                end = time.monotonic() + 1.0
+                while not stop.is_set() and time.monotonic() < end:
+                    stop.wait(0.01)
+                    rec.poll()
         finally:
             rec.close()
             log.info("closed recording: %d messages", rec.count)
@@ -398,6 +436,56 @@ def cmd_record(args: argparse.Namespace) -> int:
         summary = report.make_report(out, sc, "run", float(start["duration"]), float(start["time_scale"]), int(start["seed"]))  # type: ignore[arg-type]
         print(report.table(summary))
     return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from zswarm import replay
+
+    rec_path = args.results / "recording.mcap"
+    if not rec_path.exists():
+        procutil.fail_usage(f"{rec_path}: no recording there")
+    zenoh_out = bool(args.connect or args.listen or args.config)
+    if args.live is None and not zenoh_out:
+        procutil.fail_usage("replay needs --live [HOST:PORT] or a Zenoh endpoint (--connect/--listen/--config)")
+    sc = procutil.load_or_exit(str(args.results / "scenario.toml")) if (args.results / "scenario.toml").exists() else None
+    log = procutil.setup_logging("replay")
+    stop = procutil.stop_on_signals()
+    run = None
+    if zenoh_out:
+        run = keys.check_run_id(args.run_id or replay.recorded_run_id(rec_path) or "default")
+    bus = None
+    try:
+        if zenoh_out:
+            from zswarm.bus import ZenohBus
+
+            bus = ZenohBus(procutil.zenoh_conf(args))
+            if args.wait_for_recorder:
+                up = threading.Event()
+                bus.watch_alive(keys.alive(run, "recorder", 0), lambda _k, alive: up.set() if alive else None)  # type: ignore[arg-type]
+                log.info("waiting for a recorder of run %r", run)
+                while not up.wait(0.2):
+                    if stop.is_set():
+                        return 130
+        counts = replay.run_replay(args.results, sc, args.speed, args.live, bus, run, stop) if not args.hold else _replay_hold(args, sc, bus, run, stop, replay)
+        log.info("replayed %d messages and %d liveliness events%s", counts["messages"], counts["alive_events"], f" onto run {run!r}" if run else "")
+    finally:
+        if bus is not None:
+            time.sleep(0.5)  # let the last samples leave before the session closes
+            bus.close()
+    return 130 if stop.is_set() else 0
+
+
+def _replay_hold(args: argparse.Namespace, sc: Any, bus: Any, run: str | None, stop: threading.Event, replay: Any) -> dict[str, int]:
+    from zswarm.record import ViewerOut
+
+    out = ViewerOut(None, args.live, sc, server_name=f"zswarm replay {args.results.name}")
+    try:
+        counts: dict[str, int] = replay.replay(args.results / "recording.mcap", args.speed, stop, live=out, bus=bus, run=run)
+        print(f"replayed; still serving on ws://{args.live[0]}:{out.live_port} until Ctrl-C", file=sys.stderr)
+        stop.wait()
+        return counts
+    finally:
+        out.close()
 
 
 def cmd_report(args: argparse.Namespace) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import signal
 import sys
 import threading
@@ -94,6 +95,10 @@ def host_port(s: str) -> tuple[str, int]:
     if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
         raise argparse.ArgumentTypeError(f"expected HOST:PORT, e.g. {LIVE_DEFAULT} (got {s!r})")
     return host, int(port)
+
+
+def positive_float_or_inf(s: str) -> float:
+    return math.inf if s.strip().lower() in ("inf", "max") else positive_float(s)
 
 
 def positive_float(s: str) -> float:

@@ -74,13 +74,102 @@ def _dumps(obj: Any) -> bytes:
     return orjson.dumps(obj, option=orjson.OPT_NON_STR_KEYS)
 
 
+class ViewerOut:
+    """A run's channels on a ``foxglove.Context`` whose sinks are an MCAP file
+    (``path``) and/or a Foxglove WebSocket server (``live``): each message as
+    JSON on its stream's channel, plus :class:`zswarm.viz.Views`.
+
+    Not thread-safe: one thread feeds it (the recorder's loop, ``zswarm replay``).
+    """
+
+    def __init__(
+        self,
+        path: Path | None,
+        live: tuple[str, int] | None,
+        scenario: Scenario | None,
+        metadata: dict[str, str] | None = None,
+        server_name: str = "zswarm",
+    ) -> None:
+        import foxglove
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        from zswarm.viz import Views
+
+        self.ctx = foxglove.Context()
+        self.writer: Any = None
+        self.server: Any = None
+        self.count = 0
+        self.malformed = 0
+        self._channels: dict[str, Any] = {}
+        if path is not None:
+            opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=4 << 20, profile="")
+            self.writer = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
+            if metadata:
+                self.writer.write_metadata("zswarm", metadata)
+        if live is not None:
+            self.server = foxglove.start_server(name=server_name, host=live[0], port=live[1], context=self.ctx)
+        self.views = Views(self.ctx, self._json_channel, scenario)
+
+    @property
+    def live_port(self) -> int | None:
+        return None if self.server is None else int(self.server.port)
+
+    def _json_channel(self, topic: str, schema: dict[str, Any]) -> Any:
+        import foxglove
+
+        return foxglove.Channel(topic, schema=schema, context=self.ctx)
+
+    def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> dict[str, Any] | None:
+        """Decode, validate and write one message of ``stream`` (msgpack bytes, or
+        JSON as :func:`read` gives it); a malformed one is counted, described on
+        ``/events/malformed`` and dropped.  Returns the decoded message or None."""
+        expect = STREAM_TYPES.get(stream.split("/", 1)[0])
+        try:
+            if expect is None:
+                raise wire.MessageError("not a zswarm stream")
+            m = decode(payload, expect)
+        except wire.MessageError as exc:
+            self.malformed += 1
+            if self.malformed <= 10 or self.malformed % 1000 == 0:
+                log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
+            size = len(payload) if isinstance(payload, bytes) else len(_dumps(payload))
+            self._log(MALFORMED_CHANNEL, MALFORMED_SCHEMA, _dumps({"stream": stream[:256], "reason": str(exc)[:256], "size": size}), t)
+            return None
+        self._log(stream, m["type"], _dumps(wire.to_json(m)), t)
+        self.views.on_message(stream, m, t)
+        return m
+
+    def alive(self, event: dict[str, Any], t: int) -> None:
+        self._log(ALIVE_CHANNEL, ALIVE_SCHEMA, _dumps(event), t)
+
+    def _log(self, stream: str, schema: dict[str, Any] | str, data: bytes, t: int) -> None:
+        """``schema``: a JSON schema, or the message type whose schema it is."""
+        ch = self._channels.get(stream)
+        if ch is None:
+            ch = self._channels[stream] = self._json_channel("/" + stream, wire.json_schema(schema) if isinstance(schema, str) else schema)
+        ch.log(data, log_time=t)
+        self.count += 1
+
+    def flush(self) -> None:
+        if self.writer is not None:
+            self.writer.flush()
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+
 class Recorder:
     """Subscribes to everything of a run and writes it to ``path`` (and/or serves it live).
 
-    Callbacks only append to a buffer; :meth:`flush` (called by the owner's
-    loop, at least every second) decodes the buffer, writes it and ends an
-    MCAP chunk, so a file cut short by a crash is readable up to the last
-    flush.  ``path`` None and no ``live``: keep the raw messages in memory
+    Over Zenoh, samples wait in a FIFO on Zenoh's side; :meth:`poll` (the
+    owner's loop, every ~10 ms) takes them, stamps them, decodes and writes
+    them; :meth:`flush` (at least every second) also ends the MCAP chunk, so
+    a file cut short by a crash is readable up to the last flush.  ``path`` None and no ``live``: keep the raw messages in memory
     (``messages``) instead (``zswarm sweep``, the step-size study).
     """
 
@@ -103,48 +192,35 @@ class Recorder:
         self.now_ns = now_ns or time.time_ns
         self._buf: list[tuple[str, bytes | dict[str, Any], int]] = []
         self._lock = threading.Lock()
-        self._channels: dict[str, Any] = {}
         self.count = 0
-        self.malformed = 0
         self.alive: dict[str, bool] = {}
         self.stopped = threading.Event()
         self._closed = False
-        self._ctx: Any = None
-        self._writer: Any = None
-        self.server: Any = None
-        self.views: Any = None
+        self.out: ViewerOut | None = None
         if self.path is not None or live is not None:
-            import foxglove
-            from foxglove.mcap import MCAPCompression, MCAPWriteOptions
-
-            from zswarm.viz import Views
-
-            self._ctx = foxglove.Context()
-            if self.path is not None:
-                opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=4 << 20, profile="")
-                self._writer = foxglove.open_mcap(self.path, allow_overwrite=True, context=self._ctx, writer_options=opts)
-                meta = dict(metadata or {})
-                meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
-                self._writer.write_metadata("zswarm", meta)
-            if live is not None:
-                self.server = foxglove.start_server(name=f"zswarm {run}", host=live[0], port=live[1], context=self._ctx)
-            self.views = Views(self._ctx, self._json_channel, scenario)
-        bus.subscribe(keys.everything(run), self._on_data)
+            meta = dict(metadata or {})
+            meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
+            self.out = ViewerOut(self.path, live, scenario, meta, server_name=f"zswarm {run}")
+        # A real bus: samples wait on Zenoh's side until poll() takes them (no
+        # callback contending for the GIL with the decoding); in-process: callbacks,
+        # stamped at the virtual time they are delivered.
+        self._drain = bus.subscribe_polled(keys.everything(run)) if hasattr(bus, "subscribe_polled") else None
+        if self._drain is None:
+            bus.subscribe(keys.everything(run), self._on_data)
         bus.watch_alive(keys.alive_all(run), self._on_alive)
 
     @property
+    def malformed(self) -> int:
+        return 0 if self.out is None else self.out.malformed
+
+    @property
     def live_port(self) -> int | None:
-        return None if self.server is None else int(self.server.port)
+        return None if self.out is None else self.out.live_port
 
-    def _json_channel(self, topic: str, schema: dict[str, Any]) -> Any:
-        import foxglove
-
-        return foxglove.Channel(topic, schema=schema, context=self._ctx)
-
-    def _on_data(self, key: str, payload: bytes) -> None:
+    def _on_data(self, key: str, payload: bytes, t: int | None = None) -> None:
         if self._skip_keys and key.startswith(self._skip_keys):
             return
-        t = self.now_ns()
+        t = self.now_ns() if t is None else t
         stream = keys.stream_of(self.run, key)
         with self._lock:
             self._buf.append((stream, payload, t))
@@ -156,46 +232,38 @@ class Recorder:
         event = {"key": key, "alive": alive, "t_wall": time.time()}
         with self._lock:
             self.alive[key] = alive
-            self._buf.append((ALIVE_CHANNEL, event if self._ctx is not None else msgpack.packb(event), t))
+            self._buf.append((ALIVE_CHANNEL, event if self.out is not None else msgpack.packb(event), t))
+
+    def poll(self) -> None:
+        """Take what has arrived (stamped now: call it every ~10 ms) and write it to
+        the outputs, without ending the MCAP chunk."""
+        self._take(flush=False)
 
     def flush(self) -> None:
+        """:meth:`poll`, then end the MCAP chunk: the file is readable up to here."""
+        self._take(flush=True)
+
+    def _take(self, flush: bool) -> None:
+        if self._drain is not None:
+            t = self.now_ns()
+            for key, payload in self._drain():
+                self._on_data(key, payload, t)
         with self._lock:
             buf, self._buf = self._buf, []
             if self._closed:
                 return
-            if self._ctx is None:
-                self.messages.extend(buf)  # type: ignore[arg-type] - raw payloads only without a context
+            if self.out is None:
+                self.messages.extend(buf)  # type: ignore[arg-type] - raw payloads only without an output
                 self.count += len(buf)
                 return
             for stream, payload, t in buf:
-                self._write(stream, payload, t)
-            if self._writer is not None:
-                self._writer.flush()
-
-    def _write(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
-        if isinstance(payload, dict):  # a liveliness event
-            self._log(ALIVE_CHANNEL, ALIVE_SCHEMA, _dumps(payload), t)
-            return
-        expect = STREAM_TYPES.get(stream.split("/", 1)[0])
-        try:
-            if expect is None:
-                raise wire.MessageError("not a zswarm stream")
-            m = wire.decode(payload, expect)
-        except wire.MessageError as exc:
-            self.malformed += 1
-            if self.malformed <= 10 or self.malformed % 1000 == 0:
-                log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
-            self._log(MALFORMED_CHANNEL, MALFORMED_SCHEMA, _dumps({"stream": stream[:256], "reason": str(exc)[:256], "size": len(payload)}), t)
-            return
-        self._log(stream, wire.json_schema(m["type"]), _dumps(wire.to_json(m)), t)
-        self.views.on_message(stream, m, t)
-
-    def _log(self, stream: str, schema: dict[str, Any], data: bytes, t: int) -> None:
-        ch = self._channels.get(stream)
-        if ch is None:
-            ch = self._channels[stream] = self._json_channel("/" + stream, schema)
-        ch.log(data, log_time=t)
-        self.count += 1
+                if stream == ALIVE_CHANNEL:
+                    self.out.alive(payload, t)  # type: ignore[arg-type] - an event dict
+                else:
+                    self.out.message(stream, payload, t)
+            if flush:
+                self.out.flush()
+            self.count = self.out.count
 
     def close(self) -> None:
         self.flush()
@@ -203,10 +271,8 @@ class Recorder:
             if self._closed:
                 return
             self._closed = True
-            if self.server is not None:
-                self.server.stop()
-            if self._writer is not None:
-                self._writer.close()
+            if self.out is not None:
+                self.out.close()
 
 
 def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:

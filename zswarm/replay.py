@@ -1,0 +1,131 @@
+"""``zswarm replay``: play a results folder's recording back.
+
+Two ways, at ``speed`` times the pace of the recording's log times (``inf``:
+as fast as the output takes them):
+
+* ``live``: every channel of the recording (the run's messages and the viewer
+  channels, recomputed) on a Foxglove WebSocket server, for Foxglove or
+  Lichtblick;
+* ``bus``: every message back onto a Zenoh network as the original msgpack
+  payload on its original key under run id ``run``, liveliness tokens
+  included, so that anything that listens to a run (``zswarm record``, a
+  user's own subscriber) sees it again.  Publishers block rather than drop
+  (this is not a control path), so a recorder there gets every message.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from zswarm import keys, wire
+from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, read
+from zswarm.scenario import Scenario
+
+log = logging.getLogger("zswarm.replay")
+
+
+def recorded_run_id(path: Path) -> str | None:
+    """The run id the recording was made under (its ``ctl/start``), if any."""
+    for stream, payload, _t in read(path):
+        if stream == "ctl/start":
+            try:
+                m = wire.decode(payload, "start") if isinstance(payload, bytes) else wire.from_json(payload, "start")
+            except wire.MessageError:
+                return None
+            return str(m["run"])
+    return None
+
+
+def _rerun_alive_key(key: str, run: str) -> str | None:
+    """``zswarm/<old>/alive/<role>/<i>`` under run id ``run``."""
+    parts = key.split("/")
+    if len(parts) < 3 or parts[0] != "zswarm" or parts[2] != "alive":
+        return None
+    return "/".join(["zswarm", run, *parts[2:]])
+
+
+def replay(
+    path: Path,
+    speed: float,
+    stop: threading.Event,
+    live: ViewerOut | None = None,
+    bus: Any = None,
+    run: str | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> dict[str, int]:
+    """Play ``path`` back onto ``live`` and/or ``bus``; return counts of what went out."""
+    pubs: dict[str, Any] = {}
+    tokens: set[str] = set()
+    sent = {"messages": 0, "malformed_skipped": 0, "alive_events": 0}
+    t0_log: int | None = None
+    t0_wall = time.monotonic()
+    last_progress = t0_wall
+    for stream, payload, t in read(path):
+        if stop.is_set():
+            break
+        if stream == MALFORMED_CHANNEL:
+            continue
+        if t0_log is None:
+            t0_log = t
+        if math.isfinite(speed):
+            wait = t0_wall + (t - t0_log) * 1e-9 / speed - time.monotonic()
+            if wait > 0 and stop.wait(wait):
+                break
+        if stream == ALIVE_CHANNEL:
+            event = payload if isinstance(payload, dict) else None
+            if event is None or not isinstance(event.get("key"), str):
+                continue
+            sent["alive_events"] += 1
+            if live is not None:
+                live.alive(event, t)
+            if bus is not None and run is not None:
+                key = _rerun_alive_key(event["key"], run)
+                if key is None:
+                    continue
+                if event.get("alive") and key not in tokens:
+                    bus.declare_token(key)
+                    tokens.add(key)
+                elif not event.get("alive") and key in tokens:
+                    bus.undeclare_token(key)
+                    tokens.discard(key)
+            continue
+        if live is not None and live.message(stream, payload, t) is None:
+            sent["malformed_skipped"] += 1
+            continue
+        if bus is not None and run is not None:
+            try:
+                data = payload if isinstance(payload, bytes) else wire.payload_from_json(payload)
+            except wire.MessageError:
+                sent["malformed_skipped"] += 1
+                continue
+            key = keys.stream_key(run, stream)
+            pub = pubs.get(key)
+            if pub is None:
+                pub = pubs[key] = bus.publisher(key, block=True)
+            pub.put(data)
+        sent["messages"] += 1
+        now = time.monotonic()
+        if progress is not None and now - last_progress > 1.0:
+            progress((t - t0_log) * 1e-9)
+            last_progress = now
+    if live is not None:
+        live.flush()
+    return sent
+
+
+def run_replay(results: Path, sc: Scenario | None, speed: float, live_at: tuple[str, int] | None, bus: Any, run: str | None, stop: threading.Event) -> dict[str, int]:
+    """The CLI's body: a ViewerOut for ``live_at`` (if any), then :func:`replay`."""
+    out = ViewerOut(None, live_at, sc, server_name=f"zswarm replay {results.name}") if live_at is not None else None
+    try:
+        if out is not None:
+            log.info("serving on ws://%s:%d (Foxglove or Lichtblick: open connection, Foxglove WebSocket)", live_at[0], out.live_port)  # type: ignore[index]
+        return replay(results / "recording.mcap", speed, stop, live=out, bus=bus, run=run)
+    finally:
+        if out is not None:
+            out.close()
