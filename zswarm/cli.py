@@ -131,6 +131,31 @@ def build_parser() -> argparse.ArgumentParser:
 
     ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
     procutil.add_zenoh_args(ro, default_mode="router")
+    ro.add_argument("--exit-after-run", metavar="RUN_ID", default=None, help="exit once the recorder of this run has come and gone (compose: the run ends by itself)")
+
+    co = sub.add_parser(
+        "compose",
+        help="write a docker-compose file for a scenario: a router, the recorder, the world and one container per agent",
+        description="Writes a compose file (to stdout or -o FILE) that runs TOPOLOGY with one container per process on "
+        "internal bridge networks.  The scenario's folder is mounted at /scenario, results go to "
+        "${ZSWARM_RESULTS:-./runs}/<scenario>/ on the host.  `docker compose up` returns when the run is over.",
+    )
+    co.add_argument("topology", help="scenario TOML file")
+    co.add_argument("-o", "--output", type=Path, default=None, help="the compose file (default: stdout); relative paths in it are from its folder")
+    co.add_argument("--image", default="zswarm:latest", help="image of every service (default zswarm:latest)")
+    co.add_argument("--build-context", type=Path, default=None, help="folder with zswarm's Dockerfile to build the image from (default: this zswarm's source tree, if it has one)")
+    co.add_argument("--no-build", action="store_true", help="no build section: the image must exist (docker build -t IMAGE .)")
+    co.add_argument("--base", default=None, help="base image build argument (the Dockerfile's default: python:3.11-slim)")
+    co.add_argument("--network", choices=("flat", "routed"), default="flat", help="flat: one network; routed: agents behind a second router on their own network")
+    co.add_argument("--run-id", default="compose", help="run id (default compose)")
+    co.add_argument("--results", default="${ZSWARM_RESULTS:-./runs}", help="host folder for the results (default ${ZSWARM_RESULTS:-./runs})")
+    co.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds (default: the scenario's)")
+    co.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
+    co.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+    co.add_argument("--live", type=int, default=None, metavar="PORT", help="serve the run on a Foxglove WebSocket server, published on 127.0.0.1:PORT")
+    co.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help="override a scenario field; the scenario as run is written beside the compose file"
+    )
 
     rec = sub.add_parser("record", help="record a run (started by hand) into a results folder")
     rec.add_argument("topology", help="scenario TOML file")
@@ -189,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
     return cmds[args.cmd](args)
 
 
@@ -378,10 +403,65 @@ def cmd_router(args: argparse.Namespace) -> int:
     if not args.listen and not args.config:
         procutil.fail_usage("router needs --listen ENDPOINT, e.g. --listen tcp/127.0.0.1:7447")
     log = procutil.setup_logging("router")
-    with ZenohBus(procutil.zenoh_conf(args)):
+    with ZenohBus(procutil.zenoh_conf(args)) as bus:
         stop = procutil.stop_on_signals()
         log.info("zenoh %s listening on %s; Ctrl-C to stop", args.mode, ", ".join(args.listen) or "(config)")
+        if args.exit_after_run:
+            run = keys.check_run_id(args.exit_after_run)
+            seen = threading.Event()
+
+            def on_recorder(_key: str, alive: bool) -> None:
+                if alive:
+                    seen.set()
+                elif seen.is_set():
+                    log.info("the recorder of run %r is gone: exiting", run)
+                    stop.set()
+
+            bus.watch_alive(keys.alive(run, "recorder", 0), on_recorder)
         stop.wait()
+    return 0
+
+
+def cmd_compose(args: argparse.Namespace) -> int:
+    from zswarm import compose
+
+    sc = _load(args)
+    topology = Path(args.topology)
+    if args.overrides:
+        if args.output is None:
+            procutil.fail_usage("--set needs -o FILE (the scenario as run is written beside it)")
+        topology = args.output.with_name(args.output.stem + ".scenario.toml")
+        topology.write_text(sc.text, encoding="utf-8")
+    build = None
+    if not args.no_build:
+        build = args.build_context
+        if build is None:
+            src = Path(__file__).resolve().parent.parent
+            build = src if (src / "Dockerfile").exists() else None
+        elif not (build / "Dockerfile").exists():
+            procutil.fail_usage(f"{build}: no Dockerfile there")
+    text = compose.write(
+        sc,
+        topology,
+        args.output,
+        args.image,
+        build,
+        args.base,
+        keys.check_run_id(args.run_id),
+        args.results,
+        args.network,
+        args.duration,
+        args.time_scale,
+        args.seed,
+        args.live,
+        argv=sys.argv[2:],
+    )
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output} ({len(sc.ids)} agents); run it with: docker compose -f {args.output} up", file=sys.stderr)
     return 0
 
 
