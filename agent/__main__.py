@@ -2,7 +2,8 @@
 
 Declares its subscriptions, then its liveliness token, waits for the world's
 start announcement, and steps on its own clock until the run ends, the world
-disappears, or SIGINT/SIGTERM.
+stays away longer than ``--world-grace`` (a crash; a network partition shorter
+than that is ridden out and the agent re-joins), or SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--id", type=int, required=True, help="agent id in the scenario")
     procutil.add_run_args(p)
     p.add_argument("--startup-timeout", type=procutil.positive_float, default=120.0, help="give up if no start within this many s")
+    p.add_argument("--world-grace", type=procutil.positive_float, default=10.0, help="s to go on after the world's token is lost before stopping (default 10)")
     procutil.add_zenoh_args(p)
     return p.parse_args(argv)
 
@@ -55,12 +57,26 @@ def main(argv: list[str] | None = None) -> int:
     def on_stop(key: str, payload: bytes) -> None:
         stop.set()
 
+    lost: list[threading.Timer] = []
+
+    def world_gone() -> None:
+        log.warning("the world did not come back within %g s: stopping", args.world_grace)
+        stop.set()
+
     def on_world(key: str, up: bool) -> None:
         if up:
+            if lost:
+                lost.pop().cancel()
+                log.info("the world is back")
             world_seen.set()
-        elif world_seen.is_set():
-            log.warning("the world went away: stopping")
-            stop.set()
+        elif world_seen.is_set() and not lost:
+            # A crash, or a partition of the network (this host's link down longer than
+            # the lease): go on, on this agent's own clock, for the world to come back.
+            log.warning("lost the world's token: going on for up to %g s for it to come back", args.world_grace)
+            timer = threading.Timer(args.world_grace, world_gone)
+            timer.daemon = True
+            lost.append(timer)
+            timer.start()
 
     with ZenohBus(conf) as bus:
         # Handlers only once the session is open: until then SIGTERM's default
