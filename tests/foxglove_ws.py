@@ -60,18 +60,24 @@ class Client:
                 self.channels[ch["id"]] = ch
                 self.by_topic[ch["topic"]] = ch
 
+    def _next(self, deadline: float, what: str) -> bytes | None:
+        """The next binary frame before ``deadline`` (text ops are handled here: None)."""
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError(what)
+        try:
+            msg = self.ws.recv(timeout=left)
+        except TimeoutError:
+            return None
+        if isinstance(msg, str):
+            self._handle_text(msg)
+            return None
+        return msg
+
     def wait_for_topics(self, topics: set[str], timeout: float) -> None:
         deadline = time.monotonic() + timeout
         while not topics <= set(self.by_topic):
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise TimeoutError(f"not advertised within {timeout} s: {sorted(topics - set(self.by_topic))} (have {sorted(self.by_topic)})")
-            try:
-                msg = self.ws.recv(timeout=left)
-            except TimeoutError:
-                continue
-            if isinstance(msg, str):
-                self._handle_text(msg)
+            self._next(deadline, f"not advertised within {timeout} s: {sorted(topics - set(self.by_topic))} (have {sorted(self.by_topic)})")
 
     def subscribe(self, topics: list[str]) -> None:
         subs = []
@@ -96,17 +102,8 @@ class Client:
         out: list[tuple[str, int, Any]] = []
         deadline = time.monotonic() + timeout
         while len(out) < want:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise TimeoutError(f"{len(out)} of {want} messages within {timeout} s")
-            try:
-                msg = self.ws.recv(timeout=left)
-            except TimeoutError:
-                continue
-            if isinstance(msg, str):
-                self._handle_text(msg)
-                continue
-            if msg[0] != 1:  # not MessageData (time, service responses, ...)
+            msg = self._next(deadline, f"{len(out)} of {want} messages within {timeout} s")
+            if msg is None or msg[0] != 1:  # not MessageData (time, service responses, ...)
                 continue
             sid, log_time = struct.unpack_from("<IQ", msg, 1)
             sub = self.subs.get(sid)

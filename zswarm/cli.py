@@ -28,6 +28,19 @@ def _common_run_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
+    """``--live [HOST:PORT]``: a Foxglove WebSocket server, on the default address without a value."""
+    p.add_argument(
+        "--live",
+        nargs="?",
+        type=procutil.host_port,
+        const=procutil.host_port(procutil.LIVE_DEFAULT),
+        default=None,
+        metavar="HOST:PORT",
+        help=f"{what} (default {procutil.LIVE_DEFAULT})",
+    )
+
+
 def _load(args: argparse.Namespace) -> Any:
     """The scenario of ``args.topology`` with the ``--set`` overrides (exit 2 on any error)."""
     from zswarm.scenario import ScenarioError, parse_override
@@ -47,15 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common_run_args(r)
     r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
-    r.add_argument(
-        "--live",
-        nargs="?",
-        type=procutil.host_port,
-        const=procutil.host_port(procutil.LIVE_DEFAULT),
-        default=None,
-        metavar="HOST:PORT",
-        help=f"serve the recording's channels on a Foxglove WebSocket server while the run goes on (default {procutil.LIVE_DEFAULT}; open it in Foxglove or Lichtblick)",
-    )
+    _live_arg(r, "serve the recording's channels on a Foxglove WebSocket server while the run goes on (open it in Foxglove or Lichtblick)")
 
     s = sub.add_parser("sim", help="run the same world and agents in one process on a virtual clock")
     _common_run_args(s)
@@ -174,15 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
         "for zswarm record or your own subscribers.  Both at once work too.",
     )
     rp.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
-    rp.add_argument(
-        "--live",
-        nargs="?",
-        type=procutil.host_port,
-        const=procutil.host_port(procutil.LIVE_DEFAULT),
-        default=None,
-        metavar="HOST:PORT",
-        help=f"serve on a Foxglove WebSocket server (default {procutil.LIVE_DEFAULT})",
-    )
+    _live_arg(rp, "serve on a Foxglove WebSocket server")
     rp.add_argument("--speed", type=procutil.positive_float_or_inf, default=1.0, help="times the recording's pace (default 1; 'inf': as fast as possible)")
     rp.add_argument("--run-id", default=None, help="run id to publish under on Zenoh (default: the recorded run's)")
     rp.add_argument("--wait-for-recorder", action="store_true", help="on Zenoh: start once a zswarm recorder of --run-id is alive")

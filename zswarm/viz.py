@@ -290,26 +290,13 @@ class Views:
         size = _vec((self.size, self.size, self.size))
         ents = []
         for i in col:
-            ents.append(
-                SceneEntity(
-                    timestamp=stamp,
-                    frame_id=f"agent_{i}",
-                    id=f"agent_{i}",
-                    frame_locked=True,
-                    cubes=[CubePrimitive(pose=origin, size=size, color=Color(r=_TRUE[0], g=_TRUE[1], b=_TRUE[2], a=_TRUE[3]))],
-                    texts=[TextPrimitive(pose=Pose(position=_vec((0.0, 0.0, 1.2 * self.size)), orientation=ident), billboard=True, font_size=14.0, scale_invariant=True, text=str(i), color=Color(r=1.0, g=1.0, b=1.0, a=1.0))],
-                )
-            )
-            if i in self.newest:
-                ents.append(
-                    SceneEntity(
-                        timestamp=stamp,
-                        frame_id=f"agent_{i}_est",
-                        id=f"agent_{i}_est",
-                        frame_locked=True,
-                        cubes=[CubePrimitive(pose=origin, size=size, color=Color(r=_EST[0], g=_EST[1], b=_EST[2], a=_EST[3]))],
-                    )
-                )
+            frames = [(f"agent_{i}", _TRUE)] + ([(f"agent_{i}_est", _EST)] if i in self.newest else [])
+            for frame, c in frames:
+                label = [] if frame.endswith("_est") else [
+                    TextPrimitive(pose=Pose(position=_vec((0.0, 0.0, 1.2 * self.size)), orientation=ident), billboard=True, font_size=14.0, scale_invariant=True, text=str(i), color=Color(r=1.0, g=1.0, b=1.0, a=1.0))
+                ]  # fmt: skip
+                cube = CubePrimitive(pose=origin, size=size, color=Color(r=c[0], g=c[1], b=c[2], a=c[3]))
+                ents.append(SceneEntity(timestamp=stamp, frame_id=frame, id=frame, frame_locked=True, cubes=[cube], texts=label))
         pts = [Point3(x=float(p[col[j]][0]), y=float(p[col[j]][1]), z=float(p[col[j]][2])) for a, b in self.edges if a in col and b in col for j in (a, b)]
         if pts:
             ents.append(
