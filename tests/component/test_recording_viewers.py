@@ -191,3 +191,41 @@ def test_zeta_and_commands(tmp_path):
         assert len(rows) > 10 and all("zeta" in m for _, _, m in rows[1:])  # the first estimate (t = 0) is published before any step
         cmds = by_topic[f"/cmd/{i}"]
         assert cmds and all(len(m["tau"]) == 3 for _, _, m in cmds)
+
+
+def test_recordings_of_earlier_versions_still_report(tmp_path):
+    """Results folders written before the JSON recording (msgpack payloads, topics without
+    a leading slash) are still read: the same messages give the same Recording."""
+    import msgpack
+    from mcap.writer import Writer
+
+    from zswarm.bus import MemoryBus
+    from zswarm.record import Recorder
+
+    sc = load(TOPO / "thesis-3.2-fixed8.toml")
+    msgs = simulate(sc, tmp_path, 0.5, sc.seed, record=False)
+    old = tmp_path / "old.mcap"
+    with open(old, "wb") as f:
+        w = Writer(f)
+        w.start(profile="zswarm", library="zswarm")
+        ids: dict[str, int] = {}
+        for topic, payload, t in msgs:
+            if topic not in ids:
+                ids[topic] = w.register_channel(topic, "msgpack", 0)
+            w.add_message(ids[topic], log_time=t, data=payload, publish_time=t)
+        w.finish()
+    assert all(isinstance(p, bytes) for _, p, _ in msgs) and msgpack.unpackb(msgs[-1][1]) is not None
+    new = tmp_path / "new.mcap"
+    rec = Recorder(MemoryBus(), "sim", new, now_ns=lambda: 0)
+    for topic, payload, t in msgs:
+        if topic == "events/alive":
+            rec.out.alive(msgpack.unpackb(payload), t)
+        else:
+            rec.out.message(topic, payload, t)
+    rec.close()
+    a, b = load_recording(old), load_recording(new)
+    assert np.array_equal(a.truth_t, b.truth_t) and np.array_equal(a.truth_R, b.truth_R)
+    assert a.est.keys() == b.est.keys()
+    for i in a.est:
+        assert all(x[0] == y[0] and np.array_equal(x[1], y[1]) and np.array_equal(x[2], y[2]) for x, y in zip(a.est[i], b.est[i], strict=True))
+    assert a.stats == b.stats and len(a.alive_events) == len(b.alive_events) > 0
