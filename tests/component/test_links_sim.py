@@ -13,8 +13,8 @@ from zswarm.sim import simulate
 def sim_with(tmp_path, links_toml, duration=5.0):
     text = (TOPO / "thesis-3.2-fixed8.toml").read_text() + "\n" + links_toml
     sc = loads(text, "x.toml")
-    simulate(sc, tmp_path, duration, sc.seed)
-    return make_report(tmp_path, sc, "sim", duration, 0.0, sc.seed, plots=False)
+    msgs = simulate(sc, tmp_path, duration, sc.seed, record=False)  # in memory: the report needs no file
+    return make_report(tmp_path, sc, "sim", duration, 0.0, sc.seed, plots=False, messages=msgs)
 
 
 def test_drop_and_delay_are_applied_exactly(tmp_path):

@@ -26,8 +26,8 @@ NOTES = {  # READING-NOTES, Chapter 5: max_k |R̄_k|_I below 0.1 from, below 0.0
 
 def run(tmp, name, **over):
     sc = load(TOPO / f"{name}.toml")
-    simulate(sc, tmp, sc.duration, sc.seed, lean=True)
-    return make_report(tmp, sc, "sim", sc.duration, 0.0, sc.seed, plots=False)
+    msgs = simulate(sc, tmp, sc.duration, sc.seed, lean=True, record=False)  # in memory: the report needs no file
+    return make_report(tmp, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs)
 
 
 def within_25pct(got, ref):
@@ -164,8 +164,8 @@ def test_command_links_delay_drop_and_stale_policy_on_sim(tmp_path):
 
     sets = [parse_override(x) for x in ("links.commands.delay_ms=40", "links.commands.drop=0.3", 'links.per_link."2->world".drop=0.0')]
     sc = load(TOPO / "thesis-5.6-hybrid7.toml", sets)
-    simulate(sc, tmp_path, 6.0, sc.seed, lean=True, kill={5: 3.0})
-    s = make_report(tmp_path, sc, "sim", 6.0, 0.0, sc.seed, plots=False)
+    msgs = simulate(sc, tmp_path, 6.0, sc.seed, lean=True, kill={5: 3.0}, record=False)  # in memory: the report needs no file
+    s = make_report(tmp_path, sc, "sim", 6.0, 0.0, sc.seed, plots=False, messages=msgs)
     for i in range(1, 8):
         c = s["links"][f"{i}->world"]
         n = c["offered"]
