@@ -153,7 +153,7 @@ def write(
     """The compose file's text; paths in it are relative to ``out``'s folder (or the current one)."""
     where = (out.parent if out is not None else Path.cwd()).resolve()
     scen_dir = _rel(topology.resolve().parent, where)
-    build = None
+    build: dict[str, Any] | None = None
     if build_context is not None:
         build = {"context": _rel(build_context.resolve(), where)}
         if base is not None:

@@ -18,7 +18,8 @@ Log times (MCAP ``log_time``) are the receive time in ns: Unix time for
 Every message also carries its world time ``t`` (s).
 
 Read it back with :func:`read` (or any MCAP reader with a protobuf decoder and
-a JSON parser).  Recordings of zswarm < 0.2 (msgpack payloads) are read too.
+a JSON parser).  Earlier recordings (msgpack payloads, topics without the
+leading slash) are read too.
 """
 
 from __future__ import annotations
@@ -253,12 +254,12 @@ class Recorder:
             if self._closed:
                 return
             if self.out is None:
-                self.messages.extend(buf)  # type: ignore[arg-type] - raw payloads only without an output
+                self.messages.extend(buf)  # type: ignore[arg-type]  # raw payloads only without an output
                 self.count += len(buf)
                 return
             for stream, payload, t in buf:
                 if stream == ALIVE_CHANNEL:
-                    self.out.alive(payload, t)  # type: ignore[arg-type] - an event dict
+                    self.out.alive(payload, t)  # type: ignore[arg-type]  # an event dict
                 else:
                     self.out.message(stream, payload, t)
             if flush:

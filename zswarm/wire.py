@@ -391,7 +391,7 @@ def payload_from_json(obj: Any) -> bytes:
     """The wire payload (msgpack) of a JSON message, validated first (``zswarm replay``)."""
     m = _json_to_wire(obj)
     _validate(m, None)
-    return msgpack.packb(m, use_bin_type=True)
+    return bytes(msgpack.packb(m, use_bin_type=True))
 
 
 _NUM = {"type": "number"}
@@ -411,7 +411,7 @@ _VALUE = {"anyOf": [_NUM, {"type": "array"}]}  # a number or a (nested) array of
 def _json_kind(kind: Any) -> dict[str, Any]:
     if isinstance(kind, tuple):
         return _json_array(kind)
-    simple = {"int": {"type": "integer"}, "float": _NUM, "str": {"type": "string"}, "intlist": {"type": "array", "items": {"type": "integer"}}, "any": {"type": "object"}}
+    simple: dict[str, dict[str, Any]] = {"int": {"type": "integer"}, "float": _NUM, "str": {"type": "string"}, "intlist": {"type": "array", "items": {"type": "integer"}}, "any": {"type": "object"}}
     if kind in simple:
         return simple[kind]
     if kind in ("vecmap", "matmap"):
