@@ -16,13 +16,14 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/zswarm run topologies/thesis-3.2-fixed8.toml --duration 40
 
-## make test: unit, component and integration tests
+## make test: unit and component tests on two workers (by file), then the integration tests alone
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile
+	$(PY) -m pytest -q -m integration
 
 ## make test-fast: everything but the integration tests
 test-fast: $(STAMP)
-	$(PY) -m pytest -q -m "not integration"
+	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile
 
 ## make bench: latency, step time, rate and CPU over real processes, beside raw zenoh pub/sub
 bench: $(STAMP)
