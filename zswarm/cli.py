@@ -184,11 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--run-id", default=None, help="run id to publish under on Zenoh (default: the recorded run's)")
     rp.add_argument("--wait-for-recorder", action="store_true", help="on Zenoh: start once a zswarm recorder of --run-id is alive")
     rp.add_argument("--hold", action="store_true", help="with --live: keep serving after the end until Ctrl-C")
-    g = rp.add_argument_group("zenoh (give an endpoint to replay onto a Zenoh network)")
-    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="endpoint to connect to (repeatable)")
-    g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
-    g.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config file")
-    g.add_argument("--mode", choices=("client", "peer", "router"), default="client", help="Zenoh session mode (default client)")
+    procutil.add_zenoh_args(rp)  # an endpoint replays onto a Zenoh network
 
     rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
@@ -543,26 +539,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 while not up.wait(0.2):
                     if stop.is_set():
                         return 130
-        counts = replay.run_replay(args.results, sc, args.speed, args.live, bus, run, stop) if not args.hold else _replay_hold(args, sc, bus, run, stop, replay)
+        counts = replay.run_replay(args.results, sc, args.speed, args.live, bus, run, stop, hold=args.hold)
         log.info("replayed %d messages and %d liveliness events%s", counts["messages"], counts["alive_events"], f" onto run {run!r}" if run else "")
     finally:
         if bus is not None:
             time.sleep(0.5)  # let the last samples leave before the session closes
             bus.close()
     return 130 if stop.is_set() else 0
-
-
-def _replay_hold(args: argparse.Namespace, sc: Any, bus: Any, run: str | None, stop: threading.Event, replay: Any) -> dict[str, int]:
-    from zswarm.record import ViewerOut
-
-    out = ViewerOut(None, args.live, sc, server_name=f"zswarm replay {args.results.name}")
-    try:
-        counts: dict[str, int] = replay.replay(args.results / "recording.mcap", args.speed, stop, live=out, bus=bus, run=run)
-        print(f"replayed; still serving on ws://{args.live[0]}:{out.live_port} until Ctrl-C", file=sys.stderr)
-        stop.wait()
-        return counts
-    finally:
-        out.close()
 
 
 def cmd_report(args: argparse.Namespace) -> int:

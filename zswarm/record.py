@@ -38,6 +38,7 @@ from mcap.reader import NonSeekingReader
 from zswarm import keys, wire
 from zswarm.bus import Bus
 from zswarm.scenario import Scenario
+from zswarm.viz import object_schema
 
 log = logging.getLogger("zswarm.record")
 
@@ -53,26 +54,22 @@ STREAM_TYPES: dict[str, str | tuple[str, ...]] = {
     "stats": "stats",
     "ctl": ("start", "stop", "progress"),
 }
-ALIVE_SCHEMA = {
-    "title": "zswarm.Alive",
-    "description": "A process's liveliness token appeared (alive) or went away",
-    "type": "object",
-    "properties": {"key": {"type": "string"}, "alive": {"type": "boolean"}, "t_wall": {"type": "number"}},
-    "required": ["key", "alive", "t_wall"],
-    "additionalProperties": False,
-}
-MALFORMED_SCHEMA = {
-    "title": "zswarm.Malformed",
-    "description": "A payload under the run's keys that is not a valid zswarm message (dropped)",
-    "type": "object",
-    "properties": {"stream": {"type": "string"}, "reason": {"type": "string"}, "size": {"type": "integer"}},
-    "required": ["stream", "reason", "size"],
-    "additionalProperties": False,
-}
+ALIVE_SCHEMA = object_schema(
+    "zswarm.Alive",
+    "A process's liveliness token appeared (alive) or went away",
+    {"key": {"type": "string"}, "alive": {"type": "boolean"}, "t_wall": {"type": "number"}},
+    ("key", "alive", "t_wall"),
+)
+MALFORMED_SCHEMA = object_schema(
+    "zswarm.Malformed",
+    "A payload under the run's keys that is not a valid zswarm message (dropped)",
+    {"stream": {"type": "string"}, "reason": {"type": "string"}, "size": {"type": "integer"}},
+    ("stream", "reason", "size"),
+)
 
 
 def _dumps(obj: Any) -> bytes:
-    return orjson.dumps(obj, option=orjson.OPT_NON_STR_KEYS)
+    return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
 
 
 class ViewerOut:
@@ -109,16 +106,11 @@ class ViewerOut:
                 self.writer.write_metadata("zswarm", metadata)
         if live is not None:
             self.server = foxglove.start_server(name=server_name, host=live[0], port=live[1], context=self.ctx)
-        self.views = Views(self.ctx, self._json_channel, scenario)
+        self.views = Views(self.ctx, self.log_json, scenario)
 
     @property
     def live_port(self) -> int | None:
         return None if self.server is None else int(self.server.port)
-
-    def _json_channel(self, topic: str, schema: dict[str, Any]) -> Any:
-        import foxglove
-
-        return foxglove.Channel(topic, schema=schema, context=self.ctx)
 
     def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> dict[str, Any] | None:
         """Decode, validate and write one message of ``stream`` (msgpack bytes, or
@@ -134,22 +126,28 @@ class ViewerOut:
             if self.malformed <= 10 or self.malformed % 1000 == 0:
                 log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
             size = len(payload) if isinstance(payload, bytes) else len(_dumps(payload))
-            self._log(MALFORMED_CHANNEL, MALFORMED_SCHEMA, _dumps({"stream": stream[:256], "reason": str(exc)[:256], "size": size}), t)
+            self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream[:256], "reason": str(exc)[:256], "size": size}, t)
+            self.count += 1
             return None
-        self._log(stream, m["type"], _dumps(wire.to_json(m)), t)
+        self.log_json(stream, m["type"], wire.to_json(m), t)
+        self.count += 1
         self.views.on_message(stream, m, t)
         return m
 
     def alive(self, event: dict[str, Any], t: int) -> None:
-        self._log(ALIVE_CHANNEL, ALIVE_SCHEMA, _dumps(event), t)
+        self.log_json(ALIVE_CHANNEL, ALIVE_SCHEMA, event, t)
+        self.count += 1
 
-    def _log(self, stream: str, schema: dict[str, Any] | str, data: bytes, t: int) -> None:
-        """``schema``: a JSON schema, or the message type whose schema it is."""
+    def log_json(self, stream: str, schema: dict[str, Any] | str, obj: Any, t: int) -> None:
+        """``obj`` as JSON on the channel ``/<stream>``, made the first time with
+        ``schema`` (a JSON schema, or the message type whose schema it is)."""
         ch = self._channels.get(stream)
         if ch is None:
-            ch = self._channels[stream] = self._json_channel("/" + stream, wire.json_schema(schema) if isinstance(schema, str) else schema)
-        ch.log(data, log_time=t)
-        self.count += 1
+            import foxglove
+
+            js = wire.json_schema(schema) if isinstance(schema, str) else schema
+            ch = self._channels[stream] = foxglove.Channel("/" + stream, schema=js, context=self.ctx)
+        ch.log(_dumps(obj), log_time=t)
 
     def flush(self) -> None:
         if self.writer is not None:
@@ -170,8 +168,9 @@ class Recorder:
     Over Zenoh, samples wait in a FIFO on Zenoh's side; :meth:`poll` (the
     owner's loop, every ~10 ms) takes them, stamps them, decodes and writes
     them; :meth:`flush` (at least every second) also ends the MCAP chunk, so
-    a file cut short by a crash is readable up to the last flush.  ``path`` None and no ``live``: keep the raw messages in memory
-    (``messages``) instead (``zswarm sweep``, the step-size study).
+    a file cut short by a crash is readable up to the last flush.  ``path``
+    None and no ``live``: keep the raw messages in memory (``messages``)
+    instead (``zswarm sweep``, the step-size study).
     """
 
     def __init__(

@@ -19,12 +19,11 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from zswarm import keys, wire
-from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, read
+from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, decode, read
 from zswarm.scenario import Scenario
 
 log = logging.getLogger("zswarm.replay")
@@ -35,10 +34,9 @@ def recorded_run_id(path: Path) -> str | None:
     for stream, payload, _t in read(path):
         if stream == "ctl/start":
             try:
-                m = wire.decode(payload, "start") if isinstance(payload, bytes) else wire.from_json(payload, "start")
+                return str(decode(payload, "start")["run"])
             except wire.MessageError:
                 return None
-            return str(m["run"])
     return None
 
 
@@ -57,7 +55,6 @@ def replay(
     live: ViewerOut | None = None,
     bus: Any = None,
     run: str | None = None,
-    progress: Callable[[float], None] | None = None,
 ) -> dict[str, int]:
     """Play ``path`` back onto ``live`` and/or ``bus``; return counts of what went out."""
     pubs: dict[str, Any] = {}
@@ -65,7 +62,6 @@ def replay(
     sent = {"messages": 0, "malformed_skipped": 0, "alive_events": 0}
     t0_log: int | None = None
     t0_wall = time.monotonic()
-    last_progress = t0_wall
     for stream, payload, t in read(path):
         if stop.is_set():
             break
@@ -110,22 +106,25 @@ def replay(
                 pub = pubs[key] = bus.publisher(key, block=True)
             pub.put(data)
         sent["messages"] += 1
-        now = time.monotonic()
-        if progress is not None and now - last_progress > 1.0:
-            progress((t - t0_log) * 1e-9)
-            last_progress = now
     if live is not None:
         live.flush()
     return sent
 
 
-def run_replay(results: Path, sc: Scenario | None, speed: float, live_at: tuple[str, int] | None, bus: Any, run: str | None, stop: threading.Event) -> dict[str, int]:
-    """The CLI's body: a ViewerOut for ``live_at`` (if any), then :func:`replay`."""
+def run_replay(
+    results: Path, sc: Scenario | None, speed: float, live_at: tuple[str, int] | None, bus: Any, run: str | None, stop: threading.Event, hold: bool = False
+) -> dict[str, int]:
+    """The CLI's body: a ViewerOut for ``live_at`` (if any), then :func:`replay`;
+    ``hold``: keep serving after the end until ``stop``."""
     out = ViewerOut(None, live_at, sc, server_name=f"zswarm replay {results.name}") if live_at is not None else None
     try:
         if out is not None:
             log.info("serving on ws://%s:%d (Foxglove or Lichtblick: open connection, Foxglove WebSocket)", live_at[0], out.live_port)  # type: ignore[index]
-        return replay(results / "recording.mcap", speed, stop, live=out, bus=bus, run=run)
+        counts = replay(results / "recording.mcap", speed, stop, live=out, bus=bus, run=run)
+        if hold and out is not None:
+            log.info("replayed; still serving until Ctrl-C")
+            stop.wait()
+        return counts
     finally:
         if out is not None:
             out.close()

@@ -43,7 +43,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-import orjson
 
 from zswarm import so3
 from zswarm.scenario import Scenario
@@ -51,30 +50,31 @@ from zswarm.scenario import Scenario
 _NUM = {"type": "number"}
 
 
-def _schema(title: str, description: str, props: Mapping[str, Any], required: tuple[str, ...] = ("t",), extra: Any = False) -> dict[str, Any]:
+def object_schema(title: str, description: str, props: Mapping[str, Any], required: tuple[str, ...] = ("t",), extra: Any = False) -> dict[str, Any]:
+    """The JSON schema of an object message (``title`` names it in the viewers)."""
     return {"title": title, "description": description, "type": "object", "properties": dict(props), "required": list(required), "additionalProperties": extra}
 
 
-ERRORS_SCHEMA = _schema(
+ERRORS_SCHEMA = object_schema(
     "zswarm.AgentErrors",
     "Estimation errors of one agent at its estimate's world time t (s)",
     {"t": _NUM, "attitude": _NUM, "position": _NUM, "position_direct": _NUM},
     ("t", "attitude", "position", "position_direct"),
 )
-EDGE_ERRORS_SCHEMA = _schema(
+EDGE_ERRORS_SCHEMA = object_schema(
     "zswarm.EdgeErrors",
     "Relative errors of one edge (head h, tail t) at world time t (s): |R̃_t^T R̃_h|_I and ||p̃_h − p̃_t||",
     {"t": _NUM, "head": {"type": "integer"}, "tail": {"type": "integer"}, "attitude": _NUM, "position": _NUM},
     ("t", "head", "tail", "attitude", "position"),
 )
-HYBRID_SCHEMA = _schema("zswarm.Hybrid", "ξ_k of the edges the agent heads (xi_<k>) and its named scalars (zeta, ...) at world time t (s)", {"t": _NUM}, extra=_NUM)
-JUMPS_SCHEMA = _schema(
+HYBRID_SCHEMA = object_schema("zswarm.Hybrid", "ξ_k of the edges the agent heads (xi_<k>) and its named scalars (zeta, ...) at world time t (s)", {"t": _NUM}, extra=_NUM)
+JUMPS_SCHEMA = object_schema(
     "zswarm.Jump",
     "One jump of a hybrid variable: ξ_k of edge k (variable 'xi') or ζ_i of agent i (variable 'zeta')",
     {"t": _NUM, "agent": {"type": "integer"}, "variable": {"enum": ["xi", "zeta"]}, "index": {"type": "integer"}, "before": _NUM, "after": _NUM},
     ("t", "agent", "variable", "index", "before", "after"),
 )
-LINK_SCHEMA = _schema(
+LINK_SCHEMA = object_schema(
     "zswarm.LinkCounters",
     "Counters of one link as its receiver reports them, at world time t (s)",
     {"t": _NUM, "link": {"type": "string"}, "delivered": {"type": "integer"}, "dropped": {"type": "integer"}, "reordered": {"type": "integer"}},
@@ -108,22 +108,18 @@ def _stamp(ns: int) -> Any:
     return Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
 
 
-def _json(obj: Any) -> bytes:
-    return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
-
-
 class Views:
     """Derives the viewer channels from a run's messages (see the module docstring).
 
-    ``channel(topic, schema)`` makes a JSON channel with that JSON schema on
-    the caller's context; typed channels are made on ``context`` directly.
+    ``log_json(stream, schema, obj, log_time)`` writes a JSON message on the
+    channel ``/<stream>`` (made with that JSON schema the first time); the
+    typed channels are made on ``context`` directly.
     """
 
-    def __init__(self, context: Any, channel: Callable[[str, dict[str, Any]], Any], scenario: Scenario | None, rate: float = 50.0, scene_rate: float = 10.0) -> None:
+    def __init__(self, context: Any, log_json: Callable[[str, dict[str, Any], Any, int], None], scenario: Scenario | None, rate: float = 50.0, scene_rate: float = 10.0) -> None:
         from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 
-        self._channel = channel
-        self._json: dict[str, Any] = {}
+        self._log_json = log_json
         self.tf = FrameTransformsChannel("/tf", context=context)
         self.scene = SceneUpdateChannel("/scene", context=context)
         self.period = 1.0 / rate
@@ -142,14 +138,6 @@ class Views:
         self.next_est_tf: dict[int, float] = {}
         self.next_scene = -math.inf
         self.next_edges = -math.inf
-        self.count = 0
-
-    def _log_json(self, topic: str, schema: dict[str, Any], obj: Any, log_time: int) -> None:
-        ch = self._json.get(topic)
-        if ch is None:
-            ch = self._json[topic] = self._channel(topic, schema)
-        ch.log(_json(obj), log_time=log_time)
-        self.count += 1
 
     # ------------------------------------------------------------------ inputs
 
@@ -181,7 +169,6 @@ class Views:
                 ),
                 log_time=log_time,
             )
-            self.count += 1
         if t >= self.next_scene:
             self.next_scene = t + self.scene_period - 1e-9
             self._scene(col, m["p"], log_time)
@@ -195,7 +182,7 @@ class Views:
                     continue
                 Rbar = b[0].T @ a[0]
                 self._log_json(
-                    f"/errors/edge/{h}_{tl}",
+                    f"errors/edge/{h}_{tl}",
                     EDGE_ERRORS_SCHEMA,
                     {"t": t, "head": h, "tail": tl, "attitude": so3.attitude_norm(Rbar), "position": float(np.linalg.norm(a[1] - b[1]))},
                     log_time,
@@ -218,7 +205,6 @@ class Views:
                     ),
                     log_time=log_time,
                 )
-                self.count += 1
             item = (i, t, m["R_hat"], m["p_hat"], log_time)
             if self.truth and t <= self.truth[-1][0]:
                 self._error(*item)
@@ -229,10 +215,10 @@ class Views:
         hybrid: dict[str, float] = {f"xi_{k}": x for k, x in m.get("xi", {}).items()}
         hybrid |= {n: x for n, x in m.get("extra", {}).items() if isinstance(x, float)}
         if hybrid:
-            self._log_json(f"/hybrid/{i}", HYBRID_SCHEMA, {"t": t, **hybrid}, log_time)
+            self._log_json(f"hybrid/{i}", HYBRID_SCHEMA, {"t": t, **hybrid}, log_time)
         for var, key in (("xi", "jumps"), ("zeta", "agent_jumps")):
             for k, tj, before, after in m.get(key, ()):
-                self._log_json("/hybrid/jumps", JUMPS_SCHEMA, {"t": tj, "agent": i, "variable": var, "index": k, "before": before, "after": after}, log_time)
+                self._log_json("hybrid/jumps", JUMPS_SCHEMA, {"t": tj, "agent": i, "variable": var, "index": k, "before": before, "after": after}, log_time)
 
     def _error(self, i: int, t: float, R_hat: np.ndarray, p_hat: np.ndarray, log_time: int) -> None:
         # The truth sample before t, its attitude moved on with its ω, its position
@@ -257,7 +243,7 @@ class Views:
         Rp = R_tilde @ p_hat
         self.newest[i] = (R_tilde, Rp - pi)
         self._log_json(
-            f"/errors/{i}",
+            f"errors/{i}",
             ERRORS_SCHEMA,
             {"t": t, "attitude": so3.attitude_norm(R_tilde), "position": float(np.linalg.norm(pi - Rp)), "position_direct": float(np.linalg.norm(pi - p_hat))},
             log_time,
@@ -277,7 +263,7 @@ class Views:
             if not all(k in row for k in ("delivered", "dropped")):
                 continue
             row = {k: (int(v) if k in ("delivered", "dropped", "reordered") else v) for k, v in row.items()}
-            self._log_json(f"/links/{src}_to_{dst}", LINK_SCHEMA, {"t": m["t"], "link": name, **row}, log_time)
+            self._log_json(f"links/{src}_to_{dst}", LINK_SCHEMA, {"t": m["t"], "link": name, **row}, log_time)
 
     # ------------------------------------------------------------------ the scene
 
@@ -308,4 +294,3 @@ class Views:
                 )
             )
         self.scene.log(SceneUpdate(entities=ents), log_time=log_time)
-        self.count += 1
