@@ -1,4 +1,4 @@
-"""The ``zswarm`` command: run, sim, sweep, basin, basin-compare, router, record, report, design-hybrid."""
+"""The ``zswarm`` command: run, sim, sweep, basin, basin-compare, router, compose, record, replay, report, design-hybrid, generate."""
 
 from __future__ import annotations
 
@@ -189,6 +189,24 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
 
+    g = sub.add_parser(
+        "generate",
+        help="write an N-agent scenario of an algorithm family (graph, positions, motions, initial errors from a seed)",
+        description="Writes a scenario that loads by construction: the family's algorithm, gains and world as in its paper's "
+        "shipped scenario; the graph, positions, motions and initial estimation errors drawn from --seed.",
+    )
+    g.add_argument("family", nargs="?", help="algorithm family (--list shows them)")
+    g.add_argument("-n", "--agents", type=int, default=None, help="number of agents")
+    g.add_argument("--seed", type=int, default=1, help="seed of the draw, and the scenario's seed (default 1)")
+    g.add_argument("--graph", default=None, help="graph shape (default: the family's first; --list shows them)")
+    g.add_argument("--in-degree", type=int, default=3, help="leader-follower families: in-neighbours per follower (default 3)")
+    g.add_argument("--max-angle", type=float, default=0.9, help="largest initial attitude error, a fraction of pi (default 0.9)")
+    g.add_argument("--spread", type=float, default=3.0, help="RMS initial position error, m (default 3)")
+    g.add_argument("--duration", type=procutil.positive_float, default=None, help="the scenario's duration, s (default: the family's)")
+    g.add_argument("--name", default=None, help="scenario name (default gen-<family>-<n>-s<seed>)")
+    g.add_argument("-o", "--output", type=Path, default=None, help="file to write (default: standard output)")
+    g.add_argument("--list", action="store_true", help="list the families and their graph shapes")
+
     d = sub.add_parser(
         "design-hybrid",
         help="Prop. 4.2: u, Δ*, and the bounds on γ and δ for A and Ξ; checks Condition 4.1",
@@ -207,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid, "generate": cmd_generate}
     return cmds[args.cmd](args)
 
 
@@ -573,6 +591,38 @@ def cmd_report(args: argparse.Namespace) -> int:
     seed = int(prev.get("seed", start["seed"] if start else sc.seed))
     summary = report.make_report(args.results, sc, engine, duration, scale, seed)
     print(report.table(summary))
+    return 0
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    from zswarm import generate
+
+    if args.list:
+        for fam, what, graphs in generate.describe():
+            print(f"{fam:<28} graphs: {', '.join(graphs):<22} {what}")
+        return 0
+    if args.family is None or args.agents is None:
+        procutil.fail_usage("generate needs a FAMILY and -n N (zswarm generate --list shows the families)")
+    try:
+        text, sc = generate.generate(
+            args.family,
+            args.agents,
+            args.seed,
+            graph=args.graph,
+            in_degree=args.in_degree,
+            max_angle=args.max_angle,
+            spread=args.spread,
+            duration=args.duration,
+            name=args.name,
+        )
+    except ValueError as exc:
+        procutil.fail_usage(f"generate: {exc}")
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}: {sc.name}, {len(sc.ids)} agents, {sc.duration:g} s", file=sys.stderr)
     return 0
 
 
