@@ -17,9 +17,9 @@ from __future__ import annotations
 import heapq
 import logging
 import math
-import threading
 import time
 from collections import deque
+from functools import partial
 from collections.abc import Callable, Mapping
 from types import ModuleType
 from typing import Any
@@ -82,7 +82,9 @@ class Inbox:
     """Newest decoded message per source key, with per-link counters and malformed counts."""
 
     def __init__(self, log_name: str, now: Callable[[], float], link_model: Callable[[str], LinkModel] | None = None) -> None:
-        self._lock = threading.Lock()
+        # Arrivals not yet processed: (processor, key, payload, arrival stamp), appended by
+        # the bus callbacks (any thread), taken by drain() on the agent's thread.
+        self._pending: deque[tuple[Callable[[str, bytes, float], None], str, bytes, float]] = deque()
         self.now = now  # the receiver's own clock, stamps every arrival as "rx"
         # Link emulation (zswarm/links.py): each arrival is lost or held until its release time.
         self._link_model = link_model
@@ -106,49 +108,65 @@ class Inbox:
         self, expect: str, link_of: Callable[[str], str | None], validate: Callable[[dict[str, Any]], object] | None = None
     ) -> Callable[[str, bytes], None]:
         """A bus callback for messages of type ``expect``; ``validate`` raises ValueError
-        on a message that decodes but is not what this agent's algorithm reads."""
+        on a message that decodes but is not what this agent's algorithm reads.
+
+        The callback only stamps the arrival on the receiver's clock and queues the
+        payload (one deque append, thread-safe): decoding, validation, link emulation
+        and storage happen on the agent's own thread when it next reads the inbox
+        (:meth:`drain`).  So Zenoh's thread holds the GIL for microseconds, no lock is
+        taken, and nothing it does waits for a tick in progress.
+        """
+        process = partial(self._process, expect, link_of, validate)
+        pending, now = self._pending, self.now
 
         def on_message(key: str, payload: bytes) -> None:
-            link = link_of(key)
-            try:
-                if link is None:
-                    raise wire.MessageError("key is not one of this agent's links")
-                msg = wire.decode(payload, expect)
-                if validate is not None:
-                    validate(msg)
-            except ValueError as exc:
-                with self._lock:
-                    self.malformed += 1
-                    first = key not in self._logged
-                    self._logged.add(key)
-                if first:
-                    self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
-                return
-            rx = self.now()
-            msg["rx_net"] = rx  # off the network, before any emulated delay
-            with self._lock:
-                if self._held:
-                    # Held messages due by now go first: a message released on arrival
-                    # must not overtake one held on the same link (FIFO links), nor be
-                    # stored before older data that is already due.
-                    self._release(rx)
-                if self._link_model is not None:
-                    model = self.models.get(link)
-                    if model is None:
-                        model = self.models[link] = self._link_model(link)
-                    release = model.admit(rx)
-                    if release is None:
-                        return  # lost on the emulated link (counted by the model)
-                    if release > rx:
-                        heapq.heappush(self._held, (release, self._held_n, link, expect, msg))
-                        self._held_n += 1
-                        return
-                self._deliver(link, expect, msg, rx)
+            pending.append((process, key, payload, now()))
 
         return on_message
 
+    def drain(self) -> None:
+        """Process every queued arrival, in arrival order (the readers below call this)."""
+        pending = self._pending
+        while pending:
+            process, key, payload, rx = pending.popleft()
+            process(key, payload, rx)
+
+    def _process(self, expect: str, link_of: Callable[[str], str | None], validate: Callable[[dict[str, Any]], object] | None, key: str, payload: bytes, rx: float) -> None:
+        """Decode, validate, emulate the link and store one arrival (stamped ``rx`` on arrival)."""
+        link = link_of(key)
+        try:
+            if link is None:
+                raise wire.MessageError("key is not one of this agent's links")
+            msg = wire.decode(payload, expect)
+            if validate is not None:
+                validate(msg)
+        except ValueError as exc:
+            self.malformed += 1
+            if key not in self._logged:
+                self._logged.add(key)
+                self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
+            return
+        msg["rx_net"] = rx  # off the network, before any emulated delay
+        if self._held:
+            # Held messages due by now go first: a message released on arrival
+            # must not overtake one held on the same link (FIFO links), nor be
+            # stored before older data that is already due.
+            self._release(rx)
+        if self._link_model is not None:
+            model = self.models.get(link)
+            if model is None:
+                model = self.models[link] = self._link_model(link)
+            release = model.admit(rx)
+            if release is None:
+                return  # lost on the emulated link (counted by the model)
+            if release > rx:
+                heapq.heappush(self._held, (release, self._held_n, link, expect, msg))
+                self._held_n += 1
+                return
+        self._deliver(link, expect, msg, rx)
+
     def _deliver(self, link: str, expect: str, msg: dict[str, Any], rx: float) -> None:
-        """Store a message that has reached this agent (caller holds the lock)."""
+        """Store a message that has reached this agent."""
         msg["rx"] = rx
         sent = msg["t_local"] if "t_local" in msg else msg["t"]
         counter = self.links.get(link)
@@ -174,27 +192,28 @@ class Inbox:
                 recent.append(msg)
 
     def release_due(self) -> None:
-        """Deliver every held message whose release time has come (the agent calls this each tick)."""
-        if not self._held:
-            return
-        now = self.now()
-        with self._lock:
-            self._release(now)
+        """Process the arrivals, then deliver every held message whose release time has
+        come (the agent calls this each tick)."""
+        self.drain()
+        if self._held:
+            self._release(self.now())
 
     def _release(self, now: float) -> None:
-        """Deliver the held messages due at ``now``, in release order (caller holds the lock)."""
+        """Deliver the held messages due at ``now``, in release order."""
         while self._held and self._held[0][0] <= now:
             release, _, link, expect, msg = heapq.heappop(self._held)
             self._deliver(link, expect, msg, release)
 
     def get(self, link: str) -> dict[str, Any] | None:
+        """The newest message on ``link`` (arrivals queued so far processed first)."""
+        if self._pending:
+            self.drain()
         return self.latest.get(link)
 
     def sensor_transit(self, local: Callable[[float], float], n: int = 16) -> float:
         """Median network transit of the last ``n`` sensor packets (arrival off the network, before
         any emulated delay, minus the stamp, on this agent's clock); 0 when none or negative."""
-        with self._lock:
-            ps = list(self.packets)[-n:]
+        ps = list(self.packets)[-n:]
         if not ps:
             return 0.0
         return max(0.0, float(np.median([p["rx_net"] - local(p["t"]) for p in ps])))
@@ -202,51 +221,47 @@ class Inbox:
     def recent_packets(self, after: float) -> list[dict[str, Any]]:
         """Sensor packets acquired after world time ``after`` (oldest first), with the
         newest one at or before it first when there is one."""
-        with self._lock:
-            out: list[dict[str, Any]] = []
-            for p in reversed(self.packets):
-                out.append(p)
-                if p["t"] <= after:
-                    break
-            out.reverse()
-            return out
+        out: list[dict[str, Any]] = []
+        for p in reversed(self.packets):
+            out.append(p)
+            if p["t"] <= after:
+                break
+        out.reverse()
+        return out
 
     def at_or_before(self, link: str, t_world: float) -> dict[str, Any] | None:
         """The newest message on an edge stamped at or before ``t_world``; if every
         recent one is newer, the oldest of them (None: nothing received yet)."""
-        with self._lock:
-            recent = self.recent.get(link)
-            if not recent:
-                return None
-            for m in reversed(recent):
-                if m["t"] <= t_world:
-                    return m
-            return recent[0]
+        recent = self.recent.get(link)
+        if not recent:
+            return None
+        for m in reversed(recent):
+            if m["t"] <= t_world:
+                return m
+        return recent[0]
 
     def samples(self, name: str, j: int | None = None) -> list[tuple[float, np.ndarray]]:
         """``(acquisition world time, value)`` of a field of recent sensor packets ("gyro",
         "vel"), or with ``j``, of a per-neighbour field's entry for j (``rel_att``)."""
-        with self._lock:
-            if j is None:
-                series = self._series.get(name)
-                return list(series) if series is not None else []
-            return [(p["t"], p[name][j]) for p in self.packets if j in p.get(name, ())]
+        if j is None:
+            series = self._series.get(name)
+            return list(series) if series is not None else []
+        return [(p["t"], p[name][j]) for p in self.packets if j in p.get(name, ())]
 
     def vectors(self, key: int | str) -> list[tuple[float, np.ndarray, np.ndarray]]:
         """``(acquisition world time, body-frame vector, gyro)`` of recent sensor packets: the
         bearing toward agent ``key`` (int) or the packet field ``key`` ("vel_body")."""
-        with self._lock:
-            if isinstance(key, int):
-                return [(p["t"], p["bearings"][key], p["gyro"]) for p in self.packets if key in p.get("bearings", ())]
-            return [(p["t"], p[key], p["gyro"]) for p in self.packets if key in p]
+        if isinstance(key, int):
+            return [(p["t"], p["bearings"][key], p["gyro"]) for p in self.packets if key in p.get("bearings", ())]
+        return [(p["t"], p[key], p["gyro"]) for p in self.packets if key in p]
 
     def counters(self) -> dict[str, Any]:
-        with self._lock:
-            links = {k: v.as_dict() for k, v in self.links.items()}
-            for k, m in self.models.items():
-                if m.spec.active:
-                    links.setdefault(k, {"delivered": 0, "dropped": 0, "reordered": 0}).update(m.counters())
-            return {"links": links, "malformed": self.malformed}
+        self.drain()
+        links = {k: v.as_dict() for k, v in self.links.items()}
+        for k, m in self.models.items():
+            if m.spec.active:
+                links.setdefault(k, {"delivered": 0, "dropped": 0, "reordered": 0}).update(m.counters())
+        return {"links": links, "malformed": self.malformed}
 
 
 def _edge_link(key: str) -> str | None:
@@ -465,15 +480,18 @@ class AgentNode:
             (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
         )
         sense_link = f"world->{agent_id}"
-        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link))
+        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link), direct=True)
         if self.spec.neighbors:
-            bus.subscribe(keys.edges_into(run, agent_id), self.inbox.handler("edge", _edge_link, self.aspec.check_edge))
+            bus.subscribe(keys.edges_into(run, agent_id), self.inbox.handler("edge", _edge_link, self.aspec.check_edge), direct=True)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         self.pub_est = bus.publisher(keys.est(run, agent_id))
         self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None
         self.cmd_seq = 0
         self.sent = dict.fromkeys(self.out, 0)  # messages actually sent per out-edge (an algorithm may skip one)
         self.pub_stats = bus.publisher(keys.stats(run, "agent", agent_id))
+        # The final counters are what the report's counts rest on (alive at the end, what
+        # the recording lacks): sent once, on a publisher that waits rather than drops.
+        self.pub_final = bus.publisher(keys.stats(run, "agent", agent_id), block=True)
         self.sense_link = sense_link
         self.view = TickView(self)
         self.seq = 0
@@ -697,7 +715,7 @@ class AgentNode:
     def publish_stats(self, t_world: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        self.pub_stats.put(wire.encode("stats", self.id, self.stats_seq, t_world, role="agent", counters=counters))
+        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", self.id, self.stats_seq, t_world, role="agent", counters=counters))
         self.stats_seq += 1
 
 

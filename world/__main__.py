@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
         stop = procutil.stop_on_signals()
         world = World(sc, bus, run, seed)
         pub_start = bus.publisher(keys.ctl(run, "start"))
-        pub_stop = bus.publisher(keys.ctl(run, "stop"))
+        pub_stop = bus.publisher(keys.ctl(run, "stop"), block=True)  # sent once: wait rather than drop
         pub_progress = bus.publisher(keys.ctl(run, "progress"))
         alive: set[tuple[str, int]] = set()
         changed = threading.Event()

@@ -97,6 +97,7 @@ class World:
         self.pub_sense = {i: bus.publisher(keys.sense(run, i)) for i in self.ids}
         self.pub_truth = bus.publisher(keys.truth(run))
         self.pub_stats = bus.publisher(keys.stats(run, "world", 0))
+        self.pub_final = bus.publisher(keys.stats(run, "world", 0), block=True)  # see AgentNode.pub_final
         self.stats_seq = 0
         self.k = 0  # index of the next sensor sample
         self.seq = 0
@@ -175,5 +176,5 @@ class World:
     def publish_stats(self, t: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        self.pub_stats.put(wire.encode("stats", 0, self.stats_seq, t, role="world", counters=counters))
+        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", 0, self.stats_seq, t, role="world", counters=counters))
         self.stats_seq += 1

@@ -165,7 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
     rec = sub.add_parser("record", help="record a run (started by hand) into a results folder")
     rec.add_argument("topology", help="scenario TOML file")
     rec.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
-    rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end")
+    rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end (the recording stays as recording.raw.mcap, payloads as they came, until zswarm report transcodes it)")
     rec.add_argument("--live", type=procutil.host_port, default=None, metavar="HOST:PORT", help="also serve the channels on a Foxglove WebSocket server")
     procutil.add_run_args(rec)
     procutil.add_zenoh_args(rec)
@@ -261,7 +261,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if tty and not args.quiet:
         print(file=sys.stderr)
     messages = recorded if isinstance(recorded, list) else None
-    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages)
+    from zswarm.sim import LEAN_SKIP
+
+    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages, not_recorded=LEAN_SKIP if args.lean else ())
     summary["wall_time_s"] = wall
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if not args.quiet:
@@ -480,7 +482,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     from zswarm import report, wire
     from zswarm.bus import ZenohBus
     from zswarm.launch import results_dir
-    from zswarm.record import Recorder
+    from zswarm.record import RAW_SUFFIX, Recorder
 
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args)
@@ -492,7 +494,10 @@ def cmd_record(args: argparse.Namespace) -> int:
     start: dict[str, object] = {}
     with ZenohBus(conf) as bus:
         stop = procutil.stop_on_signals()
-        rec = Recorder(bus, run, out / "recording.mcap", metadata={"engine": "run", "scenario": sc.name, "run": run}, scenario=sc, live=args.live)
+        # Without a live view the recorder copies payloads as they come (recording.raw.mcap);
+        # the report below (or zswarm report) transcodes them into recording.mcap.
+        path = out / ("recording" + (RAW_SUFFIX if args.live is None else ".mcap"))
+        rec = Recorder(bus, run, path, metadata={"engine": "run", "scenario": sc.name, "run": run}, scenario=sc, live=args.live, raw=args.live is None)
 
         def on_start(key: str, payload: bytes) -> None:
             if not start:
@@ -503,7 +508,7 @@ def cmd_record(args: argparse.Namespace) -> int:
 
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.declare_token(keys.alive(run, "recorder", 0))
-        log.info("recording run %r into %s", run, out / "recording.mcap")
+        log.info("recording run %r into %s", run, path)
         if args.live is not None:
             log.info("live view on ws://%s:%d (Foxglove or Lichtblick: open connection, Foxglove WebSocket)", args.live[0], rec.live_port)
         try:
@@ -531,14 +536,15 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from zswarm import replay
+    from zswarm.record import ensure_recording
 
-    rec_path = args.results / "recording.mcap"
+    sc = procutil.load_or_exit(str(args.results / "scenario.toml")) if (args.results / "scenario.toml").exists() else None
+    rec_path = ensure_recording(args.results, sc)
     if not rec_path.exists():
         procutil.fail_usage(f"{rec_path}: no recording there")
     zenoh_out = bool(args.connect or args.listen or args.config)
     if args.live is None and not zenoh_out:
         procutil.fail_usage("replay needs --live [HOST:PORT] or a Zenoh endpoint (--connect/--listen/--config)")
-    sc = procutil.load_or_exit(str(args.results / "scenario.toml")) if (args.results / "scenario.toml").exists() else None
     log = procutil.setup_logging("replay")
     stop = procutil.stop_on_signals()
     run = None
@@ -568,10 +574,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from zswarm import report, wire
-    from zswarm.record import decode, read
+    from zswarm.record import decode, ensure_recording, read
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
-    rec_path = args.results / "recording.mcap"
+    rec_path = ensure_recording(args.results, sc)
     if not rec_path.exists():
         procutil.fail_usage(f"{rec_path}: no recording there")
     start = None
@@ -589,7 +595,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     duration = float(prev.get("duration_s", start["duration"] if start else sc.duration))
     scale = float(prev.get("time_scale", start["time_scale"] if start else 1.0))
     seed = int(prev.get("seed", start["seed"] if start else sc.seed))
-    summary = report.make_report(args.results, sc, engine, duration, scale, seed)
+    summary = report.make_report(args.results, sc, engine, duration, scale, seed, not_recorded=prev.get("recording", {}).get("not_recorded", ()))
     print(report.table(summary))
     return 0
 

@@ -17,6 +17,14 @@ Log times (MCAP ``log_time``) are the receive time in ns: Unix time for
 1970-01-01 in a viewer); the header metadata ``zswarm.log_time`` says which.
 Every message also carries its world time ``t`` (s).
 
+During ``zswarm run`` the recorder does no per-message work but a copy: it
+writes the payloads as they came (msgpack, one channel per stream) into
+``recording.raw.mcap``, flushed every 0.5 s, and the report turns that into
+``recording.mcap`` after the run (:func:`transcode`).  Decoding, validating and
+writing JSON for every message took a quarter of a core at 8 agents; under
+load the recorder then fell behind and the router dropped what it could not
+take.  With ``--live`` the recorder writes JSON as it goes (the viewer needs it).
+
 Read it back with :func:`read` (or any MCAP reader with a protobuf decoder and
 a JSON parser).  Earlier recordings (msgpack payloads, topics without the
 leading slash) are read too.
@@ -162,6 +170,92 @@ class ViewerOut:
             self.writer = None
 
 
+RAW_SUFFIX = ".raw.mcap"
+_RAW_SCHEMA: Any = None  # made on first use (foxglove imported lazily)
+
+
+class RawOut:
+    """The run's payloads as they came, one msgpack channel per stream, in an MCAP
+    file (the format :func:`read` reads as "earlier recordings"); :func:`transcode`
+    makes the viewer recording of it."""
+
+    def __init__(self, path: Path, metadata: dict[str, str] | None = None) -> None:
+        import foxglove
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        global _RAW_SCHEMA
+        if _RAW_SCHEMA is None:
+            # msgpack is self-describing: the schema only names the wire format (zswarm.wire).
+            _RAW_SCHEMA = foxglove.Schema(name=f"zswarm.wire.v{wire.VERSION}", encoding="", data=b"")
+        self.ctx = foxglove.Context()
+        opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="")
+        self.writer: Any = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
+        if metadata:
+            self.writer.write_metadata("zswarm", metadata)
+        self._channels: dict[str, Any] = {}
+        self.count = 0
+        self.malformed = 0  # counted when transcoded
+        self.live_port = None
+
+    def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
+        ch = self._channels.get(stream)
+        if ch is None:
+            import foxglove
+
+            ch = self._channels[stream] = foxglove.Channel(stream, message_encoding="msgpack", schema=_RAW_SCHEMA, context=self.ctx)
+        ch.log(payload if isinstance(payload, bytes) else msgpack.packb(payload), log_time=t)
+        self.count += 1
+
+    def alive(self, event: dict[str, Any], t: int) -> None:
+        self.message(ALIVE_CHANNEL, msgpack.packb(event), t)
+
+    def flush(self) -> None:
+        if self.writer is not None:
+            self.writer.flush()
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+
+def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
+    """Write the viewer recording ``out`` (JSON with schemas, viewer channels) of the
+    raw recording ``raw`` (:class:`RawOut`), then delete ``raw``; returns the number of
+    malformed messages (described on ``/events/malformed`` in ``out``)."""
+    from mcap.reader import make_reader
+
+    with open(raw, "rb") as f:
+        try:
+            meta = {k: v for m in make_reader(f).iter_metadata() if m.name == "zswarm" for k, v in m.metadata.items()}
+        except Exception:  # noqa: BLE001 - a file cut short has no summary: read it without metadata
+            meta = {}
+    meta["transcoded_from"] = raw.name
+    tmp = out.with_name(out.name + ".part")
+    vo = ViewerOut(tmp, None, scenario, meta)
+    try:
+        for stream, payload, t in read(raw):
+            if stream == ALIVE_CHANNEL:
+                vo.alive(unpack(payload), t)
+            else:
+                vo.message(stream, payload, t)
+    finally:
+        vo.close()
+    tmp.replace(out)
+    raw.unlink()
+    return vo.malformed
+
+
+def ensure_recording(results: Path, scenario: Scenario | None) -> Path:
+    """``results/recording.mcap``, transcoded first from ``recording.raw.mcap`` if that is
+    what the recorder left (a run, or a recorder killed before the report)."""
+    rec = results / "recording.mcap"
+    raw = results / ("recording" + RAW_SUFFIX)
+    if raw.exists():
+        transcode(raw, rec, scenario)
+    return rec
+
+
 class Recorder:
     """Subscribes to everything of a run and writes it to ``path`` (and/or serves it live).
 
@@ -183,7 +277,10 @@ class Recorder:
         skip: tuple[str, ...] = (),
         scenario: Scenario | None = None,
         live: tuple[str, int] | None = None,
+        raw: bool = False,
     ) -> None:
+        """``raw``: write ``path`` as :class:`RawOut` (payloads as they came; a run's
+        recorder, whose report transcodes it); otherwise JSON as it goes."""
         self.run = run
         # Keys of the stream prefixes not written (e.g. "sense/", "edge/" for a lean recording).
         self._skip_keys = tuple(keys.stream_key(run, s) for s in skip)
@@ -196,8 +293,12 @@ class Recorder:
         self.alive: dict[str, bool] = {}
         self.stopped = threading.Event()
         self._closed = False
-        self.out: ViewerOut | None = None
-        if self.path is not None or live is not None:
+        self.out: ViewerOut | RawOut | None = None
+        if raw and self.path is not None and live is None:
+            meta = dict(metadata or {})
+            meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
+            self.out = RawOut(self.path, meta)
+        elif self.path is not None or live is not None:
             meta = dict(metadata or {})
             meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
             self.out = ViewerOut(self.path, live, scenario, meta, server_name=f"zswarm {run}")

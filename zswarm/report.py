@@ -27,7 +27,7 @@ from __future__ import annotations
 import csv
 import json
 from collections import defaultdict
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import report_formation, report_sync, so3, wire
-from zswarm.record import ALIVE_CHANNEL, decode, read, unpack
+from zswarm.record import ALIVE_CHANNEL, decode, ensure_recording, read, unpack
 from zswarm.scenario import Scenario
 
 
@@ -54,6 +54,7 @@ class Recording:
     start: dict[str, Any] | None
     stop_seen: bool
     counts: dict[str, int] = field(default_factory=dict)
+    streams: dict[str, int] = field(default_factory=dict)  # messages recorded per channel (est/3, edge/1/3, ...)
     malformed: int = 0
     xi: dict[int, list[tuple[float, float]]] = field(default_factory=dict)  # edge k -> (t, ξ_k)
     jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (k, t, before, after)
@@ -75,9 +76,11 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
     start = None
     stop_seen = False
     counts: dict[str, int] = defaultdict(int)
+    streams: dict[str, int] = defaultdict(int)
     malformed = 0
     for topic, payload, _t in read(path) if isinstance(path, (str, Path)) else path:
         counts[topic.split("/")[0]] += 1
+        streams[topic] += 1
         if topic == ALIVE_CHANNEL:
             alive.append(unpack(payload))
             continue
@@ -105,7 +108,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
             prev = stats.get((role, m["src"]))
             # Keep the final stats if any, else the newest.
             if prev is None or not prev.get("final") or m["counters"].get("final"):
-                stats[(role, m["src"])] = {**m["counters"], "t": m["t"]}
+                stats[(role, m["src"])] = {**m["counters"], "t": m["t"], "seq": m["seq"]}
         elif m["type"] == "start":
             start = m
         elif m["type"] == "stop":
@@ -126,6 +129,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
         start=start,
         stop_seen=stop_seen,
         counts=dict(counts),
+        streams=dict(streams),
         malformed=malformed,
         xi={k: sorted(v) for k, v in sorted(xi.items())},
         jumps=sorted(jumps, key=lambda j: (j[1], j[0])),
@@ -357,6 +361,7 @@ def summarize(
     tm: TreeMetrics | None = None,
     thresholds: tuple[float, float] = THRESHOLDS,
     sm: report_sync.SyncMetrics | None = None,
+    not_recorded: Sequence[str] = (),
 ) -> dict[str, Any]:
     """The summary.json content (see README, "Results folder")."""
     t_end = duration
@@ -433,8 +438,57 @@ def summarize(
         "world": world,
         "overload": overload(agents, world),
         "recorded_messages": rec.counts,
+        "recording": completeness(sc, rec, not_recorded),
         "malformed_in_recording": rec.malformed,
     } | ({"warnings": list(sc.warnings) + extra.get("warnings", [])} if sc.warnings or extra.get("warnings") else {})
+
+
+def completeness(sc: Scenario, rec: Recording, not_recorded: Sequence[str] = ()) -> dict[str, Any]:
+    """What the recording lacks of what the processes published, per channel.
+
+    Each process counts what it publishes and says so in its stats: the world
+    its samples (one ``truth`` and one ``sense/<i>`` each), an agent its steps
+    (one ``est/<i>`` each) and its messages per out-edge and to the world, and
+    every process its stats messages (their sequence numbers).  The final
+    stats, sent on a clean exit, make the count exact; a process that did not
+    exit cleanly leaves a lower bound (``exact``: false).  Channels in
+    ``not_recorded`` (a lean recording) are left out on purpose.
+    """
+    expected: dict[str, int] = {}
+    exact = True
+    world = rec.stats.get(("world", 0))
+    if world is None:
+        exact = False
+    else:
+        exact = exact and bool(world.get("final"))
+        expected["truth"] = int(world.get("samples", 0))
+        for link, n in world.get("sent", {}).items():
+            expected[f"sense/{link.split('->')[1]}"] = int(n)
+    for a in sc.agents:
+        st = rec.stats.get(("agent", a.id))
+        if st is None:
+            exact = False
+            continue
+        exact = exact and bool(st.get("final"))
+        expected[f"est/{a.id}"] = int(st.get("steps", 0))
+        for link, n in st.get("sent", {}).items():
+            src, dst = link.split("->")
+            expected[f"cmd/{src}" if dst == "world" else f"edge/{src}/{dst}"] = int(n)
+    for (role, src), st in rec.stats.items():
+        expected[f"stats/{role}/{src}"] = int(st.get("seq", -1)) + 1
+    skip = tuple(f"{p.rstrip('/')}/" for p in not_recorded) + tuple(f"{p.rstrip('/')}" for p in not_recorded)
+    expected = {k: v for k, v in expected.items() if not (k.startswith(skip) or k in skip)}
+    missing = {k: n - rec.streams.get(k, 0) for k, n in sorted(expected.items()) if n > rec.streams.get(k, 0)}
+    surplus = {k: rec.streams.get(k, 0) - n for k, n in sorted(expected.items()) if rec.streams.get(k, 0) > n}
+    return {
+        "published": sum(expected.values()),
+        "recorded": sum(min(rec.streams.get(k, 0), n) for k, n in expected.items()),
+        "missing_total": sum(missing.values()),
+        "missing": missing,
+        "surplus": surplus,
+        "exact": exact,
+        "not_recorded": list(not_recorded),
+    }
 
 
 def _tree_summary(sc: Scenario, rec: Recording, agents: dict[str, Any], t_end: float, tm: TreeMetrics | None) -> dict[str, Any]:
@@ -540,15 +594,17 @@ def make_report(
     plots: bool = True,
     thresholds: tuple[float, float] = THRESHOLDS,
     messages: Iterable[tuple[str, bytes, int]] | None = None,
+    not_recorded: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
-    write errors.csv, summary.json and plots; return the summary."""
-    rec = load_recording(out_dir / "recording.mcap" if messages is None else messages)
+    write errors.csv, summary.json and plots; return the summary.  ``not_recorded``:
+    channel prefixes the recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean)."""
+    rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages)
     errs = errors(rec)
     sync = report_sync.is_sync(sc)
     sm = report_sync.sync_metrics(sc, rec) if sync else None
     tm = tree_metrics(sc, rec) if sc.info.graph == "tree" and not sync else None
-    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds, sm)
+    summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds, sm, not_recorded)
     write_errors_csv(out_dir / "errors.csv", errs)
     if tm is not None:
         write_edges_csv(out_dir / "edges.csv", sc, tm, rec)

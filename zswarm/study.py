@@ -44,12 +44,12 @@ class Series:
 
 def run(sc: Scenario, out_dir: Path) -> Series:
     """``zswarm sim`` of ``sc`` in memory (no recording file); its mean error series."""
-    from zswarm.sim import simulate
+    from zswarm.sim import LEAN_SKIP, simulate
 
     out_dir.mkdir(parents=True, exist_ok=True)
     msgs = simulate(sc, out_dir, sc.duration, sc.seed, lean=True, record=False)
     assert isinstance(msgs, list)
-    s = report.make_report(out_dir, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs)
+    s = report.make_report(out_dir, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
     rec = report.load_recording(msgs)
     if report_formation.is_formation(sc):  # De Carli: max over robots, up to the common rotation (and translation)
         fm = report_formation.formation_metrics(sc, rec)

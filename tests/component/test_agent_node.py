@@ -129,5 +129,6 @@ def test_emulated_links_stay_fifo_when_a_message_is_released_on_arrival():
     node.inbox._link_model = lambda name: Scripted(sc.link_spec(name), name, 1)
     _feed(bus, sc, clock, 0.0)
     _feed(bus, sc, clock, 0.005)
+    node.inbox.drain()  # arrivals are processed when the agent reads its inbox (stamped on arrival)
     assert [p["t"] for p in node.inbox.packets] == [0.0, 0.005]
     assert node.inbox.get("world->3")["t"] == 0.005

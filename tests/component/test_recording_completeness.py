@@ -1,0 +1,78 @@
+"""What a recording lacks is counted exactly: against what each process says it published
+(final stats), per channel; and the run recorder's raw file transcodes to the same recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from zswarm.record import RawOut, read, transcode
+from zswarm.report import completeness, load_recording, make_report
+from zswarm.scenario import load
+from zswarm.sim import LEAN_SKIP, simulate
+
+TOPO = Path(__file__).resolve().parents[2] / "topologies"
+
+
+@pytest.fixture(scope="module")
+def fixed8():
+    sc = load(TOPO / "thesis-3.2-fixed8.toml")
+    msgs = simulate(sc, Path("."), 2.0, sc.seed, record=False)
+    return sc, msgs
+
+
+def test_a_full_recording_lacks_nothing(fixed8):
+    sc, msgs = fixed8
+    c = completeness(sc, load_recording(msgs))
+    # 2 s: 401 samples (truth + 8 sense each), 201 steps per agent (est + one message per out-edge)
+    assert c["exact"] and c["missing_total"] == 0 and not c["surplus"]
+    n_edges = sum(len(a.neighbors) for a in sc.agents)
+    stats = sum(1 for t, _, _ in msgs if t.startswith("stats/"))
+    assert c["published"] == 401 * 9 + 201 * (8 + n_edges) + stats
+
+
+def test_dropped_messages_are_counted_per_channel(fixed8):
+    sc, msgs = fixed8
+    gone = {"est/3": 7, "truth": 2, "edge/1/3": 5, "sense/8": 1}
+    left, drop = [], dict(gone)
+    for m in msgs:
+        if drop.get(m[0], 0) > 0:
+            drop[m[0]] -= 1
+            continue
+        left.append(m)
+    c = completeness(sc, load_recording(left))
+    assert c["missing"] == gone and c["missing_total"] == sum(gone.values()) and c["exact"]
+
+
+def test_without_final_stats_the_count_is_a_lower_bound(fixed8):
+    sc, msgs = fixed8
+    rec = load_recording(msgs)
+    rec.stats[("agent", 5)] = {**rec.stats[("agent", 5)], "final": False}
+    assert not completeness(sc, rec)["exact"]
+
+
+def test_lean_channels_are_left_out_on_purpose(tmp_path):
+    sc = load(TOPO / "thesis-3.2-fixed8.toml")
+    msgs = simulate(sc, tmp_path, 1.0, sc.seed, lean=True, record=False)
+    s = make_report(tmp_path, sc, "sim", 1.0, 0.0, sc.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
+    assert s["recording"]["missing_total"] == 0 and s["recording"]["not_recorded"] == list(LEAN_SKIP)
+    # Without saying so, the same lean recording lacks every sensor and edge message.
+    s2 = make_report(tmp_path, sc, "sim", 1.0, 0.0, sc.seed, plots=False, messages=msgs)
+    assert s2["recording"]["missing_total"] == 201 * 8 + 101 * sum(len(a.neighbors) for a in sc.agents)
+
+
+def test_the_raw_recording_transcodes_to_the_same_recording(tmp_path, fixed8):
+    """The run recorder's path (payloads as they came, transcoded after the run) gives the
+    report exactly what the JSON path gives."""
+    sc, msgs = fixed8
+    raw = RawOut(tmp_path / "recording.raw.mcap", {"engine": "test"})
+    for stream, payload, t in msgs:
+        raw.message(stream, payload, t)
+    raw.close()
+    assert transcode(tmp_path / "recording.raw.mcap", tmp_path / "recording.mcap", sc) == 0
+    assert not (tmp_path / "recording.raw.mcap").exists()
+    a, b = load_recording(msgs), load_recording(tmp_path / "recording.mcap")
+    assert a.streams == b.streams
+    assert (a.truth_R == b.truth_R).all() and all((x[1] == y[1]).all() for x, y in zip(a.est[5], b.est[5], strict=True))
+    assert [t for t, _, _ in read(tmp_path / "recording.mcap")] == [t for t, _, _ in msgs]  # same order
