@@ -19,8 +19,8 @@ import logging
 import math
 import time
 from collections import deque
-from functools import partial
 from collections.abc import Callable, Mapping
+from functools import partial
 from types import ModuleType
 from typing import Any
 

@@ -58,9 +58,8 @@ def payload_sizes(sc: Scenario, seed: int) -> dict[str, Any]:
     sizes: dict[str, list[int]] = {}
 
     class Sizing(MemoryBus):
-        def put(self, key: str, payload: Any) -> None:
-            data = payload if isinstance(payload, bytes) else payload.payload
-            sizes.setdefault(key.split("/", 2)[2], []).append(len(data))
+        def put(self, key: str, payload: bytes) -> None:
+            sizes.setdefault(key.split("/", 2)[2], []).append(len(payload))
             super().put(key, payload)
 
     real = sim.MemoryBus
@@ -81,6 +80,20 @@ def payload_sizes(sc: Scenario, seed: int) -> dict[str, Any]:
             "out": {str(j): mean.get(f"edge/{i}/{j}", 0) for j in sc.out_neighbors(i)},
         }
     return {"agents": agents, "truth": mean["truth"]}
+
+
+def row(missed: int, ticks: int, edge_p99_ms: list[float], cpu: dict[str, float], sc: Scenario, **extra: Any) -> dict[str, Any]:
+    """One swarm's figures at one N: missed deadlines (% of the agents' ticks), the median
+    and the largest of the edges' p99 latencies, mean per-agent CPU and the other processes'."""
+    return {
+        "missed_pct": 100 * missed / ticks,
+        "edge_p99_ms": float(np.median(edge_p99_ms)),
+        "edge_p99_max_ms": float(max(edge_p99_ms)),
+        "agent_cpu_pct": float(np.mean([cpu[f"agent-{i}"] for i in sc.ids])),
+        "world_cpu_pct": cpu["world"],
+        "recorder_cpu_pct": cpu["recorder"],
+        "router_cpu_pct": cpu["router"],
+    } | extra
 
 
 def run_raw(sc: Scenario, sizes: dict[str, Any], duration: float) -> dict[str, Any]:
@@ -115,18 +128,8 @@ def run_raw(sc: Scenario, sizes: dict[str, Any], duration: float) -> dict[str, A
         res = {k: json.loads(Path(f"{d}/{k}.json").read_text()) for k in procs}
     agents = [res[f"agent-{i}"] for i in sc.ids]
     ticks = sum(a["ticks"] + a["missed"] for a in agents)
-    edges = [v for a in agents for k, v in a["links"].items() if k.startswith("edge/")]
-    return {
-        "missed_pct": 100 * sum(a["missed"] for a in agents) / ticks,
-        "edge_p99_ms": float(np.median([e["p99_ms"] for e in edges])),
-        "edge_p99_max_ms": float(max(e["p99_ms"] for e in edges)),
-        "agent_cpu_pct": float(np.mean([cpu[f"agent-{i}"] for i in sc.ids])),
-        "world_cpu_pct": cpu["world"],
-        "recorder_cpu_pct": cpu["recorder"],
-        "router_cpu_pct": cpu["router"],
-        "lost_in_recording": None,
-        "world_late": res["world"]["late"],
-    }
+    p99 = [v["p99_ms"] for a in agents for k, v in a["links"].items() if k.startswith("edge/")]
+    return row(sum(a["missed"] for a in agents), ticks, p99, cpu, sc, lost_in_recording=None, world_late=res["world"]["late"])
 
 
 def run_zswarm(topology: Path, sc: Scenario, duration: float, out: Path) -> dict[str, Any]:
@@ -155,19 +158,17 @@ def run_zswarm(topology: Path, sc: Scenario, duration: float, out: Path) -> dict
     s = json.loads((out / "summary.json").read_text())
     ag = s["agents"].values()
     ticks = sum(a["steps"] + a["missed_deadlines"] + a.get("idle_ticks", 0) for a in ag)
-    edges = [v for k, v in s["links"].items() if not k.startswith("world->") and not k.endswith("->world") and "latency_p99_ms" in v]
-    return {
-        "missed_pct": 100 * sum(a["missed_deadlines"] for a in ag) / ticks,
-        "edge_p99_ms": float(np.median([e["latency_p99_ms"] for e in edges])),
-        "edge_p99_max_ms": float(max(e["latency_p99_ms"] for e in edges)),
-        "agent_cpu_pct": float(np.mean([cpu[f"agent-{i}"] for i in sc.ids])),
-        "world_cpu_pct": cpu["world"],
-        "recorder_cpu_pct": cpu["recorder"],
-        "router_cpu_pct": cpu["router"],
-        "lost_in_recording": (s.get("recording") or {}).get("missing_total"),
-        "world_late": s["world"].get("late"),
-        "alive_at_end": sum(1 for a in ag if a.get("alive_at_end")),
-    }
+    p99 = [v["latency_p99_ms"] for k, v in s["links"].items() if not k.startswith("world->") and not k.endswith("->world") and "latency_p99_ms" in v]
+    return row(
+        sum(a["missed_deadlines"] for a in ag),
+        ticks,
+        p99,
+        cpu,
+        sc,
+        lost_in_recording=(s.get("recording") or {}).get("missing_total"),
+        world_late=s["world"].get("late"),
+        alive_at_end=sum(1 for a in ag if a.get("alive_at_end")),
+    )
 
 
 def main() -> int:

@@ -241,7 +241,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     from zswarm import report
     from zswarm.launch import results_dir
-    from zswarm.sim import simulate
+    from zswarm.sim import LEAN_SKIP, simulate
 
     sc = _load(args)
     _warn(sc)
@@ -261,8 +261,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if tty and not args.quiet:
         print(file=sys.stderr)
     messages = recorded if isinstance(recorded, list) else None
-    from zswarm.sim import LEAN_SKIP
-
     summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages, not_recorded=LEAN_SKIP if args.lean else ())
     summary["wall_time_s"] = wall
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -469,12 +467,7 @@ def cmd_compose(args: argparse.Namespace) -> int:
         args.live,
         argv=sys.argv[2:],
     )
-    if args.output is None:
-        sys.stdout.write(text)
-    else:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_text(text, encoding="utf-8")
-        print(f"wrote {args.output} ({len(sc.ids)} agents); run it with: docker compose -f {args.output} up", file=sys.stderr)
+    _write_output(text, args.output, f"({len(sc.ids)} agents); run it with: docker compose -f {args.output} up")
     return 0
 
 
@@ -623,13 +616,18 @@ def cmd_generate(args: argparse.Namespace) -> int:
         )
     except ValueError as exc:
         procutil.fail_usage(f"generate: {exc}")
-    if args.output is None:
-        sys.stdout.write(text)
-    else:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_text(text, encoding="utf-8")
-        print(f"wrote {args.output}: {sc.name}, {len(sc.ids)} agents, {sc.duration:g} s", file=sys.stderr)
+    _write_output(text, args.output, f": {sc.name}, {len(sc.ids)} agents, {sc.duration:g} s")
     return 0
+
+
+def _write_output(text: str, output: Path | None, what: str) -> None:
+    """``text`` to standard output, or to ``output`` (its folder made) with "wrote FILE<what>" on stderr."""
+    if output is None:
+        sys.stdout.write(text)
+        return
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(text, encoding="utf-8")
+    print(f"wrote {output}{what}", file=sys.stderr)
 
 
 def _warn(sc: object) -> None:

@@ -32,6 +32,7 @@ leading slash) are read too.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -171,7 +172,14 @@ class ViewerOut:
 
 
 RAW_SUFFIX = ".raw.mcap"
-_RAW_SCHEMA: Any = None  # made on first use (foxglove imported lazily)
+
+
+@functools.cache
+def _raw_schema() -> Any:
+    """msgpack is self-describing: the schema of a raw channel only names the wire format."""
+    import foxglove
+
+    return foxglove.Schema(name=f"zswarm.wire.v{wire.VERSION}", encoding="", data=b"")
 
 
 class RawOut:
@@ -183,10 +191,6 @@ class RawOut:
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        global _RAW_SCHEMA
-        if _RAW_SCHEMA is None:
-            # msgpack is self-describing: the schema only names the wire format (zswarm.wire).
-            _RAW_SCHEMA = foxglove.Schema(name=f"zswarm.wire.v{wire.VERSION}", encoding="", data=b"")
         self.ctx = foxglove.Context()
         opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="")
         self.writer: Any = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
@@ -202,7 +206,7 @@ class RawOut:
         if ch is None:
             import foxglove
 
-            ch = self._channels[stream] = foxglove.Channel(stream, message_encoding="msgpack", schema=_RAW_SCHEMA, context=self.ctx)
+            ch = self._channels[stream] = foxglove.Channel(stream, message_encoding="msgpack", schema=_raw_schema(), context=self.ctx)
         ch.log(payload if isinstance(payload, bytes) else msgpack.packb(payload), log_time=t)
         self.count += 1
 
@@ -294,13 +298,11 @@ class Recorder:
         self.stopped = threading.Event()
         self._closed = False
         self.out: ViewerOut | RawOut | None = None
+        meta = dict(metadata or {})
+        meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
         if raw and self.path is not None and live is None:
-            meta = dict(metadata or {})
-            meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
             self.out = RawOut(self.path, meta)
         elif self.path is not None or live is not None:
-            meta = dict(metadata or {})
-            meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
             self.out = ViewerOut(self.path, live, scenario, meta, server_name=f"zswarm {run}")
         # A real bus: samples wait on Zenoh's side until poll() takes them (no
         # callback contending for the GIL with the decoding); in-process: callbacks,

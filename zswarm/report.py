@@ -476,8 +476,8 @@ def completeness(sc: Scenario, rec: Recording, not_recorded: Sequence[str] = ())
             expected[f"cmd/{src}" if dst == "world" else f"edge/{src}/{dst}"] = int(n)
     for (role, src), st in rec.stats.items():
         expected[f"stats/{role}/{src}"] = int(st.get("seq", -1)) + 1
-    skip = tuple(f"{p.rstrip('/')}/" for p in not_recorded) + tuple(f"{p.rstrip('/')}" for p in not_recorded)
-    expected = {k: v for k, v in expected.items() if not (k.startswith(skip) or k in skip)}
+    left_out = {p.rstrip("/") for p in not_recorded}  # channel kinds: "sense", "edge", "cmd"
+    expected = {k: v for k, v in expected.items() if k.split("/", 1)[0] not in left_out}
     missing = {k: n - rec.streams.get(k, 0) for k, n in sorted(expected.items()) if n > rec.streams.get(k, 0)}
     surplus = {k: rec.streams.get(k, 0) - n for k, n in sorted(expected.items()) if rec.streams.get(k, 0) > n}
     return {
