@@ -58,6 +58,9 @@ def main(argv: list[str] | None = None) -> int:
         stop.set()
 
     lost: list[threading.Timer] = []
+    # Set once this agent's run is over (its duration reached; `stop` covers the world's stop and signals):
+    # the world's token going then is the end of the run, not a loss.
+    ended = threading.Event()
 
     def world_gone() -> None:
         log.warning("the world did not come back within %g s: stopping", args.world_grace)
@@ -69,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
                 lost.pop().cancel()
                 log.info("the world is back")
             world_seen.set()
-        elif world_seen.is_set() and not lost:
+        elif world_seen.is_set() and not lost and not ended.is_set() and not stop.is_set():
             # A crash, or a partition of the network (this host's link down longer than
             # the lease): go on, on this agent's own clock, for the world to come back.
             log.warning("lost the world's token: going on for up to %g s for it to come back", args.world_grace)
@@ -101,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             run_realtime(node, clock[0].now, lambda t: clock[0].sleep_until(t, stop), start["duration"])
         finally:
+            ended.set()
             node.publish_stats(min(clock[0].now(), start["duration"]), final=True)
             c = node.counters()
             log.info("stopped after %d steps (%.2f Hz, %d missed deadlines)", c["steps"], c["step_rate_hz"], c["missed_deadlines"])
