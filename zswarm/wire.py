@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from functools import partial
 from typing import Any, TypeGuard
 
 import msgpack
@@ -289,6 +290,167 @@ def _validate(m: Any, expect: str | tuple[str, ...] | None) -> dict[str, Any]:
                 raise MessageError("field names must be strings of at most 64 characters")
             out[k] = _dec_value(m[k], k)
     return out
+
+
+# ---------------------------------------------------------------- in-process messages
+#
+# zswarm sim runs every process in one: what a receiver gets from
+# decode(encode(...)) can be built from the sender's values directly, once per
+# message instead of once per receiver, without the bytes (MemoryBus.send).
+# message() builds it with decode's checks; where it cannot be sure of giving
+# exactly decode's result (a value encode would convert or reject, a limit of
+# msgpack), it returns None and the bus takes the byte path.
+
+
+class Decoded(dict):  # type: ignore[type-arg]
+    """A message as :func:`decode` returns it, built by :func:`message` (never from bytes)."""
+
+    __slots__ = ()
+
+
+# The types of the hot paths (sensors, edges, estimates, commands, truth).
+IN_PROCESS = frozenset({"sense", "edge", "est", "cmd", "truth"})
+_MAX_BIN = 1 << 20  # decode's max_bin_len
+
+
+class _Slow(Exception):
+    """message() cannot be sure of decode's result: take the byte path."""
+
+
+def _ro(v: Any, shape: tuple[int, ...] | None) -> np.ndarray:
+    """``v`` as decode returns it from ``_arr(v)``: a read-only float64 copy.
+
+    ``shape`` as in SCHEMAS (-1: any), or None for a named value (at most 4 dimensions
+    of at most MAX_VALUE_LEN elements in all)."""
+    if type(v) is np.ndarray and v.dtype == _F8 and (v.shape == shape if shape is not None else v.ndim <= 4 and v.size <= 32):
+        # Most fields.  Finite iff the exact sum is (fsum raises on inf - inf and on an
+        # overflow: then the byte path).  frombuffer over bytes: read-only, as decode's.
+        if not math.isfinite(math.fsum(v.ravel().tolist())):
+            raise _Slow
+        return np.frombuffer(v.tobytes(), dtype=_F8).reshape(v.shape)
+    a = v if (type(v) is np.ndarray and v.dtype == _F8 and v.flags.c_contiguous) else np.ascontiguousarray(v, dtype="<f8")
+    shp = a.shape
+    if shape is None:
+        if len(shp) > 4 or a.size > MAX_VALUE_LEN or any(d > MAX_VALUE_LEN for d in shp):
+            raise _Slow
+    elif len(shp) != len(shape) or any(w != -1 and w != g for w, g in zip(shape, shp, strict=True)):
+        raise _Slow
+    if a.nbytes > _MAX_BIN or not (all(map(math.isfinite, a.ravel().tolist())) if a.size <= 32 else bool(np.isfinite(a).all())):
+        raise _Slow
+    return np.frombuffer(a.tobytes(), dtype=_F8).reshape(shp)
+
+
+def _value(v: Any) -> float | np.ndarray:
+    """A named value as decode returns it from ``_enc_value(v)``."""
+    if isinstance(v, (int, float, np.floating)) and not isinstance(v, bool):
+        f = float(v)
+        if not math.isfinite(f):
+            raise _Slow
+        return f
+    return _ro(np.asarray(v), None)
+
+
+def _name(n: Any) -> str:
+    n = str(n)
+    if len(n) > 64:
+        raise _Slow
+    return n
+
+
+def _finite_float(v: Any) -> float:
+    f = float(v)
+    if not math.isfinite(f):
+        raise _Slow
+    return f
+
+
+def _converter(kind: Any) -> Callable[[Any], Any]:
+    """Sender's value -> decode's result, for one field kind (raises _Slow where unsure)."""
+    if isinstance(kind, tuple):
+        return partial(_ro, shape=kind)
+    if kind in ("vecmap", "matmap"):
+        shape = (3,) if kind == "vecmap" else (3, 3)
+        return lambda v: {int(j): _ro(y, shape) for j, y in v.items()}
+    if kind == "float":
+        return _finite_float
+    if kind == "fields":
+
+        def fields(v: Any) -> dict[str, Any]:
+            if len(v) > MAX_OPEN:
+                raise _Slow
+            return {_name(n): _value(y) for n, y in v.items()}
+
+        return fields
+    if kind == "floatmap":
+        return lambda v: {int(j): _finite_float(y) for j, y in v.items()}
+    if kind == "jumps":
+        return lambda v: [(int(e[0]), _finite_float(e[1]), _finite_float(e[2]), _finite_float(e[3])) for e in v]
+    if kind == "intlist":
+
+        def intlist(v: Any) -> list[int]:
+            if type(v) is not list or not all(type(y) is int for y in v):
+                raise _Slow
+            return list(v)
+
+        return intlist
+
+    def slow(v: Any) -> Any:  # "int", "str", "any": as msgpack gives them, only from bytes
+        raise _Slow
+
+    return slow
+
+
+# Per in-process type: (field, converter, optional) in decode's order (the schema's).
+_CONVERT = {t: tuple((k, _converter(kind), k in OPTIONAL.get(t, ())) for k, kind in SCHEMAS[t].items()) for t in IN_PROCESS}
+
+
+def message(mtype: str, src: int, seq: int, t: float, **fields: Any) -> Decoded | None:
+    """``decode(encode(mtype, src, seq, t, **fields))``, built without the bytes.
+
+    For the types in :data:`IN_PROCESS`; None where the result might differ from
+    the byte path's (a field decode would reject, a value encode would convert
+    in its own way, a msgpack limit): the caller then encodes.  Equality with
+    the byte path, bit for bit, is tested (tests/component/test_wire.py and
+    ``zswarm sim`` both ways in tests/component/test_sim.py).
+    """
+    conv = _CONVERT.get(mtype)
+    if conv is None or type(src) is not int or type(seq) is not int:
+        return None
+    try:
+        out = Decoded(type=mtype, src=src, seq=seq, t=_finite_float(t))
+        n = 0
+        for k, fn, optional in conv:
+            v = fields.get(k, _MISSING)
+            if v is _MISSING:
+                if optional:
+                    continue
+                return None
+            out[k] = fn(v)
+            n += 1
+        if n < len(fields):  # open fields (edge, cmd), after the schema's as decode has them
+            if mtype not in OPEN or len(fields) - n > MAX_OPEN:
+                return None
+            schema = SCHEMAS[mtype]
+            for k, v in fields.items():
+                if k not in schema:
+                    out[_name(k)] = _value(v)
+        return out
+    except (_Slow, TypeError, ValueError, AttributeError, OverflowError):
+        return None  # what encode does with such a value (raise, most likely) is the byte path's
+
+
+def payload(m: Decoded) -> bytes:
+    """The wire payload of an in-process message (decode gives ``m`` back)."""
+    fields = {k: x for k, x in m.items() if k not in ("type", "src", "seq", "t")}
+    return encode(m["type"], m["src"], m["seq"], m["t"], **fields)
+
+
+def check_type(m: Decoded, expect: str | tuple[str, ...] | None) -> Decoded:
+    """A receiver's own copy of an in-process message, checked against ``expect`` as decode would."""
+    mtype = m["type"]
+    if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
+        raise MessageError(f"type {mtype!r} where {expect!r} was expected")
+    return Decoded(m)
 
 
 # ---------------------------------------------------------------- JSON (recordings, viewers)
