@@ -105,10 +105,15 @@ class Inbox:
         self._log = logging.getLogger(log_name)
 
     def handler(
-        self, expect: str, link_of: Callable[[str], str | None], validate: Callable[[dict[str, Any]], object] | None = None
+        self,
+        expect: str,
+        link_of: Callable[[str], str | None],
+        validate: Callable[[dict[str, Any]], object] | None = None,
+        decode: Callable[[bytes], dict[str, Any]] | None = None,
     ) -> Callable[[str, bytes], None]:
         """A bus callback for messages of type ``expect``; ``validate`` raises ValueError
-        on a message that decodes but is not what this agent's algorithm reads.
+        on a message that decodes but is not what this agent's algorithm reads;
+        ``decode``: ``wire.decode(payload, expect)`` or a faster equivalent (``wire.decoder``).
 
         The callback only stamps the arrival on the receiver's clock and queues the
         payload (one deque append, thread-safe): decoding, validation, link emulation
@@ -116,7 +121,7 @@ class Inbox:
         (:meth:`drain`).  So Zenoh's thread holds the GIL for microseconds, no lock is
         taken, and nothing it does waits for a tick in progress.
         """
-        process = partial(self._process, expect, link_of, validate)
+        process = partial(self._process, expect, link_of, validate, decode or partial(wire.decode, expect=expect))
         pending, now = self._pending, self.now
 
         def on_message(key: str, payload: bytes) -> None:
@@ -131,13 +136,22 @@ class Inbox:
             process, key, payload, rx = pending.popleft()
             process(key, payload, rx)
 
-    def _process(self, expect: str, link_of: Callable[[str], str | None], validate: Callable[[dict[str, Any]], object] | None, key: str, payload: Any, rx: float) -> None:
+    def _process(
+        self,
+        expect: str,
+        link_of: Callable[[str], str | None],
+        validate: Callable[[dict[str, Any]], object] | None,
+        decode: Callable[[bytes], dict[str, Any]],
+        key: str,
+        payload: Any,
+        rx: float,
+    ) -> None:
         """Decode (bytes; a wire.Decoded from an in-process bus is checked), validate, emulate the link and store one arrival (stamped ``rx`` on arrival)."""
         link = link_of(key)
         try:
             if link is None:
                 raise wire.MessageError("key is not one of this agent's links")
-            msg = wire.decode(payload, expect) if type(payload) is bytes else wire.check_type(payload, expect)
+            msg = decode(payload) if type(payload) is bytes else wire.check_type(payload, expect)
             if validate is not None:
                 validate(msg)
         except ValueError as exc:
@@ -480,9 +494,11 @@ class AgentNode:
             (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
         )
         sense_link = f"world->{agent_id}"
-        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link), direct=True, decoded=True)
+        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense")), direct=True, decoded=True)
         if self.spec.neighbors:
-            bus.subscribe(keys.edges_into(run, agent_id), self.inbox.handler("edge", _edge_link, self.aspec.check_edge), direct=True, decoded=True)
+            edge_in = {n: (f.shape, f.optional) for n, f in self.aspec.edge_in.items()}
+            handler = self.inbox.handler("edge", _edge_link, self.aspec.check_edge, wire.decoder("edge", edge_in))
+            bus.subscribe(keys.edges_into(run, agent_id), handler, direct=True, decoded=True)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         self.pub_est = bus.publisher(keys.est(run, agent_id))
         self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None

@@ -101,6 +101,7 @@ class CommandInbox:
         self.now = now
         self.policy = policy
         self.fields = dict(fields)
+        self._decode = wire.decoder("cmd", {n: (tuple(shape), False) for n, shape in self.fields.items()})
         self._lock = threading.Lock()
         self.links: dict[int, _CmdLink] = {}
         for i in self.ids:
@@ -129,7 +130,7 @@ class CommandInbox:
             try:
                 if i is None or i not in self.index:
                     raise wire.MessageError("key is not the command key of an agent of this scenario")
-                msg = wire.decode(payload, "cmd") if type(payload) is bytes else wire.check_type(payload, "cmd")
+                msg = self._decode(payload) if type(payload) is bytes else wire.check_type(payload, "cmd")
                 if msg["src"] != i:
                     raise wire.MessageError(f"src {msg['src']} on agent {i}'s command key")
                 for name, shape in self.fields.items():

@@ -471,6 +471,9 @@ def cmd_compose(args: argparse.Namespace) -> int:
     return 0
 
 
+FINAL_STATS_WAIT_S = 8.0  # the recorder's wait for the processes' final stats after the run's stop
+
+
 def cmd_record(args: argparse.Namespace) -> int:
     from zswarm import report, wire
     from zswarm.bus import ZenohBus
@@ -513,8 +516,16 @@ def cmd_record(args: argparse.Namespace) -> int:
                     rec.flush()
                     next_flush += 0.5
             if rec.stopped.is_set() and not stop.is_set():
-                # The run ended: give the agents' final stats a moment to arrive.
-                end = time.monotonic() + 1.0
+                # The run ended: wait for the final stats of every process still up.  A fixed
+                # second was not always enough on a loaded machine (an agent behind its
+                # schedule stops later), and a missed one reads as an agent that died.
+                # Bounded: `zswarm run` kills a process that has not stopped 6 s after the world.
+                procs = [("world", 0), *(("agent", i) for i in sc.ids)]
+                end = time.monotonic() + FINAL_STATS_WAIT_S
+                while not stop.is_set() and time.monotonic() < end and rec.awaiting_finals(procs):
+                    stop.wait(0.01)
+                    rec.poll()
+                end = time.monotonic() + 0.2  # what is in flight from processes that went meanwhile
                 while not stop.is_set() and time.monotonic() < end:
                     stop.wait(0.01)
                     rec.poll()

@@ -297,6 +297,7 @@ class Recorder:
         self._lock = threading.Lock()
         self.count = 0
         self.alive: dict[str, bool] = {}
+        self.finals: set[str] = set()  # stats keys whose final counters have arrived
         self.stopped = threading.Event()
         self._closed = False
         self.out: ViewerOut | RawOut | None = None
@@ -332,6 +333,19 @@ class Recorder:
             self._buf.append((stream, payload, t))
         if key.endswith("/ctl/stop"):
             self.stopped.set()
+        elif "/stats/" in key and key not in self.finals:  # once a second per process: decoding is cheap
+            try:
+                if decode(payload, "stats")["counters"].get("final"):
+                    self.finals.add(key)
+            except (wire.MessageError, AttributeError):
+                pass  # counted as malformed where it is written
+
+    def awaiting_finals(self, procs: list[tuple[str, int]]) -> list[tuple[str, int]]:
+        """The processes (role, id) still up (liveliness token present) whose final stats have
+        not arrived: each sends them as it stops, and the report's "alive at the end" and
+        what the recording lacks rest on them."""
+        with self._lock:
+            return [(r, i) for r, i in procs if keys.stats(self.run, r, i) not in self.finals and self.alive.get(keys.alive(self.run, r, i), False)]
 
     def _on_alive(self, key: str, alive: bool) -> None:
         t = self.now_ns()

@@ -279,3 +279,94 @@ def test_in_process_message_property():
                 assert _identical(dict(fast), slow)
 
     check()
+
+
+# ---------------------------------------------------------------- the receivers' fast decoder
+
+EDGE_IN = {"R_hat": ((3, 3), False), "p_hat": ((3,), False), "b": ((3,), False), "vel": ((3,), True), "s": ((), True)}
+DECODERS = {"sense": wire.decoder("sense"), "edge": wire.decoder("edge", EDGE_IN), "cmd": wire.decoder("cmd", {"tau": ((3,), False)})}
+
+
+def _outcome(dec, payload):
+    """What a decoder makes of ``payload``: ('ok', message) or ('error', its message)."""
+    try:
+        return "ok", dec(payload)
+    except wire.MessageError as exc:
+        return "error", str(exc)
+
+
+def _same_outcome(mtype, payload):
+    got, want = _outcome(DECODERS[mtype], payload), _outcome(lambda p: wire.decode(p, mtype), payload)
+    assert got[0] == want[0], (got, want)
+    if got[0] == "error":
+        assert got[1] == want[1]
+    elif mtype == "sense":
+        assert _identical(got[1], want[1])  # the schema's order
+    else:  # an open type: the same fields, perhaps in another order
+        assert _identical(dict(sorted(got[1].items())), dict(sorted(want[1].items())))
+
+
+@pytest.mark.parametrize(
+    "mtype, fields",
+    [
+        ("sense", CASES["sense"]),
+        ("sense", dict(gyro=v, bearings={})),
+        ("sense", dict(gyro=v, rel_pos={3: v}, vel=v, vel_body=v, R=R, p=v)),
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=v, b=v)),
+        ("edge", dict(b=v, p_hat=v, t_local=1, R_hat=R, vel=-v, s=2)),  # another order, an int, every optional field
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=v, b=v, unexpected=v)),  # a field the receiver does not read
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=v, b=v, s=v)),  # a declared number sent as an array
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=v)),  # b missing: decode takes it, the receiver's check does not
+        ("edge", dict(t_local=1.5, R_hat=np.eye(4), p_hat=v, b=v)),
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=np.array([np.nan, 0.0, 0.0]), b=v)),
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=np.array([1e308, 1e308, 0.0]), b=v)),  # finite; the fast sum overflows
+        ("cmd", CASES["cmd"]),
+        ("cmd", dict(t_local=0.0, tau=np.array([np.inf, 0.0, 0.0]))),
+    ],
+)
+def test_fast_decoder_is_decode(mtype, fields):
+    _same_outcome(mtype, wire.encode(mtype, 3, 42, 1.25, **fields))
+
+
+def test_fast_decoder_is_decode_on_foreign_and_broken_payloads():
+    ok = wire.encode("sense", 0, 1, 0.5, gyro=v, bearings={2: v})
+    cases = [
+        ok + b"\x00",  # trailing bytes
+        ok[:-3],  # cut short
+        _raw(),  # an edge message, on the sensor key
+        msgpack.packb({"v": 2, "type": "sense", "src": True, "seq": 0, "t": 0.0}),
+        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": float("nan")}),
+        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "gyro": None}),
+        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "bearings": {True: [[3], v.tobytes()]}}),
+        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "gyro": [[3], v.tobytes()[:16]]}),
+        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "gyro": [(3,), v.tobytes(), 1]}),
+        # the same key twice: msgpack keeps the last, and so must the fast path
+        b"\x86" + b"".join(msgpack.packb(x) for x in ("v", 2, "type", "sense", "src", 0, "seq", 0, "t", 0.0, "src", 7)),
+    ]
+    for p in cases:
+        _same_outcome("sense", p)
+
+
+def test_fast_decoder_property():
+    """Random messages and random byte mutations of valid ones: the fast decoder's outcome
+    (the message, or the MessageError and its text) is decode's."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra import numpy as hnp
+
+    floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
+    vec = hnp.arrays(np.float64, st.sampled_from([(3,), (2,), (3, 3)]), elements=floats)
+
+    @settings(max_examples=300, deadline=None)
+    @given(vec, st.dictionaries(st.integers(-3, 3), vec, max_size=3), floats, st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), max_size=3))
+    def check(g, bearings, t, flips):
+        for mtype, fields in (("sense", dict(gyro=g, bearings=bearings)), ("edge", dict(t_local=t, R_hat=R, p_hat=g, b=v))):
+            try:
+                p = bytearray(wire.encode(mtype, 1, 2, 0.5, **fields))
+            except (ValueError, TypeError):
+                continue
+            for at, byte in flips:
+                p[at % len(p)] = byte
+            _same_outcome(mtype, bytes(p))
+
+    check()
