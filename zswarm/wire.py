@@ -317,17 +317,13 @@ class _Slow(Exception):
     """message() cannot be sure of decode's result: take the byte path."""
 
 
-def _ro(v: Any, shape: tuple[int, ...] | None) -> np.ndarray:
-    """``v`` as decode returns it from ``_arr(v)``: a read-only float64 copy.
-
-    ``shape`` as in SCHEMAS (-1: any), or None for a named value (at most 4 dimensions
-    of at most MAX_VALUE_LEN elements in all)."""
+def _norm(v: Any, shape: tuple[int, ...] | None) -> np.ndarray:
+    """``v`` as ``_arr`` sends it: a float64 array, checked as decode checks ``[shape, bytes]``
+    (raises _Slow otherwise).  ``shape`` as in SCHEMAS (-1: any), or None for a named value
+    (at most 4 dimensions of at most MAX_VALUE_LEN elements in all).  Not yet copied, nor
+    checked for finiteness: :func:`_message` does both for all of a message's arrays at once."""
     if type(v) is np.ndarray and v.dtype == _F8 and (v.shape == shape if shape is not None else v.ndim <= 4 and v.size <= 32):
-        # Most fields.  Finite iff the exact sum is (fsum raises on inf - inf and on an
-        # overflow: then the byte path).  frombuffer over bytes: read-only, as decode's.
-        if not math.isfinite(math.fsum(v.ravel().tolist())):
-            raise _Slow
-        return np.frombuffer(v.tobytes(), dtype=_F8).reshape(v.shape)
+        return v  # most fields
     a = v if (type(v) is np.ndarray and v.dtype == _F8 and v.flags.c_contiguous) else np.ascontiguousarray(v, dtype="<f8")
     shp = a.shape
     if shape is None:
@@ -335,19 +331,25 @@ def _ro(v: Any, shape: tuple[int, ...] | None) -> np.ndarray:
             raise _Slow
     elif len(shp) != len(shape) or any(w != -1 and w != g for w, g in zip(shape, shp, strict=True)):
         raise _Slow
-    if a.nbytes > _MAX_BIN or not (all(map(math.isfinite, a.ravel().tolist())) if a.size <= 32 else bool(np.isfinite(a).all())):
+    if a.nbytes > _MAX_BIN:
         raise _Slow
-    return np.frombuffer(a.tobytes(), dtype=_F8).reshape(shp)
+    return a
 
 
-def _value(v: Any) -> float | np.ndarray:
+_Pending = list[tuple[dict[Any, Any], Any, np.ndarray]]  # (container, key, array): made read-only copies at the end
+
+
+def _put_arr(d: dict[Any, Any], k: Any, v: Any, shape: tuple[int, ...] | None, pend: _Pending) -> None:
+    a = d[k] = _norm(v, shape)
+    pend.append((d, k, a))
+
+
+def _put_value(d: dict[Any, Any], k: Any, v: Any, pend: _Pending) -> None:
     """A named value as decode returns it from ``_enc_value(v)``."""
     if isinstance(v, (int, float, np.floating)) and not isinstance(v, bool):
-        f = float(v)
-        if not math.isfinite(f):
-            raise _Slow
-        return f
-    return _ro(np.asarray(v), None)
+        d[k] = _finite_float(v)
+    else:
+        _put_arr(d, k, np.asarray(v), None, pend)
 
 
 def _name(n: Any) -> str:
@@ -364,37 +366,57 @@ def _finite_float(v: Any) -> float:
     return f
 
 
-def _converter(kind: Any) -> Callable[[Any], Any]:
-    """Sender's value -> decode's result, for one field kind (raises _Slow where unsure)."""
+def _converter(kind: Any) -> Callable[[dict[str, Any], str, Any, _Pending], None]:
+    """Puts the sender's value of one field kind as decode would return it (raises _Slow where unsure)."""
     if isinstance(kind, tuple):
-        return partial(_ro, shape=kind)
+        return lambda out, k, v, pend: _put_arr(out, k, v, kind, pend)
     if kind in ("vecmap", "matmap"):
         shape = (3,) if kind == "vecmap" else (3, 3)
-        return lambda v: {int(j): _ro(y, shape) for j, y in v.items()}
+
+        def arrmap(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
+            d = out[k] = {}
+            for j, y in v.items():
+                _put_arr(d, int(j), y, shape, pend)
+
+        return arrmap
     if kind == "float":
-        return _finite_float
+
+        def flt(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
+            out[k] = _finite_float(v)
+
+        return flt
     if kind == "fields":
 
-        def fields(v: Any) -> dict[str, Any]:
+        def fields(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
             if len(v) > MAX_OPEN:
                 raise _Slow
-            return {_name(n): _value(y) for n, y in v.items()}
+            d = out[k] = {}
+            for n, y in v.items():
+                _put_value(d, _name(n), y, pend)
 
         return fields
     if kind == "floatmap":
-        return lambda v: {int(j): _finite_float(y) for j, y in v.items()}
+
+        def floatmap(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
+            out[k] = {int(j): _finite_float(y) for j, y in v.items()}
+
+        return floatmap
     if kind == "jumps":
-        return lambda v: [(int(e[0]), _finite_float(e[1]), _finite_float(e[2]), _finite_float(e[3])) for e in v]
+
+        def jumps(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
+            out[k] = [(int(e[0]), _finite_float(e[1]), _finite_float(e[2]), _finite_float(e[3])) for e in v]
+
+        return jumps
     if kind == "intlist":
 
-        def intlist(v: Any) -> list[int]:
+        def intlist(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
             if type(v) is not list or not all(type(y) is int for y in v):
                 raise _Slow
-            return list(v)
+            out[k] = list(v)
 
         return intlist
 
-    def slow(v: Any) -> Any:  # "int", "str", "any": as msgpack gives them, only from bytes
+    def slow(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:  # "int", "str", "any": as msgpack gives them, only from bytes
         raise _Slow
 
     return slow
@@ -418,14 +440,15 @@ def message(mtype: str, src: int, seq: int, t: float, **fields: Any) -> Decoded 
         return None
     try:
         out = Decoded(type=mtype, src=src, seq=seq, t=_finite_float(t))
+        pend: _Pending = []
         n = 0
-        for k, fn, optional in conv:
+        for k, put, optional in conv:
             v = fields.get(k, _MISSING)
             if v is _MISSING:
                 if optional:
                     continue
                 return None
-            out[k] = fn(v)
+            put(out, k, v, pend)
             n += 1
         if n < len(fields):  # open fields (edge, cmd), after the schema's as decode has them
             if mtype not in OPEN or len(fields) - n > MAX_OPEN:
@@ -433,7 +456,18 @@ def message(mtype: str, src: int, seq: int, t: float, **fields: Any) -> Decoded 
             schema = SCHEMAS[mtype]
             for k, v in fields.items():
                 if k not in schema:
-                    out[_name(k)] = _value(v)
+                    _put_value(out, _name(k), v, pend)
+        if pend:
+            # Every array of the message copied into one buffer (read-only views of it, as
+            # decode's arrays are read-only), and one finiteness check: finite iff the exact
+            # sum is (fsum raises on inf - inf and on an overflow: then the byte path).
+            flat = np.frombuffer(b"".join([a.tobytes() for _, _, a in pend]), dtype=_F8)
+            if not math.isfinite(math.fsum(flat.tolist())):
+                return None
+            o = 0
+            for d, k, a in pend:
+                d[k] = flat[o : o + a.size].reshape(a.shape)
+                o += a.size
         return out
     except (_Slow, TypeError, ValueError, AttributeError, OverflowError):
         return None  # what encode does with such a value (raise, most likely) is the byte path's

@@ -76,3 +76,26 @@ def test_the_raw_recording_transcodes_to_the_same_recording(tmp_path, fixed8):
     assert a.streams == b.streams
     assert (a.truth_R == b.truth_R).all() and all((x[1] == y[1]).all() for x, y in zip(a.est[5], b.est[5], strict=True))
     assert [t for t, _, _ in read(tmp_path / "recording.mcap")] == [t for t, _, _ in msgs]  # same order
+
+
+def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
+    """After the run's stop the recorder waits for each process still up to send its final
+    stats (a fixed second was not always enough on a loaded machine); one whose token is
+    gone is not waited for."""
+    from zswarm import keys, wire
+    from zswarm.bus import MemoryBus
+    from zswarm.record import Recorder
+
+    bus = MemoryBus()
+    rec = Recorder(bus, "r", None, now_ns=lambda: 0)
+    procs = [("world", 0), ("agent", 1), ("agent", 2), ("agent", 3)]
+    for role, i in procs[:3]:  # agent 3 never came up
+        bus.declare_token(keys.alive("r", role, i))
+    assert rec.awaiting_finals(procs) == procs[:3]
+    bus.publisher(keys.stats("r", "agent", 1)).send("stats", 1, 0, 1.0, role="agent", counters={"final": False})
+    bus.publisher(keys.stats("r", "world", 0)).send("stats", 0, 1, 2.0, role="world", counters={"final": True})
+    bus.publisher(keys.stats("r", "agent", 2)).send("stats", 2, 0, 1.0, role="agent", counters=5)  # malformed: still awaited
+    assert rec.awaiting_finals(procs) == [("agent", 1), ("agent", 2)]
+    bus.publisher(keys.stats("r", "agent", 1)).put(wire.encode("stats", 1, 1, 2.0, role="agent", counters={"final": True}))
+    bus.undeclare_token(keys.alive("r", "agent", 2))  # gone: nothing more will come from it
+    assert rec.awaiting_finals(procs) == []
