@@ -84,7 +84,7 @@ class Inbox:
     def __init__(self, log_name: str, now: Callable[[], float], link_model: Callable[[str], LinkModel] | None = None) -> None:
         # Arrivals not yet processed: (processor, key, payload, arrival stamp), appended by
         # the bus callbacks (any thread), taken by drain() on the agent's thread.
-        self._pending: deque[tuple[Callable[[str, Any, float], None], str, Any, float]] = deque()
+        self._pending: deque[tuple[Callable[[str, bytes, float], None], str, bytes, float]] = deque()
         self.now = now  # the receiver's own clock, stamps every arrival as "rx"
         # Link emulation (zswarm/links.py): each arrival is lost or held until its release time.
         self._link_model = link_model
@@ -148,15 +148,15 @@ class Inbox:
         validate: Callable[[dict[str, Any]], object] | None,
         decode: Callable[[bytes], dict[str, Any]],
         key: str,
-        payload: Any,
+        payload: bytes,
         rx: float,
     ) -> None:
-        """Decode (bytes; a wire.Decoded from an in-process bus is checked), validate, emulate the link and store one arrival (stamped ``rx`` on arrival)."""
+        """Decode, validate, emulate the link and store one arrival (stamped ``rx`` on arrival)."""
         link = link_of(key)
         try:
             if link is None:
                 raise wire.MessageError("key is not one of this agent's links")
-            msg = decode(payload) if type(payload) is bytes else wire.check_type(payload, expect)
+            msg = decode(payload)
             if validate is not None:
                 validate(msg)
         except ValueError as exc:
@@ -499,11 +499,11 @@ class AgentNode:
             (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
         )
         sense_link = f"world->{agent_id}"
-        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense")), direct=False, decoded=True)
+        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense")), direct=False)
         if self.spec.neighbors:
             edge_in = {n: (f.shape, f.optional) for n, f in self.aspec.edge_in.items()}
             handler = self.inbox.handler("edge", _edge_link, self.aspec.check_edge, wire.decoder("edge", edge_in))
-            bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False, decoded=True)
+            bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         self.pub_est = bus.publisher(keys.est(run, agent_id))
         self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None
@@ -675,7 +675,7 @@ class AgentNode:
         for i, fields in pub.edges.items():
             p = self.pub_edge.get(i)
             if p is not None:
-                p.send("edge", self.id, seq, t_stamp, t_local=t_local, **fields)
+                p.put(wire.encode("edge", self.id, seq, t_stamp, t_local=t_local, **fields))
                 self.sent[i] += 1
         e = pub.estimate
         est: dict[str, Any] = {"t_local": t_local}
@@ -694,9 +694,9 @@ class AgentNode:
         if pub.command is not None and self.pub_cmd is not None:
             # To the world's plant (zero-order hold there), stamped with the time of the
             # measurements it was computed from.
-            self.pub_cmd.send("cmd", self.id, self.cmd_seq, t_stamp, t_local=t_local, **pub.command)
+            self.pub_cmd.put(wire.encode("cmd", self.id, self.cmd_seq, t_stamp, t_local=t_local, **pub.command))
             self.cmd_seq += 1
-        self.pub_est.send("est", self.id, seq, t_stamp, **est)
+        self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, **est))
 
     # ------------------------------------------------------------------ reporting
 
@@ -736,7 +736,7 @@ class AgentNode:
     def publish_stats(self, t_world: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        (self.pub_final if final else self.pub_stats).send("stats", self.id, self.stats_seq, t_world, role="agent", counters=counters)
+        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", self.id, self.stats_seq, t_world, role="agent", counters=counters))
         self.stats_seq += 1
 
 

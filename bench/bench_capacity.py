@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_runtime import cpu_seconds  # noqa: E402
-from zswarm import generate, wire  # noqa: E402
+from zswarm import generate  # noqa: E402
 from zswarm.scenario import Scenario  # noqa: E402
 
 
@@ -58,9 +58,9 @@ def payload_sizes(sc: Scenario, seed: int) -> dict[str, Any]:
     sizes: dict[str, list[int]] = {}
 
     class Sizing(MemoryBus):
-        def send(self, key: str, mtype: str, src: int, seq: int, t: float, **fields: Any) -> None:
-            sizes.setdefault(key.split("/", 2)[2], []).append(len(wire.encode(mtype, src, seq, t, **fields)))
-            super().send(key, mtype, src, seq, t, **fields)
+        def put(self, key: str, payload: bytes) -> None:
+            sizes.setdefault(key.split("/", 2)[2], []).append(len(payload))
+            super().put(key, payload)
 
     real = sim.MemoryBus
     sim.MemoryBus = Sizing  # type: ignore[misc]

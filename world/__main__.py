@@ -96,11 +96,11 @@ def main(argv: list[str] | None = None) -> int:
             if time.monotonic() >= next_announce:
                 # Re-announce so that a late (re)started process can join the run.
                 pub_start.put(start)
-                pub_progress.send("progress", 0, world.seq, t, duration=duration)
+                pub_progress.put(wire.encode("progress", 0, world.seq, t, duration=duration))
                 next_announce += 0.5
         end_t = min(clock.now(), duration)
         world.publish_stats(end_t, final=True)
-        pub_stop.send("stop", 0, 0, end_t, reason=reason)
+        pub_stop.put(wire.encode("stop", 0, 0, end_t, reason=reason))
         log.info("stopped (%s) at t = %.3f s after %d samples, %d late", reason, end_t, world.samples, world.late)
         # Give the stop message time to leave before the session closes.
         time.sleep(0.1)

@@ -50,7 +50,7 @@ class World:
                 list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["kinematic"]
             )
             self.motion = KinematicPlant(np.array([a.R_matrix for a in scenario.agents]), np.array([a.p for a in scenario.agents]), scenario.step, self.commands)
-            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent), decoded=True)
+            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
         elif scenario.plant == "rigid_body":
             self.commands = CommandInbox(
                 list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["rigid_body"]
@@ -63,7 +63,7 @@ class World:
                 scenario.step,
                 self.commands,
             )
-            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent), decoded=True)
+            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
         else:
             self.motion = PrescribedMotion(
                 np.array([a.R_matrix for a in scenario.agents]),
@@ -122,11 +122,11 @@ class World:
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
         if isinstance(self.motion, RigidBodyPlant):
-            self.pub_truth.send("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, tau=self.motion.tau)
+            self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, tau=self.motion.tau))
         elif isinstance(self.motion, KinematicPlant):
-            self.pub_truth.send("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, u=self.motion.u)
+            self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W, u=self.motion.u))
         else:
-            self.pub_truth.send("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W)
+            self.pub_truth.put(wire.encode("truth", 0, seq, t, ids=self.ids, R=R, p=p, w=W))
         for i in self.ids:
             a = self.index[i]
             rng = self.rngs[i]
@@ -153,7 +153,7 @@ class World:
             if "rel_pos" in want:
                 # toward the robots i senses (Scenario.sensed): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
-            self.pub_sense[i].send("sense", 0, seq, t, **m)
+            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
         self.seq += 1
         self.samples += 1
         self.k += 1
@@ -176,5 +176,5 @@ class World:
     def publish_stats(self, t: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        (self.pub_final if final else self.pub_stats).send("stats", 0, self.stats_seq, t, role="world", counters=counters)
+        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", 0, self.stats_seq, t, role="world", counters=counters))
         self.stats_seq += 1

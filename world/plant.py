@@ -130,7 +130,7 @@ class CommandInbox:
             try:
                 if i is None or i not in self.index:
                     raise wire.MessageError("key is not the command key of an agent of this scenario")
-                msg = self._decode(payload) if type(payload) is bytes else wire.check_type(payload, "cmd")
+                msg = self._decode(payload)
                 if msg["src"] != i:
                     raise wire.MessageError(f"src {msg['src']} on agent {i}'s command key")
                 for name, shape in self.fields.items():

@@ -12,26 +12,17 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-from zswarm import wire
-
-# (key, payload): msgpack bytes, or for a subscriber that said decoded=True, possibly a
-# wire.Decoded of its own (MemoryBus.send: what decode would have returned, built once).
-DataCallback = Callable[[str, Any], None]
+DataCallback = Callable[[str, bytes], None]
 AliveCallback = Callable[[str, bool], None]
 
 
 class Publisher(Protocol):
     def put(self, payload: bytes) -> None: ...
 
-    def send(self, mtype: str, src: int, seq: int, t: float, **fields: Any) -> None:
-        """Publish ``wire.encode(mtype, src, seq, t, **fields)``; an in-process bus may hand
-        the decoded message to subscribers that take one (``subscribe(..., decoded=True)``)."""
-        ...
-
 
 class Bus(Protocol):
     def publisher(self, key: str, block: bool = False) -> Publisher: ...
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, decoded: bool = False) -> None: ...
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None: ...
     def declare_token(self, key: str) -> None: ...
     def watch_alive(self, key_expr: str, callback: AliveCallback) -> None: ...
     def close(self) -> None: ...
@@ -66,21 +57,13 @@ class MemoryBus:
     Deterministic: subscribers are called in the order they subscribed.  Used by
     ``zswarm sim`` and the component tests; never a stand-in for Zenoh in
     integration tests.
-
-    ``send`` skips the bytes where it can: a subscriber that takes decoded
-    messages gets its own copy of ``wire.message(...)``, which is what
-    ``wire.decode(wire.encode(...))`` returns, built once per message instead of
-    encoded once and decoded per receiver (in ``zswarm sim`` the round trip
-    took a third of the time).  ``in_process=False`` sends bytes to everyone,
-    as Zenoh does; ``zswarm sim`` gives identical results both ways (tested).
     """
 
-    def __init__(self, in_process: bool = True) -> None:
-        self.in_process = in_process
-        self._subs: list[tuple[str, DataCallback, bool]] = []
+    def __init__(self) -> None:
+        self._subs: list[tuple[str, DataCallback]] = []
         self._watchers: list[tuple[str, AliveCallback]] = []
         self._tokens: set[str] = set()
-        self._cache: dict[str, list[tuple[DataCallback, bool]]] = {}
+        self._cache: dict[str, list[DataCallback]] = {}
 
     def publisher(self, key: str, block: bool = False) -> Publisher:
         bus = self
@@ -89,37 +72,18 @@ class MemoryBus:
             def put(self, payload: bytes) -> None:
                 bus.put(key, payload)
 
-            def send(self, mtype: str, src: int, seq: int, t: float, **fields: Any) -> None:
-                bus.send(key, mtype, src, seq, t, **fields)
-
         return _Pub()
 
-    def _match(self, key: str) -> list[tuple[DataCallback, bool]]:
+    def put(self, key: str, payload: bytes) -> None:
         cbs = self._cache.get(key)
         if cbs is None:
-            cbs = self._cache[key] = [(cb, dec) for ke, cb, dec in self._subs if key_matches(ke, key)]
-        return cbs
-
-    def put(self, key: str, payload: bytes) -> None:
-        for cb, _ in self._match(key):
+            cbs = [cb for ke, cb in self._subs if key_matches(ke, key)]
+            self._cache[key] = cbs
+        for cb in cbs:
             cb(key, payload)
 
-    def send(self, key: str, mtype: str, src: int, seq: int, t: float, **fields: Any) -> None:
-        """Publish a message on ``key`` (see the class docstring)."""
-        cbs = self._match(key)
-        m = wire.message(mtype, src, seq, t, **fields) if self.in_process and any(dec for _, dec in cbs) else None
-        payload = None
-        for cb, dec in cbs:
-            if dec and m is not None:
-                cb(key, wire.Decoded(m))
-            else:
-                if payload is None:
-                    payload = wire.encode(mtype, src, seq, t, **fields)
-                cb(key, payload)
-
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, decoded: bool = False) -> None:
-        """``decoded``: the callback also takes a ``wire.Decoded`` of its own instead of bytes."""
-        self._subs.append((key_expr, callback, decoded))
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
+        self._subs.append((key_expr, callback))
         self._cache.clear()
 
     def declare_token(self, key: str) -> None:
@@ -188,18 +152,6 @@ def zenoh_config(
     return conf
 
 
-class _ZenohPublisher:
-    """A Zenoh publisher with :meth:`send` (always bytes on the wire)."""
-
-    __slots__ = ("put",)
-
-    def __init__(self, pub: Any) -> None:
-        self.put = pub.put
-
-    def send(self, mtype: str, src: int, seq: int, t: float, **fields: Any) -> None:
-        self.put(wire.encode(mtype, src, seq, t, **fields))
-
-
 class ZenohBus:
     """A real Zenoh session behind the :class:`Bus` protocol (a context manager).
 
@@ -238,14 +190,14 @@ class ZenohBus:
             express=False,
         )
         self._objs.append(pub)
-        return _ZenohPublisher(pub)
+        return pub  # type: ignore[no-any-return]
 
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, decoded: bool = False) -> None:
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
         """``direct``: run ``callback`` on Zenoh's receiving thread instead of handing each
         sample to a Python thread of its own (zenoh-python's default).  Cheaper (no thread
         wake-up per sample) but the receiving thread then waits for the GIL for every
         sample, holding up the link: on an overloaded machine long enough to miss the
-        lease (see ``agent.runtime.Inbox.handler``).  ``decoded``: always bytes here."""
+        lease (see ``agent.runtime.Inbox.handler``)."""
 
         def _cb(sample: Any) -> None:
             callback(str(sample.key_expr), sample.payload.to_bytes())

@@ -207,8 +207,6 @@ class RawOut:
             import foxglove
 
             ch = self._channels[stream] = foxglove.Channel(stream, message_encoding="msgpack", schema=_raw_schema(), context=self.ctx)
-        if type(payload) is wire.Decoded:
-            payload = wire.payload(payload)
         ch.log(payload if isinstance(payload, bytes) else msgpack.packb(payload), log_time=t)
         self.count += 1
 
@@ -312,8 +310,7 @@ class Recorder:
         # stamped at the virtual time they are delivered.
         self._drain = bus.subscribe_polled(keys.everything(run)) if hasattr(bus, "subscribe_polled") else None
         if self._drain is None:
-            # In-process, the messages as the receivers got them (wire.Decoded), except for a raw file.
-            bus.subscribe(keys.everything(run), self._on_data, decoded=not isinstance(self.out, RawOut))
+            bus.subscribe(keys.everything(run), self._on_data)
         bus.watch_alive(keys.alive_all(run), self._on_alive)
 
     @property
@@ -425,11 +422,7 @@ def _is_truncation(exc: Exception) -> bool:
 
 def decode(message: bytes | dict[str, Any], expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
     """A message as :func:`read` (or an in-memory recording) gives it, decoded and validated."""
-    if isinstance(message, bytes):
-        return wire.decode(message, expect)
-    if type(message) is wire.Decoded:  # from zswarm sim's bus: decoded and validated once for everyone
-        return wire.check_type(message, expect)
-    return wire.from_json(message, expect)
+    return wire.decode(message, expect) if isinstance(message, bytes) else wire.from_json(message, expect)
 
 
 def unpack(payload: bytes | dict[str, Any]) -> Any:

@@ -31,7 +31,6 @@ def simulate(
     kill: dict[int, float] | None = None,
     lean: bool = False,
     record: bool = True,
-    in_process: bool = True,
 ) -> Path | list[tuple[str, bytes, int]]:
     """Run ``scenario`` for ``duration`` s of world time; return the recording path.
 
@@ -41,10 +40,8 @@ def simulate(
     quarter of the size; the report needs only truth, estimates and stats).
     ``record=False`` writes no file and returns the recorded messages
     (``(channel, payload, log_time_ns)``, what :func:`zswarm.record.read` yields).
-    ``in_process=False``: every message goes through its bytes, as over Zenoh
-    (identical results, slower: see :class:`zswarm.bus.MemoryBus`).
     """
-    bus = MemoryBus(in_process=in_process)
+    bus = MemoryBus()
     t_now = [0.0]
     rec_path = out_dir / "recording.mcap"
     recorder = Recorder(
@@ -63,7 +60,7 @@ def simulate(
     bus.declare_token(keys.alive(run, "world", 0))
     for i in agents:
         bus.declare_token(keys.alive(run, "agent", i))
-    ctl_start.send("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run)
+    ctl_start.put(wire.encode("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run))
 
     # (time, priority, id): world samples have priority 0, agent ticks 1.
     queue: list[tuple[float, int, int]] = [(world.next_time(), 0, 0)]
@@ -104,7 +101,7 @@ def simulate(
             if progress:
                 progress(t)
     t_now[0] = duration
-    ctl_stop.send("stop", 0, 0, duration, reason="duration")
+    ctl_stop.put(wire.encode("stop", 0, 0, duration, reason="duration"))
     world.publish_stats(duration, final=True)
     for a in agents.values():
         a.publish_stats(duration, final=True)

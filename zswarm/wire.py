@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from functools import partial
 from typing import Any, Literal, TypeGuard
 
 import msgpack
@@ -292,201 +291,6 @@ def _validate(m: Any, expect: str | tuple[str, ...] | None) -> dict[str, Any]:
     return out
 
 
-# ---------------------------------------------------------------- in-process messages
-#
-# zswarm sim runs every process in one: what a receiver gets from
-# decode(encode(...)) can be built from the sender's values directly, once per
-# message instead of once per receiver, without the bytes (MemoryBus.send).
-# message() builds it with decode's checks; where it cannot be sure of giving
-# exactly decode's result (a value encode would convert or reject, a limit of
-# msgpack), it returns None and the bus takes the byte path.
-
-
-class Decoded(dict):  # type: ignore[type-arg]
-    """A message as :func:`decode` returns it, built by :func:`message` (never from bytes)."""
-
-    __slots__ = ()
-
-
-# The types of the hot paths (sensors, edges, estimates, commands, truth).
-IN_PROCESS = frozenset({"sense", "edge", "est", "cmd", "truth"})
-_MAX_BIN = 1 << 20  # decode's max_bin_len
-
-
-class _Slow(Exception):
-    """message() cannot be sure of decode's result: take the byte path."""
-
-
-def _norm(v: Any, shape: tuple[int, ...] | None) -> np.ndarray:
-    """``v`` as ``_arr`` sends it: a float64 array, checked as decode checks ``[shape, bytes]``
-    (raises _Slow otherwise).  ``shape`` as in SCHEMAS (-1: any), or None for a named value
-    (at most 4 dimensions of at most MAX_VALUE_LEN elements in all).  Not yet copied, nor
-    checked for finiteness: :func:`_message` does both for all of a message's arrays at once."""
-    if type(v) is np.ndarray and v.dtype == _F8 and (v.shape == shape if shape is not None else v.ndim <= 4 and v.size <= 32):
-        return v  # most fields
-    a = v if (type(v) is np.ndarray and v.dtype == _F8 and v.flags.c_contiguous) else np.ascontiguousarray(v, dtype="<f8")
-    shp = a.shape
-    if shape is None:
-        if len(shp) > 4 or a.size > MAX_VALUE_LEN or any(d > MAX_VALUE_LEN for d in shp):
-            raise _Slow
-    elif len(shp) != len(shape) or any(w != -1 and w != g for w, g in zip(shape, shp, strict=True)):
-        raise _Slow
-    if a.nbytes > _MAX_BIN:
-        raise _Slow
-    return a
-
-
-_Pending = list[tuple[dict[Any, Any], Any, np.ndarray]]  # (container, key, array): made read-only copies at the end
-
-
-def _put_arr(d: dict[Any, Any], k: Any, v: Any, shape: tuple[int, ...] | None, pend: _Pending) -> None:
-    a = d[k] = _norm(v, shape)
-    pend.append((d, k, a))
-
-
-def _put_value(d: dict[Any, Any], k: Any, v: Any, pend: _Pending) -> None:
-    """A named value as decode returns it from ``_enc_value(v)``."""
-    if isinstance(v, (int, float, np.floating)) and not isinstance(v, bool):
-        d[k] = _finite_float(v)
-    else:
-        _put_arr(d, k, np.asarray(v), None, pend)
-
-
-def _name(n: Any) -> str:
-    name = str(n)
-    if len(name) > 64:
-        raise _Slow
-    return name
-
-
-def _finite_float(v: Any) -> float:
-    f = float(v)
-    if not math.isfinite(f):
-        raise _Slow
-    return f
-
-
-def _converter(kind: Any) -> Callable[[dict[str, Any], str, Any, _Pending], None]:
-    """Puts the sender's value of one field kind as decode would return it (raises _Slow where unsure)."""
-    if isinstance(kind, tuple):
-        return lambda out, k, v, pend: _put_arr(out, k, v, kind, pend)
-    if kind in ("vecmap", "matmap"):
-        shape = (3,) if kind == "vecmap" else (3, 3)
-
-        def arrmap(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
-            d = out[k] = {}
-            for j, y in v.items():
-                _put_arr(d, int(j), y, shape, pend)
-
-        return arrmap
-    if kind == "float":
-
-        def flt(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
-            out[k] = _finite_float(v)
-
-        return flt
-    if kind == "fields":
-
-        def fields(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
-            if len(v) > MAX_OPEN:
-                raise _Slow
-            d = out[k] = {}
-            for n, y in v.items():
-                _put_value(d, _name(n), y, pend)
-
-        return fields
-    if kind == "floatmap":
-
-        def floatmap(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
-            out[k] = {int(j): _finite_float(y) for j, y in v.items()}
-
-        return floatmap
-    if kind == "jumps":
-
-        def jumps(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
-            out[k] = [(int(e[0]), _finite_float(e[1]), _finite_float(e[2]), _finite_float(e[3])) for e in v]
-
-        return jumps
-    if kind == "intlist":
-
-        def intlist(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:
-            if type(v) is not list or not all(type(y) is int for y in v):
-                raise _Slow
-            out[k] = list(v)
-
-        return intlist
-
-    def slow(out: dict[str, Any], k: str, v: Any, pend: _Pending) -> None:  # "int", "str", "any": as msgpack gives them, only from bytes
-        raise _Slow
-
-    return slow
-
-
-# Per in-process type: (field, converter, optional) in decode's order (the schema's).
-_CONVERT = {t: tuple((k, _converter(kind), k in OPTIONAL.get(t, ())) for k, kind in SCHEMAS[t].items()) for t in IN_PROCESS}
-
-
-def message(mtype: str, src: int, seq: int, t: float, **fields: Any) -> Decoded | None:
-    """``decode(encode(mtype, src, seq, t, **fields))``, built without the bytes.
-
-    For the types in :data:`IN_PROCESS`; None where the result might differ from
-    the byte path's (a field decode would reject, a value encode would convert
-    in its own way, a msgpack limit): the caller then encodes.  Equality with
-    the byte path, bit for bit, is tested (tests/component/test_wire.py and
-    ``zswarm sim`` both ways in tests/component/test_sim.py).
-    """
-    conv = _CONVERT.get(mtype)
-    if conv is None or type(src) is not int or type(seq) is not int:
-        return None
-    try:
-        out = Decoded(type=mtype, src=src, seq=seq, t=_finite_float(t))
-        pend: _Pending = []
-        n = 0
-        for k, put, optional in conv:
-            v = fields.get(k, _MISSING)
-            if v is _MISSING:
-                if optional:
-                    continue
-                return None
-            put(out, k, v, pend)
-            n += 1
-        if n < len(fields):  # open fields (edge, cmd), after the schema's as decode has them
-            if mtype not in OPEN or len(fields) - n > MAX_OPEN:
-                return None
-            schema = SCHEMAS[mtype]
-            for k, v in fields.items():
-                if k not in schema:
-                    _put_value(out, _name(k), v, pend)
-        if pend:
-            # Every array of the message copied into one buffer (read-only views of it, as
-            # decode's arrays are read-only), and one finiteness check: finite iff the exact
-            # sum is (fsum raises on inf - inf and on an overflow: then the byte path).
-            flat = np.frombuffer(b"".join([a.tobytes() for _, _, a in pend]), dtype=_F8)
-            if not math.isfinite(math.fsum(flat.tolist())):
-                return None
-            o = 0
-            for d, k, a in pend:
-                d[k] = flat[o : o + a.size].reshape(a.shape)
-                o += a.size
-        return out
-    except (_Slow, TypeError, ValueError, AttributeError, OverflowError):
-        return None  # what encode does with such a value (raise, most likely) is the byte path's
-
-
-def payload(m: Decoded) -> bytes:
-    """The wire payload of an in-process message (decode gives ``m`` back)."""
-    fields = {k: x for k, x in m.items() if k not in ("type", "src", "seq", "t")}
-    return encode(m["type"], m["src"], m["seq"], m["t"], **fields)
-
-
-def check_type(m: Decoded, expect: str | tuple[str, ...] | None) -> Decoded:
-    """A receiver's own copy of an in-process message, checked against ``expect`` as decode would."""
-    mtype = m["type"]
-    if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
-        raise MessageError(f"type {mtype!r} where {expect!r} was expected")
-    return Decoded(m)
-
-
 # ---------------------------------------------------------------- the receivers' fast path
 #
 # An agent decodes every sensor packet and every in-neighbour message: on the run
@@ -499,6 +303,10 @@ def check_type(m: Decoded, expect: str | tuple[str, ...] | None) -> Decoded:
 # the problem: the result is decode()'s whichever path it took (tested).
 
 _ARR, _MAP, _NUM = 0, 1, 2
+
+
+class _Slow(Exception):
+    """The fast path is not sure of decode()'s result: decode() decides."""
 
 
 def _fast_type(code: int, optional: bool) -> Any:

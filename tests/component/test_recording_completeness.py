@@ -92,9 +92,9 @@ def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
     for role, i in procs[:3]:  # agent 3 never came up
         bus.declare_token(keys.alive("r", role, i))
     assert rec.awaiting_finals(procs) == procs[:3]
-    bus.publisher(keys.stats("r", "agent", 1)).send("stats", 1, 0, 1.0, role="agent", counters={"final": False})
-    bus.publisher(keys.stats("r", "world", 0)).send("stats", 0, 1, 2.0, role="world", counters={"final": True})
-    bus.publisher(keys.stats("r", "agent", 2)).send("stats", 2, 0, 1.0, role="agent", counters=5)  # malformed: still awaited
+    bus.publisher(keys.stats("r", "agent", 1)).put(wire.encode("stats", 1, 0, 1.0, role="agent", counters={"final": False}))
+    bus.publisher(keys.stats("r", "world", 0)).put(wire.encode("stats", 0, 1, 2.0, role="world", counters={"final": True}))
+    bus.publisher(keys.stats("r", "agent", 2)).put(wire.encode("stats", 2, 0, 1.0, role="agent", counters=5))  # malformed: still awaited
     assert rec.awaiting_finals(procs) == [("agent", 1), ("agent", 2)]
     bus.publisher(keys.stats("r", "agent", 1)).put(wire.encode("stats", 1, 1, 2.0, role="agent", counters={"final": True}))
     bus.undeclare_token(keys.alive("r", "agent", 2))  # gone: nothing more will come from it
