@@ -69,6 +69,16 @@ def stop_on_signals() -> threading.Event:
     return stop
 
 
+def ignore_signals() -> None:
+    """From now on SIGINT and SIGTERM change nothing: the process has done its work (its
+    final stats are out, its recording closed) and is only closing its session.  Python
+    puts back the default handlers while it finalizes, so a signal then (the launcher
+    nudging a process that stops a little late on a loaded machine) killed the process
+    with -15 instead of letting it exit 0; SIG_IGN stays.  SIGKILL still ends it."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 def stop_on_signals_into(stop: threading.Event) -> None:
     """SIGINT and SIGTERM set ``stop`` (the owner winds down and reaps its children)."""
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -6,9 +6,14 @@ and the receiver) must lie within 3σ = 3·sqrt(0.3·0.7/sent) of 0.3, plus the
 messages still in flight when the agents stop (not losses, but not
 delivered either: the 50 ms delay queue and the stop's tail).
 
-Delay: the observed latency (release to the agent minus the sender's stamp,
-which includes the real transport, 0.1–3 ms on this host) must have its
-median within 5 ms of the configured 50 ms.
+Delay: the delay applied to each message is exactly the configured 50 ms; the
+observed latency (release to the agent minus the sender's stamp) adds the
+real transport to it: the sender's step after its stamp, the network, the
+receiver's callback thread.  Its median must lie between 50 ms and 50 ms plus
+one agent period (10 ms): a message later than that at the median would miss
+the receiver's next tick more often than not, which is what the runtime must
+not do.  (Measured: 0.1–3 ms over the delay on a quiet machine, 5 ms with 8
+agents on 2 slower cores.)
 
 Convergence: at delay 50 ms and drop 0.2, ``run`` and ``sim`` must agree on
 the time after which the followers' mean errors stay below the report's
@@ -58,7 +63,7 @@ def test_drop_ratio_and_delay_on_every_link(procs, tmp_path):
         lost = sent - c["delivered"]
         sigma = math.sqrt(0.3 * 0.7 / sent)
         assert abs(lost / sent - 0.3) <= 3 * sigma + in_flight / sent, (name, c)
-        assert c["latency_p50_ms"] == pytest.approx(50.0, abs=5.0), (name, c)
+        assert 50.0 <= c["latency_p50_ms"] <= 50.0 + 1e3 / 100.0, (name, c)  # plus at most one agent period (docstring)
         assert c["applied_delay_p50_ms"] == pytest.approx(50.0, abs=1e-6)
 
 
