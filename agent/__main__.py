@@ -66,13 +66,19 @@ def main(argv: list[str] | None = None) -> int:
         log.warning("the world did not come back within %g s: stopping", args.world_grace)
         stop.set()
 
+    def run_over() -> bool:
+        """The run's duration is reached on the run's clock (the world's, too): the world's
+        token going then is the world stopping at the end, even if this agent, behind its
+        schedule on a loaded machine, has not yet taken its last step or seen the stop."""
+        return ended.is_set() or stop.is_set() or bool(clock) and clock[0].now() >= start["duration"]
+
     def on_world(key: str, up: bool) -> None:
         if up:
             if lost:
                 lost.pop().cancel()
                 log.info("the world is back")
             world_seen.set()
-        elif world_seen.is_set() and not lost and not ended.is_set() and not stop.is_set():
+        elif world_seen.is_set() and not lost and not run_over():
             # A crash, or a partition of the network (this host's link down longer than
             # the lease): go on, on this agent's own clock, for the world to come back.
             log.warning("lost the world's token: going on for up to %g s for it to come back", args.world_grace)
