@@ -124,7 +124,7 @@ class Inbox:
         there, each sample's wait for the GIL held up the whole link, and on an
         overloaded machine (16 agents on 2 cores) a batch of them outlasted the 1 s
         lease, so an agent saw every token go and come back (measured: 5 of 16 agents
-        "lost the world's token" in a 20 s run; none since, with fewer missed deadlines).
+        "lost the world's token" in a 20 s run; since, 0 or 1, and fewer missed deadlines).
         """
         process = partial(self._process, expect, link_of, validate, decode or partial(wire.decode, expect=expect))
         pending, now = self._pending, self.now
