@@ -112,7 +112,6 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             ended.set()
             node.publish_stats(min(clock[0].now(), start["duration"]), final=True)
-            procutil.ignore_signals()
             c = node.counters()
             log.info("stopped after %d steps (%.2f Hz, %d missed deadlines)", c["steps"], c["step_rate_hz"], c["missed_deadlines"])
     return 0

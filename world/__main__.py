@@ -101,7 +101,6 @@ def main(argv: list[str] | None = None) -> int:
         end_t = min(clock.now(), duration)
         world.publish_stats(end_t, final=True)
         pub_stop.put(wire.encode("stop", 0, 0, end_t, reason=reason))
-        procutil.ignore_signals()
         log.info("stopped (%s) at t = %.3f s after %d samples, %d late", reason, end_t, world.samples, world.late)
         # Give the stop message time to leave before the session closes.
         time.sleep(0.1)

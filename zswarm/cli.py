@@ -531,8 +531,6 @@ def cmd_record(args: argparse.Namespace) -> int:
                     rec.poll()
         finally:
             rec.close()
-            if args.no_report or not start:
-                procutil.ignore_signals()  # only the session's close is left
             log.info("closed recording: %d messages", rec.count)
     if not args.no_report and start:
         summary = report.make_report(out, sc, "run", float(start["duration"]), float(start["time_scale"]), int(start["seed"]))  # type: ignore[arg-type]

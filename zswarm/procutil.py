@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import atexit
 import logging
 import math
 import signal
@@ -58,7 +59,14 @@ def setup_logging(name: str, level: str = "INFO") -> logging.Logger:
 
 
 def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM: the process then stops cleanly and exits 0."""
+    """An event set by SIGINT or SIGTERM: the process then stops cleanly and exits 0.
+
+    Also while the interpreter finalizes, after the process has done its work: Python
+    puts back the default handlers then, so a signal in that window (the launcher
+    nudging a process that stops a little late on a loaded machine) killed the process
+    with -15 instead of letting it exit 0, and an agent read as dead at the end.  An
+    exit hook, which runs before that, ignores them instead (SIG_IGN stays; SIGKILL
+    still ends the process)."""
     stop = threading.Event()
 
     def handler(signum: int, _frame: object) -> None:
@@ -66,15 +74,11 @@ def stop_on_signals() -> threading.Event:
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    atexit.register(_ignore_signals)
     return stop
 
 
-def ignore_signals() -> None:
-    """From now on SIGINT and SIGTERM change nothing: the process has done its work (its
-    final stats are out, its recording closed) and is only closing its session.  Python
-    puts back the default handlers while it finalizes, so a signal then (the launcher
-    nudging a process that stops a little late on a loaded machine) killed the process
-    with -15 instead of letting it exit 0; SIG_IGN stays.  SIGKILL still ends it."""
+def _ignore_signals() -> None:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
 

@@ -126,7 +126,7 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     out = tmp_path / "run"
     args = ("--out", str(out), "--duration", "15", "--time-scale", "0.5", "--quiet")
     p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), *args), log=tmp_path / "launcher.log")
-    code = p.wait(15 * 2 * 3 + 120)
+    code = p.wait(15 * 2 * 3 + 120)  # 15 world s at time scale 0.5: 30 s of wall time, ×3 for a loaded machine, + start-up
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())

@@ -36,7 +36,7 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     topo.write_text(text)
     out = tmp_path / "out"
     p = procs.start(zswarm("run", str(topo), "--out", str(out), "--time-scale", "0.5", "--quiet"), log=tmp_path / "launcher.log")
-    code = p.wait(DURATION * 2 * 4 + 120)
+    code = p.wait(DURATION * 2 * 4 + 120)  # time scale 0.5: twice DURATION of wall time, ×4 as before, + start-up
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
