@@ -49,7 +49,12 @@ def _bad_commands(run: str) -> list[tuple[str, bytes]]:
 def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_path):
     sc = load(TOPO / f"{NAME}.toml")
     out = tmp_path / "run"
-    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    # At time scale 0.5 (150 world s in 300 s of wall time): seven agents at 100 Hz and the
+    # rigid-body world at 1 kHz use 1.7-1.9 of this machine's two cores at time scale 1
+    # (measured per process: agents 14-21 %, world 34-39 %, router 17 %, recorder 13 %), so with
+    # another process keeping a core busy the agents stepped at 55-60 Hz, and this lightly
+    # damped loop does not settle then (below).
+    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--time-scale", "0.5", "--quiet"), log=tmp_path / "launcher.log")
     meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
     run_id, ep = meta["run_id"], meta["router"]["endpoint"]
     procs.adopt(out)
@@ -62,7 +67,7 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
         for key, payload in _bad_commands(run_id):
             pubs.setdefault(key, bus.publisher(key)).put(payload)
         time.sleep(0.5)
-    code = p.wait(sc.duration * 2 + 120)
+    code = p.wait(sc.duration * 2 * 2 + 120)  # 300 s of wall time, ×2 for a loaded machine, + start-up
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
@@ -91,10 +96,15 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
     for e in s["edges"].values():
         j = e["jump_log"][0]
         assert j["t"] < 0.1 and j["xi_before"] == pytest.approx(0.0, abs=1e-6) and j["xi_after"] == pytest.approx(0.9 * math.pi)
-    assert 6 <= s["jumps_total"] <= 14, s["jumps_total"]
     if ov["overloaded"]:
+        # A run that did not keep up stepped on older data than configured: a delay τ takes
+        # about k_R·λ(A)·τ ≈ 12τ off the damping k_ω = 0.1 (attitude_sync_terms, "Sampled
+        # data"), so at 55-60 Hz with 20-30 ms old measurements the loop does not settle and
+        # keeps jumping (measured: 22, 52 and 91 jumps in 150 s).  Neither the settle times
+        # nor the jump count are then the equations'; the report must say so.
         assert "OVERLOADED" in (tmp_path / "launcher.log").read_text()
         return
+    assert 6 <= s["jumps_total"] <= 14, s["jumps_total"]  # READING-NOTES: 8 in 150 s
     for key, notes in (("settles_below_0.1_at", 58.5), ("settles_below_0.01_at", 102.0)):
         got, ref = sy[key], sy_sim[key]
         assert got is not None and ref is not None, (sy, sy_sim)
