@@ -148,7 +148,7 @@ def errors(rec: Recording) -> dict[int, np.ndarray]:
             continue
         t, R_hat, p_hat, R, p = _estimates_with_truth(rec, samples, col[i])
         tr = np.einsum("nij,nij->n", R, R_hat)  # tr(R R̂^T)
-        att = np.sqrt(np.maximum(0.0, (3.0 - tr) * 0.25))
+        att = np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0))
         R_tilde_p_hat = np.einsum("nij,nkj,nk->ni", R, R_hat, p_hat)  # R R̂^T p̂
         out[i] = np.column_stack((t, att, np.linalg.norm(p - R_tilde_p_hat, axis=1), np.linalg.norm(p - p_hat, axis=1)))
     return out

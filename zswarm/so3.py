@@ -147,8 +147,9 @@ def Ra(theta: float, v: Vec3) -> Mat3:
 
 
 def attitude_norm(R: Mat3) -> float:
-    """``|R|_I = sqrt(tr(I - R)/4)`` in [0, 1] (thesis §2.1)."""
-    return math.sqrt(max(0.0, (3.0 - float(np.trace(R))) * 0.25))
+    """``|R|_I = sqrt(tr(I - R)/4)`` in [0, 1] (thesis §2.1): tr R ∈ [−1, 3] for a rotation,
+    so the bounds only take off round-off (tr R = −1 − 4e-16 at a half turn gave 1 + 2e-16)."""
+    return math.sqrt(min(1.0, max(0.0, (3.0 - float(np.trace(R))) * 0.25)))
 
 
 def projector(x: Vec3) -> Mat3:
