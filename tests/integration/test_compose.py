@@ -170,12 +170,16 @@ def test_compose_file_of_every_shipped_scenario_passes_config(compose_cli, tmp_p
 def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
     """§3.2 (8 agents, 40 s) in 12 containers (router, recorder, world, 8 agents, a
     second router for the routed topology): the run ends by itself, summary.json
-    shows the thesis' convergence, and the networks let nothing out."""
+    shows the thesis' convergence, and the networks let nothing out.
+
+    At time scale 0.5 (80 s of wall time): the twelve containers need about 1.7 of
+    this machine's two cores at time scale 1, and with another process keeping a core
+    busy agent 3 fell to 25 Hz and its estimate was lost (attitude error 0.99 at 18 s)."""
     results = tmp_path / "results"
     results.mkdir()
     f = tmp_path / "compose.yml"
     r = _run(
-        [sys.executable, "-m", "zswarm", "compose", str(TOPO / "thesis-3.2-fixed8.toml"), "-o", str(f), "--no-build", "--image", image, "--results", str(results), "--network", "routed"],
+        [sys.executable, "-m", "zswarm", "compose", str(TOPO / "thesis-3.2-fixed8.toml"), "-o", str(f), "--no-build", "--image", image, "--results", str(results), "--network", "routed", "--time-scale", "0.5"],
         60,
         cwd=ROOT,
     )
@@ -201,7 +205,7 @@ def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
         down = _run([*base, "down", "-v", "--remove-orphans"], 180, cwd=tmp_path)
     assert down.returncode == 0, down.stderr
     assert not _run(["docker", "ps", "-aq", "--filter", f"label=com.docker.compose.project={project}"], 60).stdout.split()
-    print(f"\ncompose run: {elapsed:.1f} s wall for 40 s of world time", file=sys.stderr)
+    print(f"\ncompose run: {elapsed:.1f} s wall for 40 s of world time at time scale 0.5", file=sys.stderr)
     s = json.loads((results / "thesis-3.2-fixed8" / "summary.json").read_text())
     assert s["engine"] == "run" and s["completed"] and s["duration_s"] == 40.0
     for i, a in s["agents"].items():

@@ -30,11 +30,11 @@ from zswarm.sim import simulate
 pytestmark = pytest.mark.integration
 
 
-def run(procs, tmp_path, name):
+def run(procs, tmp_path, name, time_scale=1.0):
     sc = load(TOPO / f"{name}.toml")
     out = tmp_path / "run"
-    p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
-    code = p.wait(sc.duration * 3 + 90)
+    p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), "--out", str(out), "--time-scale", f"{time_scale:g}", "--quiet"), log=tmp_path / "launcher.log")
+    code = p.wait(sc.duration / time_scale * 3 + 90)
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()
     s = json.loads((out / "summary.json").read_text())
@@ -83,7 +83,10 @@ def test_moving5_run(procs, tmp_path):
 
 @pytest.mark.parametrize("name", ["thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"])
 def test_hybrid_run(procs, tmp_path, name):
-    sc, out, s, sim_out, ss = run(procs, tmp_path, name)
+    # Time scale 0.5: with another process keeping one of the two cores busy, five agents at
+    # 100 Hz with the world, router and recorder missed 15-22 % of their ticks at time scale 1
+    # and the per-edge settle times moved by +45 % (an overloaded run is not the equations').
+    sc, out, s, sim_out, ss = run(procs, tmp_path, name, time_scale=0.5)
     for k, e in s["edges"].items():
         first = e["jump_log"][0]
         assert first["t"] < 0.1 and first["xi_before"] == 0.0 and first["xi_after"] == pytest.approx(0.08 * math.pi), (k, e["jump_log"])
