@@ -188,7 +188,9 @@ class Inbox:
     def _deliver(self, link: str, expect: str, msg: dict[str, Any], rx: float) -> None:
         """Store a message that has reached this agent."""
         msg["rx"] = rx
-        sent = msg["t_local"] if "t_local" in msg else msg["t"]
+        # From the sender's clock for messages of agents; a sensor packet's latency is its
+        # measurement's age (from the sample's stamp, not the world's send: sensor_transit).
+        sent = msg["t_local"] if expect != "sense" and "t_local" in msg else msg["t"]
         counter = self.links.get(link)
         if counter is None:
             counter = self.links[link] = LinkCounter()
