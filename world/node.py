@@ -153,7 +153,7 @@ class World:
             if "rel_pos" in want:
                 # toward the robots i senses (Scenario.sensed): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
-            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, t_local=self.now(), **m))
+            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, **m))
         self.seq += 1
         self.samples += 1
         self.k += 1

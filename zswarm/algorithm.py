@@ -205,8 +205,8 @@ class View(Protocol):
     t_world: float
     period: float  # this agent's clock period, s (1 / [clock] rate): how long what it sends is held
     command_lead: float  # s after t: the middle of the hold of the command this step sends (the measurement's age at
-    # the tick, plus the command's way to the world: the agent's own tick-to-send delay and the network's transit
-    # as the sensor packets' (both measured), plus half a period; period/2 in sim; 0 on a catch-up step, whose command is not sent)
+    # the tick, plus the command's way to the world: the agent's own tick-to-send delay and the sensor packets'
+    # transit (both measured), plus half a period; period/2 in sim; 0 on a catch-up step, whose command is not sent)
     dt: float  # the step being taken (0 when the view is begun, before any part steps)
     first: bool  # the step from the initial estimate (t = 0) to the first measurement: prediction only, no neighbours
     sense: Mapping[str, Any]  # newest sensor packet at or before t (fields by SENSORS' keys)

@@ -29,9 +29,8 @@ class MessageError(ValueError):
 SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij,
     # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p;
-    # body-frame relative positions ⁱp_ij (rel_pos, De Carli et al. (2)); t_local: the world's
-    # clock when it sent the packet (t is when it was sampled: a world behind schedule sends late)
-    "sense": {"t_local": "float", "gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,), "rel_pos": "vecmap"},
+    # body-frame relative positions ⁱp_ij (rel_pos, De Carli et al. (2))
+    "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,), "rel_pos": "vecmap"},
     # agent j -> agent i along edge j->i: the sender's clock, then the fields its
     # algorithm writes on out-edges (SPEC.edge_out: numbers or float64 arrays by
     # name; OPEN below), validated by the receiver against its SPEC.edge_in
@@ -57,7 +56,7 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
 _F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
-OPTIONAL = {"sense": {"t_local", "gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
+OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
 # Types whose other keys are named values (a finite number or a float64 array), at most
 # MAX_OPEN of them: what an algorithm declares, which the receiver validates.
 OPEN = frozenset({"edge", "cmd"})

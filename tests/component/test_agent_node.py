@@ -134,14 +134,11 @@ def test_emulated_links_stay_fifo_when_a_message_is_released_on_arrival():
     assert node.inbox.get("world->3")["t"] == 0.005
 
 
-def test_the_commands_lead_is_its_way_to_the_world_not_the_worlds_lateness():
+def test_the_commands_lead_counts_the_agents_own_delay_and_none_on_catch_up_steps():
     """§5.6 agent 3: the torque is evaluated at the middle of its hold, ``command_lead`` after
     the step's end: the measurement's age at the tick, plus the command's way to the world
-    (this agent's tick-to-put delay, measured, and the network's transit, taken from the
-    sensor packets' send stamp), plus half a period.  A world sending 50 ms late (its
-    samples stamped 50 ms before it sends them) must not lengthen it: the world applies a
-    command from its arrival on the shared clock.  A catch-up step's torque is never
-    sent: no lead."""
+    (this agent's tick-to-put delay, measured, and the sensor packets' transit), plus half
+    a period.  A catch-up step's torque is never sent: no lead."""
     sc = load(TOPO / "thesis-5.6-hybrid7.toml")
     bus, clock = MemoryBus(), ManualClock()
     busy = [0.0]  # how long a step takes: the clock moves on while the agent computes
@@ -149,13 +146,13 @@ def test_the_commands_lead_is_its_way_to_the_world_not_the_worlds_lateness():
     leads = []
     orig = node._step_part
     node._step_part = lambda ps, dt: (leads.append(node.view.command_lead), busy.__setitem__(0, 0.002), orig(ps, dt))[2]
-    late, net, T = 0.05, 0.001, 0.01
+    transit, T = 0.003, 0.01
 
-    def feed(t):  # sampled at t, sent at t + late, arrives net later
-        clock.set(t + late + net)
+    def feed(t):  # sampled at t, arrives transit later
+        clock.set(t + transit)
         busy[0] = 0.0
         rel = {j: np.eye(3) for j in sc.graph_neighbors(3)}
-        bus.put(keys.sense("t", 3), wire.encode("sense", 0, int(round(t * 200)), t, t_local=t + late, gyro=np.zeros(3), rel_att=rel))
+        bus.put(keys.sense("t", 3), wire.encode("sense", 0, int(round(t * 200)), t, gyro=np.zeros(3), rel_att=rel))
 
     def tick(t):
         clock.set(t)
@@ -164,19 +161,19 @@ def test_the_commands_lead_is_its_way_to_the_world_not_the_worlds_lateness():
 
     for k in range(0, 6):
         feed(0.005 * k)
-    tick(0.0775)  # the first step (prediction only: it sends no command)
+    tick(0.0295)  # the first step (prediction only: it sends no command)
     for k in range(6, 8):
         feed(0.005 * k)
     leads.clear()
-    tick(0.0875)  # 2.5 ms after the newest packet's arrival; no tick-to-put delay measured yet
-    assert leads == [pytest.approx(0.0875 - 0.035 + net + 0.5 * T)]
+    tick(0.0395)  # 1.5 ms after the newest packet's arrival; no tick-to-put delay measured yet
+    assert leads == [pytest.approx(0.0395 - 0.035 + transit + 0.5 * T)]
     for k in range(8, 10):
         feed(0.005 * k)
     leads.clear()
-    tick(0.0975)  # the last command was put 2 ms after its tick
-    assert leads == [pytest.approx(0.0975 - 0.045 + 0.002 + net + 0.5 * T)]
+    tick(0.0495)  # the last command was put 2 ms after its tick
+    assert leads == [pytest.approx(0.0495 - 0.045 + 0.002 + transit + 0.5 * T)]
     for k in range(10, 15):
         feed(0.005 * k)
     leads.clear()
-    tick(0.1275)  # behind: three steps (0.055, 0.065, 0.07); only the last one's torque is sent
-    assert leads[:-1] == [0.0, 0.0] and leads[-1] == pytest.approx(0.1275 - 0.07 + 0.002 + net + 0.5 * T)
+    tick(0.0795)  # behind: three steps (0.055, 0.065, 0.07); only the last one's torque is sent
+    assert leads[:-1] == [0.0, 0.0] and leads[-1] == pytest.approx(0.0795 - 0.07 + 0.002 + transit + 0.5 * T)
