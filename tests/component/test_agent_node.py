@@ -152,14 +152,14 @@ def test_the_commands_lead_counts_the_agents_own_delay_and_none_on_catch_up_step
         clock.set(t + transit)
         busy[0] = 0.0
         rel = {j: np.eye(3) for j in sc.graph_neighbors(3)}
-        bus.put(keys.sense("t", 3), wire.encode("sense", 0, int(round(t * 200)), t, gyro=np.zeros(3), rel_att=rel))
+        bus.put(keys.sense("t", 3), wire.encode("sense", 0, round(t * 200), t, gyro=np.zeros(3), rel_att=rel))
 
     def tick(t):
         clock.set(t)
         busy[0] = 0.0
         node.tick(t)
 
-    for k in range(0, 6):
+    for k in range(6):
         feed(0.005 * k)
     tick(0.0295)  # the first step (prediction only: it sends no command)
     for k in range(6, 8):
