@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from zswarm import keys, report, wire
+from zswarm import keys, procutil, report, wire
 from zswarm.bus import ZenohBus, zenoh_config
 from zswarm.scenario import Scenario
 
@@ -142,7 +142,7 @@ def run(
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     la = Launch(sc, topology, out, duration, time_scale, seed, quiet)
     interrupted = threading.Event()
-    prev = {s: signal.signal(s, lambda *_: interrupted.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    on_signals = procutil.SignalEvent(interrupted)
 
     def say(msg: str) -> None:
         if not quiet:
@@ -226,8 +226,7 @@ def run(
             la.stop_all(graceful=not interrupted.is_set())
     finally:
         la.reap()
-        for s, h in prev.items():
-            signal.signal(s, h)
+        on_signals.close()
     if not ok_start:
         return 1
     codes: dict[str, int | None] = {c.name: c.exit_code for c in la.children}

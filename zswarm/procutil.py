@@ -6,6 +6,7 @@ import argparse
 import atexit
 import logging
 import math
+import os
 import signal
 import sys
 import threading
@@ -58,8 +59,62 @@ def setup_logging(name: str, level: str = "INFO") -> logging.Logger:
     return logging.getLogger(name)
 
 
+class SignalEvent:
+    """SIGINT and SIGTERM set ``event``, without taking a lock in the signal handler.
+
+    ``Event.set`` from a Python signal handler deadlocks when the signal lands while the
+    main thread holds that event's lock, i.e. inside ``Event.wait`` (the handler runs in
+    the main thread, between two of its bytecodes, and waits for a lock its own frame
+    holds).  Agents wait on their stop event between ticks, 100-200 times a second: a
+    ``zswarm run`` stopped by Ctrl-C left one of 8 agents hung in
+    ``Event.set`` <- handler <- ``Condition.__enter__`` <- ``Event.wait`` (py-spy) in 2 of
+    20 runs with a core kept busy, and the launcher SIGKILLed it.  Here the handler only
+    writes a byte to a pipe (no lock; a full pipe means a wake-up is already pending) and
+    a daemon thread reading it sets the event.  :meth:`close` puts the previous handlers
+    back and ends the thread.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self, event: threading.Event) -> None:
+        self.event = event
+        self._r, self._w = os.pipe()
+        os.set_blocking(self._w, False)
+        self._thread = threading.Thread(target=self._watch, name="zswarm-signals", daemon=True)
+        self._thread.start()
+        self._prev = {s: signal.signal(s, self._handler) for s in self.SIGNALS}
+
+    def _handler(self, _signum: int, _frame: object) -> None:
+        try:
+            os.write(self._w, b"\0")
+        except (BlockingIOError, InterruptedError):
+            pass  # a byte is already waiting to be read: the event will be set
+        except OSError:
+            self.event.set()  # closed: no thread to hand over to (after close(), which puts the old handlers back)
+
+    def _watch(self) -> None:
+        while True:
+            try:
+                data = os.read(self._r, 64)
+            except InterruptedError:
+                continue
+            except OSError:
+                return
+            if not data:
+                os.close(self._r)
+                return
+            self.event.set()
+
+    def close(self) -> None:
+        for s, h in self._prev.items():
+            signal.signal(s, h)
+        os.close(self._w)  # the thread reads EOF and ends
+        self._thread.join(1.0)
+
+
 def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM: the process then stops cleanly and exits 0.
+    """An event set by SIGINT or SIGTERM (:class:`SignalEvent`): the process then stops
+    cleanly and exits 0.
 
     Also while the interpreter finalizes, after the process has done its work: Python
     puts back the default handlers then, so a signal in that window (the launcher
@@ -68,12 +123,7 @@ def stop_on_signals() -> threading.Event:
     exit hook, which runs before that, ignores them instead (SIG_IGN stays; SIGKILL
     still ends the process)."""
     stop = threading.Event()
-
-    def handler(signum: int, _frame: object) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    SignalEvent(stop)
     atexit.register(_ignore_signals)
     return stop
 
@@ -85,8 +135,7 @@ def _ignore_signals() -> None:
 
 def stop_on_signals_into(stop: threading.Event) -> None:
     """SIGINT and SIGTERM set ``stop`` (the owner winds down and reaps its children)."""
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    SignalEvent(stop)
 
 
 def positive_int(s: str) -> int:
