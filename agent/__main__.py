@@ -95,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.subscribe(keys.ctl(run, "stop"), on_stop)
         bus.watch_alive(keys.alive(run, "world", 0), on_world)
+        node.counters()  # once: what the stats at t = 1 s cost the first time is paid here
+        procutil.warm_up()
         bus.declare_token(keys.alive(run, "agent", args.id))
         log.info("ready on run %r, waiting for start", run)
         waited = 0.0

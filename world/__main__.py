@@ -58,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
                 changed.set()
 
         bus.watch_alive(keys.alive_all(run), on_alive)
+        world.counters()  # once: see procutil.warm_up
+        procutil.warm_up()
         bus.declare_token(keys.alive(run, "world", 0))
         need = {("agent", i) for i in sc.ids} | ({("recorder", 0)} if args.wait_for_recorder else set())
         deadline = time.monotonic() + args.startup_timeout

@@ -503,6 +503,7 @@ def cmd_record(args: argparse.Namespace) -> int:
                     pass
 
         bus.subscribe(keys.ctl(run, "start"), on_start)
+        procutil.warm_up()
         bus.declare_token(keys.alive(run, "recorder", 0))
         log.info("recording run %r into %s", run, path)
         if args.live is not None:
