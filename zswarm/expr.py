@@ -45,6 +45,14 @@ class ExprError(ValueError):
     """An expression that the whitelist does not accept."""
 
 
+# Nesting allowed (parentheses, function calls, unary signs, exponents, each one level): a
+# motion never needs more, and the parser and the closures it builds recurse once per
+# level, so 2000 nested parentheses used to end in RecursionError.  Sums and products
+# of any length are one level (evaluated in a loop, left to right as before).
+MAX_DEPTH = 64
+MAX_TOKENS = 20000
+
+
 @dataclass(frozen=True, slots=True)
 class Expr:
     """A parsed expression in ``t``; call it with a float or an array of times."""
@@ -75,7 +83,10 @@ def _tokens(src: str) -> list[tuple[str, str]]:
 class _Parser:
     def __init__(self, src: str) -> None:
         self.toks = _tokens(src)
+        if len(self.toks) > MAX_TOKENS:
+            raise ExprError(f"too long ({len(self.toks)} tokens, at most {MAX_TOKENS})")
         self.i = 0
+        self.depth = 0
 
     def peek(self) -> tuple[str, str] | None:
         return self.toks[self.i] if self.i < len(self.toks) else None
@@ -95,32 +106,40 @@ class _Parser:
     # Each parse_* returns (closure, is_constant).
     def parse_expr(self) -> tuple[Fn, bool]:
         f, c = self.parse_term()
+        rest: list[tuple[str, Fn]] = []
         while (tok := self.peek()) in (("op", "+"), ("op", "-")):
             self.take()
             g, d = self.parse_term()
-            f = _bin(f, g, tok[1])  # type: ignore[index]
+            rest.append((tok[1], g))  # type: ignore[index]
             c = c and d
-        return f, c
+        return _chain(f, rest), c
 
     def parse_term(self) -> tuple[Fn, bool]:
         f, c = self.parse_unary()
+        rest: list[tuple[str, Fn]] = []
         while (tok := self.peek()) in (("op", "*"), ("op", "/")):
             self.take()
             g, d = self.parse_unary()
-            f = _bin(f, g, tok[1])  # type: ignore[index]
+            rest.append((tok[1], g))  # type: ignore[index]
             c = c and d
-        return f, c
+        return _chain(f, rest), c
 
     def parse_unary(self) -> tuple[Fn, bool]:
-        tok = self.peek()
-        if tok == ("op", "-"):
-            self.take()
-            f, c = self.parse_unary()
-            return (lambda t, f=f: -f(t)), c
-        if tok == ("op", "+"):
-            self.take()
-            return self.parse_unary()
-        return self.parse_power()
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise ExprError(f"nested too deeply (more than {MAX_DEPTH} levels of parentheses, calls, signs or powers)")
+        try:
+            tok = self.peek()
+            if tok == ("op", "-"):
+                self.take()
+                f, c = self.parse_unary()
+                return (lambda t, f=f: -f(t)), c
+            if tok == ("op", "+"):
+                self.take()
+                return self.parse_unary()
+            return self.parse_power()
+        finally:
+            self.depth -= 1
 
     def parse_power(self) -> tuple[Fn, bool]:
         f, c = self.parse_atom()
@@ -156,16 +175,44 @@ class _Parser:
         raise ExprError(f"unexpected {text!r}")
 
 
+_OPS: dict[str, Callable[[Number, Number], Number]] = {
+    "+": lambda a, b: a + b,
+    "-": lambda a, b: a - b,
+    "*": lambda a, b: a * b,
+    "/": lambda a, b: a / b,
+}
+
+
+def _chain(f: Fn, rest: list[tuple[str, Fn]]) -> Fn:
+    """``f op g op h ...`` evaluated left to right in one closure (one level deep however
+    long the chain: a 3000-term sum used to be 3000 nested closures)."""
+    if not rest:
+        return f
+    if len(rest) == 1:
+        op, g = rest[0]
+        fn = _OPS[op]
+        return lambda t: fn(f(t), g(t))
+    steps = tuple((_OPS[op], g) for op, g in rest)
+
+    def chain(t: Number) -> Number:
+        acc = f(t)
+        for fn, g in steps:
+            acc = fn(acc, g(t))
+        return acc
+
+    return chain
+
+
+def _power(a: Number, b: Number) -> Number:
+    """``a ** b`` as numpy computes it for floats and arrays alike: a negative base with a
+    non-integer exponent is NaN (caught as "not finite"), where Python's float power
+    returned a complex number that escaped as TypeError."""
+    return np.power(a, b)
+
+
 def _bin(f: Fn, g: Fn, op: str) -> Fn:
-    if op == "+":
-        return lambda t: f(t) + g(t)
-    if op == "-":
-        return lambda t: f(t) - g(t)
-    if op == "*":
-        return lambda t: f(t) * g(t)
-    if op == "/":
-        return lambda t: f(t) / g(t)
-    return lambda t: f(t) ** g(t)
+    assert op == "**"
+    return lambda t: _power(f(t), g(t))
 
 
 def parse(src: str | int | float) -> Expr:
@@ -189,7 +236,7 @@ def parse(src: str | int | float) -> Expr:
     with np.errstate(all="ignore"):
         try:
             v0 = float(fn(0.0))
-        except (ZeroDivisionError, OverflowError, ValueError) as exc:
+        except (ZeroDivisionError, OverflowError, ValueError, TypeError) as exc:
             raise ExprError(f"cannot be evaluated at t = 0 ({exc})") from None
     if not math.isfinite(v0):
         raise ExprError("is not finite at t = 0")

@@ -569,6 +569,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         for a in agents:
             if a.velocity is not None:
                 raise c.err(f"{seen[a.id]}.v", "an agent of a rotating [world.formation] has its velocity set by the formation")
+    for a in agents:
+        _check_finite_over_run(c, a, seen[a.id], duration)
 
     oriented: tuple[tuple[int, int], ...] = ()
     oriented_from = ""
@@ -731,6 +733,28 @@ def _plant(c: _Ctx, w: dict[str, Any], info: AlgorithmSpec, algo: str, formation
             why = "; ".join(f"{m}: {info.sensor_use.get(m, 'declared in its SPEC.sensors')}" for m in missing)
             raise c.err("world.sensors", f"{algo} needs the sensor(s) {', '.join(repr(m) for m in missing)}, not fitted ({why})", raw)
     return plant, policy, fitted
+
+
+# Motions are checked on this grid over the whole run (at most this many points): an
+# expression finite at t = 0 may not be later, and 1/(1-t) used to turn the truth into NaN
+# at t = 1, after which the agents dropped every sensor packet as malformed.
+FINITE_CHECK_STEP = 1e-3
+FINITE_CHECK_POINTS = 1_000_000
+
+
+def _check_finite_over_run(c: Any, a: AgentSpec, fld: str, duration: float) -> None:
+    exprs = [("omega", k, e) for k, e in enumerate(a.omega)] + [("v", k, e) for k, e in enumerate(a.velocity or ())]
+    exprs = [x for x in exprs if not x[2].constant]
+    if not exprs:
+        return
+    n = max(1, min(FINITE_CHECK_POINTS, math.ceil(duration / FINITE_CHECK_STEP - 1e-9)))
+    ts = np.arange(n + 1) * (duration / n)  # k·1 ms exactly, when the run has at most 1e6 steps of it
+    for name, k, e in exprs:
+        with np.errstate(all="ignore"):
+            v = np.asarray(e(ts), dtype=float)
+        bad = ~np.isfinite(v)
+        if bad.any():
+            raise c.err(f"{fld}.{name}[{k}]", f"is not finite at t = {ts[int(np.argmax(bad))]:g} s (checked every {duration / n:.3g} s over the run's {duration:g} s)", e.source)
 
 
 def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: float, n: int = 200) -> list[dict[int, tuple[float, ...]]]:

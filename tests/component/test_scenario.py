@@ -101,3 +101,18 @@ def test_process_entry_points_usage_errors():
     for mod, argv in (("agent", ["--topology", "topologies/thesis-3.2-fixed8.toml"]), ("world", []), ("agent", ["--topology", "topologies/thesis-3.2-fixed8.toml", "--id", "99", "--connect", "tcp/127.0.0.1:1"])):
         r = subprocess.run([sys.executable, "-m", mod, *argv], capture_output=True, text=True, cwd=ROOT, timeout=60)
         assert r.returncode == 2, (mod, argv, r.stderr)
+
+
+def test_a_motion_not_finite_later_in_the_run_is_named():
+    # 1/(1-t) is finite at t = 0 (the expression's own check) and infinite at t = 1: the
+    # truth turned NaN there and every sensor packet was dropped as malformed, silently.
+    text = (TOPO / "thesis-3.3-moving5.toml").read_text()
+    old = 'omega = ["-cos(3*t)", "1", "sin(2*t)"]'
+    assert old in text
+    bad = text.replace(old, 'omega = ["-cos(3*t)", "1/(1-t)", "sin(2*t)"]', 1)
+    with pytest.raises(ScenarioError, match=r"x\.toml: agents\[1\]\.omega\[1\]: is not finite at t = 1 s .*'1/\(1-t\)'"):
+        loads(bad, "x.toml")
+    # A pole between two grid points is not found this way; one on a millisecond is.
+    with pytest.raises(ScenarioError, match=r"omega\[1\]: is not finite at t = 12\.345 s"):
+        loads(text.replace(old, 'omega = ["-cos(3*t)", "1/(t-12.345)", "sin(2*t)"]', 1), "x.toml")
+    loads(text.replace(old, 'omega = ["-cos(3*t)", "1/(t-31)", "sin(2*t)"]', 1), "x.toml")  # after the run's 30 s: fine
