@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
                 if world.next_time() > duration + 1e-9:
                     break
             world.sample()
-            if world.k % int(round(sc.sensor_rate)) == 0:
+            if world.k % max(1, round(sc.sensor_rate)) == 0:
                 world.publish_stats(t)
             if time.monotonic() >= next_announce:
                 # Re-announce so that a late (re)started process can join the run.

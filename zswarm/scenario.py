@@ -294,7 +294,7 @@ class _Ctx:
                 raise self.err(f"{fld}.{k}" if fld else k, "missing")
         return d
 
-    def num(self, v: Any, fld: str, *, positive: bool = False, nonneg: bool = False, maxv: float | None = None) -> float:
+    def num(self, v: Any, fld: str, *, positive: bool = False, nonneg: bool = False, maxv: float | None = None, minv: float | None = None) -> float:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise self.err(fld, "must be a number", v)
         x = float(v)
@@ -305,7 +305,9 @@ class _Ctx:
         if nonneg and x < 0:
             raise self.err(fld, "must be >= 0", v)
         if maxv is not None and x > maxv:
-            raise self.err(fld, f"must be <= {maxv}", v)
+            raise self.err(fld, f"must be <= {maxv:g}", v)
+        if minv is not None and x < minv:
+            raise self.err(fld, f"must be >= {minv:g}", v)
         return x
 
     def integer(self, v: Any, fld: str) -> int:
@@ -465,6 +467,12 @@ def render(doc: dict[str, Any], source: str, overrides: Sequence[Override]) -> s
     return head + tomli_w.dumps(doc)
 
 
+# Bounds that keep a run finite: 1e6 s is 11.6 days of world time (an hour's soak is 3600 s),
+# and a truth step under 1 µs is a million steps per simulated second (1e-300 never ended).
+MAX_DURATION_S = 1e6
+MIN_WORLD_STEP_S = 1e-6
+
+
 def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ()) -> Scenario:
     """Parse and validate scenario TOML ``text``; ``path`` is used in errors.
 
@@ -485,7 +493,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
     name = c.string(sc["name"], "scenario.name")
     description = c.string(sc.get("description", ""), "scenario.description")
-    duration = c.num(sc["duration"], "scenario.duration", positive=True)
+    # At most MAX_DURATION_S: 1e300 was accepted and the world ran until killed.
+    duration = c.num(sc["duration"], "scenario.duration", positive=True, maxv=MAX_DURATION_S)
     seed = c.integer(sc.get("seed", 0), "scenario.seed")
 
     al = c.table(doc["algorithm"], "algorithm", {"name", "gains", "params", "stale"}, {"name"})
@@ -521,7 +530,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         raise c.err("algorithm.stale.policy", f"must be one of {', '.join(STALE_POLICIES)}", stale.policy)
 
     w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate", "formation", "plant", "sensors", "commands"})
-    step = c.num(w.get("step", 0.001), "world.step", positive=True, maxv=0.001)
+    step = c.num(w.get("step", 0.001), "world.step", positive=True, maxv=0.001, minv=MIN_WORLD_STEP_S)
     sensor_rate = c.num(w.get("sensor_rate", 200.0), "world.sensor_rate", positive=True, maxv=1.0 / step)
     formation = None
     if "formation" in w:

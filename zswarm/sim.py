@@ -83,7 +83,7 @@ def simulate(
         t_now[0] = t
         if prio == 0:
             world.sample()
-            if world.k % int(round(scenario.sensor_rate)) == 0:
+            if world.k % max(1, round(scenario.sensor_rate)) == 0:
                 world.publish_stats(t)
             heapq.heappush(queue, (world.next_time(), 0, 0))
         elif who in agents:

@@ -48,6 +48,9 @@ BAD = [
     ("id = 8", "id = 9", r"x\.toml: agents: ids must be 1\.\.n"),
     ("rate = 100.0", "rate = 0", r"x\.toml: clock\.rate: must be > 0 \(got 0\)"),
     ("step = 0.001", "step = 0.01", r"x\.toml: world\.step: must be <= 0\.001"),
+    # Accepted before, and the world never finished:
+    ("step = 0.001", "step = 1e-300", r"x\.toml: world\.step: must be >= 1e-06 \(got 1e-300\)"),
+    ("duration = 40.0", "duration = 1e300", r"x\.toml: scenario\.duration: must be <= 1e\+06 \(got 1e\+300\)"),
 ]
 
 
@@ -116,3 +119,13 @@ def test_a_motion_not_finite_later_in_the_run_is_named():
     with pytest.raises(ScenarioError, match=r"omega\[1\]: is not finite at t = 12\.345 s"):
         loads(text.replace(old, 'omega = ["-cos(3*t)", "1/(t-12.345)", "sin(2*t)"]', 1), "x.toml")
     loads(text.replace(old, 'omega = ["-cos(3*t)", "1/(t-31)", "sin(2*t)"]', 1), "x.toml")  # after the run's 30 s: fine
+
+
+def test_a_sensor_rate_under_1_hz_runs(tmp_path, fixed8_text):
+    # 0.4 Hz was accepted by the loader and then divided by zero in the world and in sim
+    # (stats every round(sensor_rate) samples).
+    f = tmp_path / "slow.toml"
+    f.write_text(fixed8_text.replace("sensor_rate = 200.0", "sensor_rate = 0.4", 1))
+    r = _zswarm("sim", str(f), "--duration", "6", "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "summary.json").exists()
