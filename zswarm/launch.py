@@ -235,6 +235,12 @@ def run(
     except ValueError as exc:
         say(f"zswarm run: no report: {exc}")
         return 1
+    except Exception as exc:  # noqa: BLE001 - the run is over: keep what it left (recording, logs, exit codes)
+        # Counters that pass the wire's bounds may still be what the report did not expect.
+        say(f"zswarm run: the report failed ({type(exc).__name__}: {exc}); the recording and logs are in {out}")
+        summary = {"report_error": f"{type(exc).__name__}: {exc}", "exit_codes": codes, "interrupted": interrupted.is_set()}
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        return 1
     summary["exit_codes"] = codes
     summary["interrupted"] = interrupted.is_set()
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -25,7 +25,8 @@ class MessageError(ValueError):
 
 # field kinds: "int", "float", "str", (shape,) for float64 arrays,
 # "vecmap" for {int: float64[3]}, "matmap" for {int: float64[3,3]}, "floatmap" for
-# {int: float}, "jumps" for [[edge k, t, ξ before, ξ after], ...], "any" (msgpack-native, small)
+# {int: float}, "jumps" for [[edge k, t, ξ before, ξ after], ...], "counters" (a map of names to
+# numbers, strings, booleans, None, lists and maps of those: bounded, see _counters)
 SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij,
     # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p;
@@ -47,7 +48,7 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     # for a kinematic plant, u[k] = [v (body frame), yaw rate] it applied)
     "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3), "tau": (-1, 3), "u": (-1, 4)},
     # counters of a process
-    "stats": {"role": "str", "counters": "any"},
+    "stats": {"role": "str", "counters": "counters"},
     # run control
     "start": {"epoch": "float", "time_scale": "float", "duration": "float", "seed": "int", "run": "str"},
     "stop": {"reason": "str"},
@@ -230,7 +231,44 @@ def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
             return v
 
         return intlist
-    return lambda v, k: v  # "any": msgpack-native, small
+    if kind == "counters":
+        return _counters
+    raise AssertionError(f"unknown field kind {kind!r}")
+
+
+# A process's counters (stats): what a receiver accepts.  ``counters = 5`` used to pass as
+# "any" and make the report raise TypeError after the run.
+MAX_COUNTER_DEPTH = 6
+MAX_COUNTER_ITEMS = 20000
+
+
+def _counters(v: Any, k: str) -> dict[str, Any]:
+    if type(v) is not dict:
+        raise MessageError(f"{k}: expected a map of names to counters")
+    left = [MAX_COUNTER_ITEMS]
+
+    def check(x: Any, where: str, depth: int) -> None:
+        left[0] -= 1
+        if left[0] < 0:
+            raise MessageError(f"{k}: more than {MAX_COUNTER_ITEMS} entries")
+        if depth > MAX_COUNTER_DEPTH:
+            raise MessageError(f"{where}: nested deeper than {MAX_COUNTER_DEPTH}")
+        t = type(x)
+        if t is dict:
+            for n, y in x.items():
+                if type(n) is not str or len(n) > 256:
+                    raise MessageError(f"{where}: keys must be names (strings of at most 256 characters)")
+                check(y, f"{where}.{n}", depth + 1)
+        elif t is list:
+            for i, y in enumerate(x):
+                check(y, f"{where}[{i}]", depth + 1)
+        elif x is not None and t not in (int, float, str, bool):
+            raise MessageError(f"{where}: expected a number, a string, a list or a map")
+        elif t is str and len(x) > 4096:
+            raise MessageError(f"{where}: a string of more than 4096 characters")
+
+    check(v, k, 0)
+    return v
 
 
 # Per message type: (field, handler, optional), in schema order.
@@ -433,7 +471,7 @@ def to_json(m: Mapping[str, Any]) -> dict[str, Any]:
     schema = SCHEMAS[m["type"]]
     for k, v in m.items():
         kind = schema.get(k)
-        if kind is None or kind in ("int", "float", "str", "intlist", "any") or k in ENVELOPE:
+        if kind is None or kind in ("int", "float", "str", "intlist", "counters") or k in ENVELOPE:
             out[k] = v.tolist() if isinstance(v, np.ndarray) else v
         elif isinstance(kind, tuple):
             out[k] = v.tolist()
@@ -485,7 +523,9 @@ def _json_to_wire(obj: Any) -> dict[Any, Any]:
     m: dict[Any, Any] = {}
     for k, v in obj.items():
         kind = schema.get(k, "value" if mtype in OPEN and k not in ENVELOPE else None)
-        if kind is None or kind in ("int", "float", "str", "intlist", "any"):
+        if kind == "counters":
+            m[k] = _counters(v, k)
+        elif kind is None or kind in ("int", "float", "str", "intlist"):
             m[k] = v
         elif isinstance(kind, tuple):
             m[k] = _arr_from_json(v, k)
@@ -539,7 +579,7 @@ _VALUE = {"anyOf": [_NUM, {"type": "array"}]}  # a number or a (nested) array of
 def _json_kind(kind: Any) -> dict[str, Any]:
     if isinstance(kind, tuple):
         return _json_array(kind)
-    simple: dict[str, dict[str, Any]] = {"int": {"type": "integer"}, "float": _NUM, "str": {"type": "string"}, "intlist": {"type": "array", "items": {"type": "integer"}}, "any": {"type": "object"}}
+    simple: dict[str, dict[str, Any]] = {"int": {"type": "integer"}, "float": _NUM, "str": {"type": "string"}, "intlist": {"type": "array", "items": {"type": "integer"}}, "counters": {"type": "object"}}
     if kind in simple:
         return simple[kind]
     if kind in ("vecmap", "matmap"):

@@ -255,3 +255,28 @@ def test_fast_decoder_property():
             _same_outcome(mtype, bytes(p))
 
     check()
+
+
+@pytest.mark.parametrize(
+    "counters, match",
+    [
+        (5, "counters: expected a map"),  # wire-valid before: the report then raised TypeError after the run
+        ({1: 2}, "keys must be names"),
+        ({"a": {"b": {"c": {"d": {"e": {"f": {"g": 1}}}}}}}, "nested deeper than 6"),
+        ({"a": list(range(30000))}, "more than 20000 entries"),
+        ({"a": "x" * 5000}, "more than 4096 characters"),
+        ({"a": b"bytes"}, "expected a number, a string, a list or a map"),
+    ],
+)
+def test_stats_counters_are_bounded(counters, match):
+    payload = msgpack.packb({"v": 2, "type": "stats", "src": 1, "seq": 0, "t": 0.0, "role": "agent", "counters": counters}, use_bin_type=True)
+    with pytest.raises(wire.MessageError, match=match):
+        wire.decode(payload)
+    with pytest.raises(wire.MessageError, match=match):
+        wire.from_json({"v": 2, "type": "stats", "src": 1, "seq": 0, "t": 0.0, "role": "agent", "counters": counters})
+
+
+def test_real_counters_pass():
+    c = {"links": {"1->3": {"delivered": 10, "dropped": 0, "latency_p50_ms": 1.5}}, "final": True, "stale_policy": "hold after 0.2 s", "x": None, "l": [1, 2.5, "s"]}
+    m = wire.decode(wire.encode("stats", 3, 0, 1.0, role="agent", counters=c))
+    assert m["counters"] == c
