@@ -44,17 +44,27 @@ def main(argv: list[str] | None = None) -> int:
     start: dict[str, Any] = {}
     world_seen = threading.Event()
 
+    ignored_ctl = [0]  # malformed or foreign control messages, dropped
+
     def on_start(key: str, payload: bytes) -> None:
         if started.is_set():
             return
         try:
-            start.update(wire.decode(payload, "start"))
+            start.update(wire.decode_ctl(payload, "start"))
         except wire.MessageError as exc:
+            ignored_ctl[0] += 1
             log.warning("ignored malformed start on %s: %s", key, exc)
             return
         started.set()
 
     def on_stop(key: str, payload: bytes) -> None:
+        try:
+            wire.decode_ctl(payload, "stop")
+        except wire.MessageError as exc:
+            ignored_ctl[0] += 1
+            if ignored_ctl[0] <= 3:
+                log.warning("ignored malformed stop on %s: %s", key, exc)
+            return
         stop.set()
 
     lost: list[threading.Timer] = []

@@ -329,7 +329,11 @@ class Recorder:
         with self._lock:
             self._buf.append((stream, payload, t))
         if key.endswith("/ctl/stop"):
-            self.stopped.set()
+            try:
+                wire.decode_ctl(payload, "stop")  # only the world's stop ends the recording
+                self.stopped.set()
+            except wire.MessageError:
+                pass  # recorded as it came, counted as malformed where it is written
         elif "/stats/" in key and key not in self.finals:  # once a second per process: decoding is cheap
             try:
                 if decode(payload, "stats")["counters"].get("final"):

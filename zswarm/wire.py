@@ -276,6 +276,24 @@ _FIELDS = {t: tuple((k, _kind_handler(kind), k in OPTIONAL.get(t, ())) for k, ki
 _MISSING = object()
 
 
+def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
+    """A run-control message (``start`` or ``stop`` on ctl/...), decoded and checked beyond
+    its schema: only the world (src 0) controls a run, and a start's clock must make sense.
+
+    Any payload on ctl/stop used to stop every agent and the recorder, and a start with
+    ``time_scale = 0`` crashed the agents (a division by it in their clock).
+    """
+    m = decode(payload, expect)
+    if m["src"] != 0:
+        raise MessageError(f"{expect}: from src {m['src']}; only the world (src 0) controls the run")
+    if expect == "start":
+        if not m["time_scale"] > 0:
+            raise MessageError(f"start: time_scale must be > 0 (got {m['time_scale']!r})")
+        if not m["duration"] > 0:
+            raise MessageError(f"start: duration must be > 0 (got {m['duration']!r})")
+    return m
+
+
 def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
     """Decode and validate; arrays come back as read-only float64 numpy arrays.
 

@@ -280,3 +280,35 @@ def test_real_counters_pass():
     c = {"links": {"1->3": {"delivered": 10, "dropped": 0, "latency_p50_ms": 1.5}}, "final": True, "stale_policy": "hold after 0.2 s", "x": None, "l": [1, 2.5, "s"]}
     m = wire.decode(wire.encode("stats", 3, 0, 1.0, role="agent", counters=c))
     assert m["counters"] == c
+
+
+def test_run_control_is_the_worlds_and_makes_sense():
+    ok_stop = wire.encode("stop", 0, 0, 1.0, reason="duration")
+    assert wire.decode_ctl(ok_stop, "stop")["reason"] == "duration"
+    start = {"epoch": 1.0, "time_scale": 0.5, "duration": 10.0, "seed": 1, "run": "r"}
+    assert wire.decode_ctl(wire.encode("start", 0, 0, 0.0, **start), "start")["time_scale"] == 0.5
+    # Any payload on ctl/stop stopped every agent and the recorder; a start with time_scale 0
+    # crashed the agents.
+    for payload, match in (
+        (b"anything", "not msgpack"),
+        (wire.encode("stop", 3, 0, 1.0, reason="x"), "only the world"),
+        (wire.encode("progress", 0, 0, 1.0, duration=3.0), "where .stop. was expected"),
+        (wire.encode("start", 0, 0, 0.0, **{**start, "time_scale": 0.0}), "time_scale must be > 0"),
+        (wire.encode("start", 0, 0, 0.0, **{**start, "duration": -1.0}), "duration must be > 0"),
+    ):
+        with pytest.raises(wire.MessageError, match=match):
+            wire.decode_ctl(payload, "start" if b"start" in payload else "stop")
+
+
+def test_the_recorder_stops_only_on_the_worlds_stop():
+    from zswarm.bus import MemoryBus
+    from zswarm.record import Recorder
+
+    bus = MemoryBus()
+    rec = Recorder(bus, "t", None)
+    for junk in (b"x", wire.encode("stop", 5, 0, 1.0, reason="spoof")):
+        bus.put("zswarm/t/ctl/stop", junk)
+    assert not rec.stopped.is_set()
+    bus.put("zswarm/t/ctl/stop", wire.encode("stop", 0, 0, 1.0, reason="duration"))
+    assert rec.stopped.is_set()
+    rec.close()
