@@ -74,6 +74,7 @@ class LinkCounter:
 # Edge messages kept per link: 160 ms at 100 Hz, more than the data age of any
 # step that is not already stale (the default max_age of the §3/§4 observers is 0.2 s).
 RECENT_EDGE_MESSAGES = 16
+MAX_LOGGED_KEYS = 16  # keys whose malformed messages are logged (once each); the rest are counted only
 
 _EYE3 = np.eye(3)
 _EYE3.flags.writeable = False
@@ -111,6 +112,7 @@ class Inbox:
         link_of: Callable[[str], str | None],
         validate: Callable[[dict[str, Any]], object] | None = None,
         decode: Callable[[bytes], dict[str, Any]] | None = None,
+        sender: Callable[[str], int] | None = None,
     ) -> Callable[[str, bytes], None]:
         """A bus callback for messages of type ``expect``; ``validate`` raises ValueError
         on a message that decodes but is not what this agent's algorithm reads;
@@ -127,7 +129,7 @@ class Inbox:
         lease, so an agent saw every token go and come back (measured: 5 of 16 agents
         "lost the world's token" in a 20 s run; since, 0 or 1, and fewer missed deadlines).
         """
-        process = partial(self._process, expect, link_of, validate, decode or partial(wire.decode, expect=expect))
+        process = partial(self._process, expect, link_of, validate, decode or partial(wire.decode, expect=expect), sender)
         pending, now = self._pending, self.now
 
         def on_message(key: str, payload: bytes) -> None:
@@ -148,6 +150,7 @@ class Inbox:
         link_of: Callable[[str], str | None],
         validate: Callable[[dict[str, Any]], object] | None,
         decode: Callable[[bytes], dict[str, Any]],
+        sender: Callable[[str], int] | None,
         key: str,
         payload: bytes,
         rx: float,
@@ -158,11 +161,14 @@ class Inbox:
             if link is None:
                 raise wire.MessageError("key is not one of this agent's links")
             msg = decode(payload)
+            if sender is not None and msg["src"] != sender(link):
+                raise wire.MessageError(f"from src {msg['src']} on {link}'s key")
             if validate is not None:
                 validate(msg)
         except ValueError as exc:
             self.malformed += 1
-            if key not in self._logged:
+            # Once per key, for at most MAX_LOGGED_KEYS keys: 20 000 junk keys were 20 000 lines.
+            if key not in self._logged and len(self._logged) < MAX_LOGGED_KEYS:
                 self._logged.add(key)
                 self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
             return
@@ -289,6 +295,24 @@ def _edge_link(key: str) -> str | None:
     if len(parts) == 5 and parts[2] == "edge":
         return f"{parts[3]}->{parts[4]}"
     return None
+
+
+def _edge_links(agent_id: int, neighbors: tuple[int, ...]) -> Callable[[str], str | None]:
+    """The link of an edge key into ``agent_id``, or None unless it comes from one of its
+    in-neighbours: any ``edge/<anything>/<i>`` used to be a link of its own (20 000 junk
+    keys made 20 000 link counters and stored messages)."""
+    links = {f"{j}->{agent_id}" for j in neighbors}
+
+    def link_of(key: str) -> str | None:
+        link = _edge_link(key)
+        return link if link in links else None
+
+    return link_of
+
+
+def _edge_sender(link: str) -> int:
+    """The src an edge message on ``link`` ("j->i") must carry: j's own id."""
+    return int(link.split("->", 1)[0])
 
 
 
@@ -500,10 +524,10 @@ class AgentNode:
             (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
         )
         sense_link = f"world->{agent_id}"
-        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense")), direct=False)
+        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense"), sender=lambda link: 0), direct=False)
         if self.spec.neighbors:
             edge_in = {n: (f.shape, f.optional) for n, f in self.aspec.edge_in.items()}
-            handler = self.inbox.handler("edge", _edge_link, self.aspec.check_edge, wire.decoder("edge", edge_in))
+            handler = self.inbox.handler("edge", _edge_links(agent_id, self.spec.neighbors), self.aspec.check_edge, wire.decoder("edge", edge_in), sender=_edge_sender)
             bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         self.pub_est = bus.publisher(keys.est(run, agent_id))

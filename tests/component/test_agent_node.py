@@ -66,6 +66,24 @@ def test_malformed_and_foreign_messages_are_counted_and_dropped(caplog):
     assert node.steps == 1
 
 
+def test_edges_only_from_in_neighbours_and_only_with_their_own_src(caplog):
+    """Any ``edge/<anything>/3`` used to be a link of its own (a counter and a stored
+    message each, memory without bound), and any src was taken on any key."""
+    sc, bus, clock, node, got = setup()
+    msg = {"t_local": 0.0, "R_hat": np.eye(3), "p_hat": np.zeros(3), "b": np.array([0, 0, 1.0])}
+    for n in range(2000):
+        bus.put(f"zswarm/t/edge/junk{n}/3", wire.encode("edge", 1, n, 0.0, **msg))
+    bus.put(keys.edge("t", 5, 3), wire.encode("edge", 5, 0, 0.0, **msg))  # 5 is not an in-neighbour of 3
+    bus.put(keys.edge("t", 1, 3), wire.encode("edge", 2, 0, 0.0, **msg))  # 2 claiming to be 1
+    c = node.counters()
+    assert c["malformed"] == 2002
+    assert set(c["links"]) == set()  # nothing delivered: no link counter made
+    assert len(node.inbox.recent) == 0
+    assert sum("malformed" in r.message for r in caplog.records) <= 16  # logged for at most 16 keys
+    bus.put(keys.edge("t", 1, 3), wire.encode("edge", 1, 0, 0.0, **msg))
+    assert set(node.counters()["links"]) == {"1->3"}
+
+
 def _feed(bus, sc, clock, t, R=np.eye(3)):
     clock.set(t)
     bus.put(keys.sense("t", 3), sense_for(sc, 3, t, R))
