@@ -69,7 +69,7 @@ def test_malformed_and_foreign_messages_are_counted_and_dropped(caplog):
 def test_edges_only_from_in_neighbours_and_only_with_their_own_src(caplog):
     """Any ``edge/<anything>/3`` used to be a link of its own (a counter and a stored
     message each, memory without bound), and any src was taken on any key."""
-    sc, bus, clock, node, got = setup()
+    _, bus, _, node, _ = setup()
     msg = {"t_local": 0.0, "R_hat": np.eye(3), "p_hat": np.zeros(3), "b": np.array([0, 0, 1.0])}
     for n in range(2000):
         bus.put(f"zswarm/t/edge/junk{n}/3", wire.encode("edge", 1, n, 0.0, **msg))
