@@ -123,9 +123,11 @@ def main(argv: list[str] | None = None) -> int:
             run_realtime(node, clock[0].now, lambda t: clock[0].sleep_until(t, stop), start["duration"])
         finally:
             ended.set()
-            node.publish_stats(min(clock[0].now(), start["duration"]), final=True)
-            c = node.counters()
-            log.info("stopped after %d steps (%.2f Hz, %d missed deadlines)", c["steps"], c["step_rate_hz"], c["missed_deadlines"])
+        # Final stats only on a clean exit: a crashed agent published them from `finally` and
+        # a manual run reported it alive at the end.
+        node.publish_stats(min(clock[0].now(), start["duration"]), final=True)
+        c = node.counters()
+        log.info("stopped after %d steps (%.2f Hz, %d missed deadlines)", c["steps"], c["step_rate_hz"], c["missed_deadlines"])
     return 0
 
 

@@ -310,6 +310,20 @@ def _edge_links(agent_id: int, neighbors: tuple[int, ...]) -> Callable[[str], st
     return link_of
 
 
+def _finite_estimate(e: Mapping[str, Any]) -> bool:
+    """Every number of an estimate (R_hat, p_hat, and the arrays and numbers it reports) finite."""
+    for v in e.values():
+        if isinstance(v, np.ndarray):
+            if not np.isfinite(v).all():
+                return False
+        elif isinstance(v, float):
+            if not math.isfinite(v):
+                return False
+        elif isinstance(v, Mapping) and not _finite_estimate(v):
+            return False
+    return True
+
+
 def _edge_sender(link: str) -> int:
     """The src an edge message on ``link`` ("j->i") must carry: j's own id."""
     return int(link.split("->", 1)[0])
@@ -550,6 +564,7 @@ class AgentNode:
         self.catch_up_steps = 0  # steps beyond one per tick, taken to catch up after a late tick
         self.t_step = -math.inf  # own-clock time the state refers to (the last step's end)
         self.idle_ticks = 0  # ticks with no sensor packet newer than the last step
+        self.step_failures = 0  # ticks whose step raised or gave a non-finite estimate (_step_failed)
         self.compute_s = 0.0
         self.compute_max = 0.0
         self._now = now
@@ -593,6 +608,28 @@ class AgentNode:
             self.idle_ticks += 1
             return
         c0 = time.perf_counter()
+        good = self.state
+        try:
+            pub = self._advance(t_end, t_tick, sense)
+            if pub is not None and not _finite_estimate(pub.estimate):
+                raise FloatingPointError("a non-finite estimate")
+        except Exception as exc:  # noqa: BLE001 - any failure of the algorithm's step: see _step_failed
+            self._step_failed(good, exc, t_end)
+            return
+        if pub is None:
+            return
+        view = self.view
+        self._send(pub, view.t_world, t_tick)
+        c = time.perf_counter() - c0
+        self.compute_s += c
+        self.compute_max = max(self.compute_max, c)
+        self.steps += 1
+        if self.t_first is None:
+            self.t_first = view.t_world
+        self.t_last = view.t_world
+
+    def _advance(self, t_end: float, t_tick: float, sense: dict[str, Any]) -> Publish | None:
+        """Step the parts from the last step to ``t_end`` (the body of :meth:`tick`); what to publish."""
         view = self.view
         outputs: Any = None
         if not self.started:
@@ -629,17 +666,20 @@ class AgentNode:
                     if ps.t_first is None:
                         ps.t_first = t_e
                 self.t_step = t_e
-        pub: Publish | None = self.algo.publish(self.state, outputs, view)
-        if pub is None:
-            return
-        self._send(pub, view.t_world, t_tick)
-        c = time.perf_counter() - c0
-        self.compute_s += c
-        self.compute_max = max(self.compute_max, c)
-        self.steps += 1
-        if self.t_first is None:
-            self.t_first = view.t_world
-        self.t_last = view.t_world
+        return self.algo.publish(self.state, outputs, view)
+
+    def _step_failed(self, good: Any, exc: Exception, t_end: float) -> None:
+        """A step raised or gave a non-finite estimate (a hostile but wire-valid measurement,
+        e.g. a gyro of 1e200, used to kill the agent in ``so3.exp``): keep the last good
+        state over the interval up to ``t_end`` (not stepped again: it would fail again),
+        count it, log the first few, and go on with the next tick."""
+        self.state = good
+        self.t_step = max(self.t_step, t_end)
+        for ps in self.parts:
+            ps.last = max(ps.last, t_end)
+        self.step_failures += 1
+        if self.step_failures <= 3:
+            log.warning("agent %d: a step failed (%s: %s); kept the last good state (%d so far)", self.id, type(exc).__name__, exc, self.step_failures)
 
     def _command_transit(self) -> float:
         """How long after its tick a command reaches the world (own clock): this agent's own
@@ -753,6 +793,7 @@ class AgentNode:
                 "missed_deadlines": self.missed,
                 "catch_up_steps": self.catch_up_steps,
                 "idle_ticks": self.idle_ticks,
+                "step_failures": self.step_failures,
                 "compute_mean_us": 1e6 * self.compute_s / self.steps if self.steps else 0.0,
                 "compute_max_us": 1e6 * self.compute_max,
                 "sent": {f"{self.id}->{i}": n for i, n in self.sent.items()} | ({f"{self.id}->world": self.cmd_seq} if self.pub_cmd is not None else {}),

@@ -84,6 +84,37 @@ def test_edges_only_from_in_neighbours_and_only_with_their_own_src(caplog):
     assert set(node.counters()["links"]) == {"1->3"}
 
 
+def test_a_step_that_fails_keeps_the_last_good_state_and_the_agent_goes_on(caplog):
+    """A wire-valid but hostile measurement (a gyro of 1e200: finite, so the decoder takes
+    it) raised ValueError in so3.exp and killed the agent."""
+    sc, bus, clock, node, got = setup()
+    msg = {"t_local": 0.0, "R_hat": np.eye(3), "b": np.array([0, 0, 1.0])}
+    for t in (0.0, 0.005):
+        clock.set(t)
+        bus.put(keys.sense("t", 3), sense_for(sc, 3, t, np.eye(3)))
+        for j in (1, 2):
+            bus.put(keys.edge("t", j, 3), wire.encode("edge", j, int(t * 1000), t, p_hat=np.array(sc.agent(j).p), **msg))
+        node.tick(t)
+    good = node.state
+    clock.set(0.01)
+    hostile = {j: np.array([0, 0, 1.0]) for j in (1, 2)}
+    bus.put(keys.sense("t", 3), wire.encode("sense", 0, 2, 0.01, gyro=np.array([1e200, 0.0, 0.0]), bearings=hostile))
+    node.tick(0.01)
+    assert node.state is good and node.step_failures == 1
+    assert node.counters()["step_failures"] == 1
+    assert any("a step failed" in r.message for r in caplog.records)
+    # The next step still integrates the gyro from that sample (its rate at the step's
+    # start): it fails too; the one after is clear of it.
+    for t in (0.015, 0.02):
+        clock.set(t)
+        bus.put(keys.sense("t", 3), sense_for(sc, 3, t, np.eye(3)))
+        node.tick(t)
+    assert node.state is not good and node.step_failures <= 2  # stepping again
+    est = [wire.decode(p) for k, p in got if k == keys.est("t", 3)]
+    assert [e["t"] for e in est][:2] == [0.0, 0.005] and est[-1]["t"] == 0.02  # nothing published from a failed step
+    assert all(np.isfinite(e["R_hat"]).all() for e in est)
+
+
 def _feed(bus, sc, clock, t, R=np.eye(3)):
     clock.set(t)
     bus.put(keys.sense("t", 3), sense_for(sc, 3, t, R))
