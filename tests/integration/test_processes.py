@@ -39,7 +39,11 @@ def test_manual_launch_signals_and_malformed_messages(procs, tmp_path):
         extra.send_signal(signal.SIGTERM)
         assert extra.wait(5) == 0 and time.monotonic() - t0 < 2.0
 
-        world = procs.start([sys.executable, "-m", "world", "--topology", TOPOLOGY, "--duration", "6", "--wait-for-recorder", *common], log=tmp_path / "world.log")
+        # Time scale 0.5 (12 s of wall time): at 1, a busy machine left agent 3 499 of the 600
+        # ticks (world skipping 8 % of its samples) and the step count below failed.
+        world = procs.start(
+            [sys.executable, "-m", "world", "--topology", TOPOLOGY, "--duration", "6", "--time-scale", "0.5", "--wait-for-recorder", *common], log=tmp_path / "world.log"
+        )
         wait_for(lambda: "start:" in (tmp_path / "world.log").read_text(), 60, "world start")
         time.sleep(1.0)
         # Garbage and foreign messages on zswarm keys: counted, logged once, dropped.
