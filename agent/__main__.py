@@ -31,6 +31,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    procutil.die_with_parent()
     args = parse(argv)
     sc = procutil.load_or_exit(args.topology)
     if args.id not in sc.ids:
@@ -101,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         # Handlers only once the session is open: until then SIGTERM's default
         # action ends the process at once, even inside a connect wait.
         stop = procutil.stop_on_signals()
-        node = AgentNode(sc, args.id, bus, run, seed, now=lambda: clock[0].now() if clock else 0.0)
+        node = AgentNode(sc, args.id, bus, run, seed, now=lambda: clock[0].now() if clock else 0.0, inc=procutil.incarnation())
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.subscribe(keys.ctl(run, "stop"), on_stop)
         bus.watch_alive(keys.alive(run, "world", 0), on_world)

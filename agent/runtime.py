@@ -31,49 +31,16 @@ from zswarm import keys, timing, wire
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, make_gains
 from zswarm.bus import Bus
 from zswarm.clock import AgentClock
-from zswarm.links import LinkModel
+from zswarm.links import LinkCounter, LinkModel
 from zswarm.scenario import Scenario
 
 log = logging.getLogger("zswarm.agent")
 
 
-class LinkCounter:
-    """Counts what arrives on one link; loss is inferred from sequence-number gaps.
-
-    Also keeps the last 2000 latencies (receiver's clock at arrival minus the
-    sender's send stamp): meaningful when the clocks share a base, as they do
-    for processes on one host with no configured offset or drift.
-    """
-
-    __slots__ = ("delivered", "max_seq", "reordered", "latency")
-
-    def __init__(self) -> None:
-        self.delivered = 0
-        self.max_seq = -1
-        self.reordered = 0
-        self.latency: deque[float] = deque(maxlen=2000)
-
-    def see(self, seq: int, latency: float) -> None:
-        self.delivered += 1
-        self.latency.append(latency)
-        if seq < self.max_seq:
-            self.reordered += 1
-        else:
-            self.max_seq = seq
-
-    def as_dict(self) -> dict[str, Any]:
-        # Messages numbered 0..max_seq were sent before the last one received;
-        # those not delivered were lost on the way.
-        d: dict[str, Any] = {"delivered": self.delivered, "dropped": max(0, self.max_seq + 1 - self.delivered), "reordered": self.reordered}
-        if self.latency:
-            q = np.percentile(np.array(self.latency), [50, 99])
-            d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
-        return d
-
-
 # Edge messages kept per link: 160 ms at 100 Hz, more than the data age of any
 # step that is not already stale (the default max_age of the §3/§4 observers is 0.2 s).
 RECENT_EDGE_MESSAGES = 16
+MAX_NEIGHBOR_EVENTS = 256  # liveliness changes of in-neighbours kept for the stats
 MAX_LOGGED_KEYS = 16  # keys whose malformed messages are logged (once each); the rest are counted only
 
 _EYE3 = np.eye(3)
@@ -198,9 +165,10 @@ class Inbox:
         counter = self.links.get(link)
         if counter is None:
             counter = self.links[link] = LinkCounter()
-        counter.see(msg["seq"], rx - sent)
-        prev = self.latest.get(link)
-        if prev is None or msg["seq"] >= prev["seq"]:
+        restarts = counter.restarts
+        if counter.see(msg["seq"], msg["inc"], rx - sent):
+            if counter.restarts != restarts and expect != "sense":
+                self.recent.pop(link, None)  # the dead incarnation's messages mean nothing now
             self.latest[link] = msg
             if expect == "sense":
                 self.packets.append(msg)
@@ -405,7 +373,7 @@ class TickView:
             node = self._node
             t_j = node.clock.local(m["t"])
             age = self.t - t_j
-            stale = age > node.stale.max_age
+            stale = age > node.stale.max_age or j in node.lost  # a lost neighbour's data are stale whatever their age
             if stale:
                 node.stale_terms[j] = node.stale_terms.get(j, 0) + 1
             if not (stale and node.stale.policy == "drop"):
@@ -491,8 +459,9 @@ class _PartState:
 class AgentNode:
     """One agent: subscribes to its sensor key and in-edges, steps its algorithm on its own clock."""
 
-    def __init__(self, scenario: Scenario, agent_id: int, bus: Bus, run: str, seed: int, now: Callable[[], float]) -> None:
+    def __init__(self, scenario: Scenario, agent_id: int, bus: Bus, run: str, seed: int, now: Callable[[], float], inc: int = 0) -> None:
         self.sc = scenario
+        self.inc = inc  # this process's incarnation, in every message it sends (wire.py)
         self.stale = scenario.stale
         self.stale_terms: dict[int, int] = {}  # per in-neighbour: terms evaluated on a message older than max_age
         self.id = agent_id
@@ -544,6 +513,12 @@ class AgentNode:
             handler = self.inbox.handler("edge", _edge_links(agent_id, self.spec.neighbors), self.aspec.check_edge, wire.decoder("edge", edge_in), sender=_edge_sender)
             bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
+        # Detection: an in-neighbour whose liveliness token goes (its process died, or hung past
+        # the 1 s lease) is marked lost at once; its terms are stale from then until its token
+        # is back (the stale policy decides: "drop" leaves them out, "hold" keeps the last
+        # message), and a restarted neighbour's first message is used at once (LinkCounter).
+        self.lost: dict[int, float] = {}  # in-neighbour -> world time its token went
+        self.neighbor_events: list[tuple[int, float, bool]] = []  # (j, world time, token up), the first MAX_NEIGHBOR_EVENTS
         self.pub_est = bus.publisher(keys.est(run, agent_id))
         self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None
         self.cmd_seq = 0
@@ -571,6 +546,21 @@ class AgentNode:
         # Own clock from a tick to its command's put, last 16 (0 in sim, whose ticks take no
         # time): the part of the command's way to the world that the sensors' transit lacks.
         self.send_delays: deque[float] = deque(maxlen=16)
+        for j in self.spec.neighbors:  # last: a MemoryBus calls back at once for tokens already up
+            bus.watch_alive(keys.alive(run, "agent", j), partial(self._on_neighbor, j))
+
+    def _on_neighbor(self, j: int, key: str, up: bool) -> None:
+        """Liveliness of in-neighbour ``j`` (any thread): mark it lost or back."""
+        t = self._now()
+        if up:
+            if self.lost.pop(j, None) is None:
+                return  # its first appearance, not a return
+            log.info("agent %d: in-neighbour %d is back at t = %.3f s", self.id, j, t)
+        else:
+            self.lost[j] = t
+            log.warning("agent %d: in-neighbour %d lost (liveliness) at t = %.3f s", self.id, j, t)
+        if len(self.neighbor_events) < MAX_NEIGHBOR_EVENTS:
+            self.neighbor_events.append((j, t, up))
 
     # ------------------------------------------------------------------ the step
 
@@ -755,7 +745,7 @@ class AgentNode:
         for i, fields in pub.edges.items():
             p = self.pub_edge.get(i)
             if p is not None:
-                p.put(wire.encode("edge", self.id, seq, t_stamp, t_local=t_local, **fields))
+                p.put(wire.encode("edge", self.id, seq, t_stamp, inc=self.inc, t_local=t_local, **fields))
                 self.sent[i] += 1
         e = pub.estimate
         est: dict[str, Any] = {"t_local": t_local}
@@ -774,11 +764,11 @@ class AgentNode:
         if pub.command is not None and self.pub_cmd is not None:
             # To the world's plant (zero-order hold there), stamped with the time of the
             # measurements it was computed from.
-            payload = wire.encode("cmd", self.id, self.cmd_seq, t_stamp, t_local=t_local, **pub.command)
+            payload = wire.encode("cmd", self.id, self.cmd_seq, t_stamp, inc=self.inc, t_local=t_local, **pub.command)
             self.send_delays.append(max(0.0, self.clock.local(self._now()) - t_local))
             self.pub_cmd.put(payload)
             self.cmd_seq += 1
-        self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, **est))
+        self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, inc=self.inc, **est))
 
     # ------------------------------------------------------------------ reporting
 
@@ -801,6 +791,8 @@ class AgentNode:
                 "stale_terms": {f"{j}->{self.id}": n for j, n in sorted(self.stale_terms.items())},
             }
         )
+        if self.neighbor_events:
+            c["neighbor_events"] = [[j, round(t, 6), up] for j, t, up in list(self.neighbor_events)]
         if len(self.parts) > 1:  # what each part achieved on this agent's clock (De Carli: 200/100/50 Hz)
             c["parts"] = {
                 ps.part.name: {
@@ -819,7 +811,7 @@ class AgentNode:
     def publish_stats(self, t_world: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", self.id, self.stats_seq, t_world, role="agent", counters=counters))
+        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", self.id, self.stats_seq, t_world, inc=self.inc, role="agent", counters=counters))
         self.stats_seq += 1
 
 

@@ -33,6 +33,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    procutil.die_with_parent()
     args = parse(argv)
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args)
@@ -44,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
         # Handlers only once the session is open: until then SIGTERM's default
         # action ends the process at once, even inside a connect wait.
         stop = procutil.stop_on_signals()
-        world = World(sc, bus, run, seed)
+        world = World(sc, bus, run, seed, inc=procutil.incarnation())
         pub_start = bus.publisher(keys.ctl(run, "start"))
         pub_stop = bus.publisher(keys.ctl(run, "stop"), block=True)  # sent once: wait rather than drop
         pub_progress = bus.publisher(keys.ctl(run, "progress"))
@@ -75,10 +76,11 @@ def main(argv: list[str] | None = None) -> int:
         epoch = time.time() + START_LEAD_S / 1.0
         clock = WallClock(epoch, args.time_scale)
         world.now = clock.now  # command arrivals are stamped in world time
-        start = wire.encode("start", 0, 0, 0.0, epoch=epoch, time_scale=args.time_scale, duration=duration, seed=seed, run=run)
+        start = wire.encode("start", 0, 0, 0.0, inc=world.inc, epoch=epoch, time_scale=args.time_scale, duration=duration, seed=seed, run=run)
         pub_start.put(start)
         log.info("start: epoch %.3f, time scale %g, duration %g s", epoch, args.time_scale, duration)
         next_announce = time.monotonic() + 1.0
+        n_progress = 0  # the progress messages' own sequence (a loss count reads the gaps)
         reason = "duration"
         while True:
             t = world.next_time()
@@ -98,11 +100,12 @@ def main(argv: list[str] | None = None) -> int:
             if time.monotonic() >= next_announce:
                 # Re-announce so that a late (re)started process can join the run.
                 pub_start.put(start)
-                pub_progress.put(wire.encode("progress", 0, world.seq, t, duration=duration))
+                pub_progress.put(wire.encode("progress", 0, n_progress, t, inc=world.inc, duration=duration))
+                n_progress += 1
                 next_announce += 0.5
         end_t = min(clock.now(), duration)
         world.publish_stats(end_t, final=True)
-        pub_stop.put(wire.encode("stop", 0, 0, end_t, reason=reason))
+        pub_stop.put(wire.encode("stop", 0, 0, end_t, inc=world.inc, reason=reason))
         log.info("stopped (%s) at t = %.3f s after %d samples, %d late", reason, end_t, world.samples, world.late)
         # Give the stop message time to leave before the session closes.
         time.sleep(0.1)

@@ -41,7 +41,6 @@ import heapq
 import logging
 import math
 import threading
-from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -50,7 +49,7 @@ from numpy.typing import NDArray
 
 from world.dynamics import RigidBodies
 from zswarm import wire
-from zswarm.links import LinkModel, LinkSpec
+from zswarm.links import LinkCounter, LinkModel, LinkSpec
 from zswarm.scenario import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
 
 __all__ = ["PLANTS", "PLANT_INPUTS", "COMMAND_POLICIES", "CommandPolicy", "CommandInbox", "RigidBodyPlant", "KinematicPlant"]
@@ -58,23 +57,17 @@ __all__ = ["PLANTS", "PLANT_INPUTS", "COMMAND_POLICIES", "CommandPolicy", "Comma
 log = logging.getLogger("zswarm.world")
 
 
-class _CmdLink:
-    """Counters of one command link i->world (as the agents' LinkCounter)."""
+class _CmdLink(LinkCounter):
+    """Counters of one command link i->world (the agents' LinkCounter), and its emulation."""
 
-    __slots__ = ("delivered", "max_seq", "reordered", "latency", "model")
+    __slots__ = ("model",)
 
     def __init__(self, model: LinkModel | None) -> None:
-        self.delivered = 0
-        self.max_seq = -1
-        self.reordered = 0
-        self.latency: deque[float] = deque(maxlen=2000)
+        super().__init__()
         self.model = model
 
     def as_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"delivered": self.delivered, "dropped": max(0, self.max_seq + 1 - self.delivered), "reordered": self.reordered}
-        if self.latency:
-            q = np.percentile(np.array(self.latency), [50, 99])
-            d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
+        d = super().as_dict()
         if self.model is not None and self.model.spec.active:
             d.update(self.model.counters())
         return d
@@ -107,7 +100,7 @@ class CommandInbox:
         for i in self.ids:
             spec = link_spec(f"{i}->world")
             self.links[i] = _CmdLink(LinkModel(spec, f"{i}->world", seed) if spec.active else None)
-        self._pending: list[tuple[float, int, int, float, int, NDArray[np.float64]]] = []  # (release, n, agent, stamp, seq, u)
+        self._pending: list[tuple[float, int, int, float, int, NDArray[np.float64]]] = []  # (release, n, agent, stamp, n again: the order taken, u)
         self._n = 0
         # The plant's input vector u: the command's fields flattened in their declared order.
         self.width = sum(int(np.prod(shape)) for shape in self.fields.values())
@@ -156,13 +149,12 @@ class CommandInbox:
                     release = link.model.admit(rx)
                     if release is None:
                         return  # lost on the emulated link (counted by the model)
-                link.delivered += 1
-                if msg["seq"] < link.max_seq:
-                    link.reordered += 1
-                else:
-                    link.max_seq = msg["seq"]
-                link.latency.append(release - msg.get("t_local", msg["t"]))
-                heapq.heappush(self._pending, (release, self._n, i, msg["t"], msg["seq"], u))
+                if not link.see(msg["seq"], msg["inc"], release - msg.get("t_local", msg["t"])):
+                    self.superseded[self.index[i]] += 1  # older than one already taken (reordered)
+                    return
+                # n orders the commands of a link as they were taken (links are FIFO: release
+                # order is that order); a restarted agent's seq starts again at 0.
+                heapq.heappush(self._pending, (release, self._n, i, msg["t"], self._n, u))
                 self._n += 1
 
         return on_cmd
@@ -176,7 +168,7 @@ class CommandInbox:
                 _, _, i, stamp, seq, u = heapq.heappop(self._pending)
                 a = self.index[i]
                 if seq <= self.seq[a]:
-                    self.superseded[a] += 1  # reordered on the link: an older command than the one held
+                    self.superseded[a] += 1  # released after a newer one (cannot happen on a FIFO link)
                     continue
                 self.u[a], self.stamp[a], self.seq[a] = u, stamp, seq
                 self.applied[a] += 1

@@ -43,6 +43,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from zswarm.so3 import rotations_ok
+from zswarm.wire import ROT_TOL
+
 ENTRY_POINT_GROUP = "zswarm.algorithms"
 
 # The sensor fields the world can measure, and the sensor-packet key each one fills.
@@ -59,7 +62,7 @@ SENSORS: Mapping[str, str] = MappingProxyType(
     }
 )
 GRAPHS = ("any", "leader_follower", "tree", "sensing")
-RESERVED = frozenset({"v", "type", "src", "seq", "t", "t_local", "rx"})  # message envelope and runtime keys
+RESERVED = frozenset({"v", "type", "src", "seq", "inc", "t", "t_local", "rx"})  # message envelope and runtime keys
 PARAMS = ("", "A", "hybrid", "hybrid_vf", "formation")
 
 
@@ -69,11 +72,17 @@ class AlgorithmError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class Field:
-    """One field of an edge message or command: a float64 array of ``shape`` (``()``: a number)."""
+    """One field of an edge message or command: a float64 array of ``shape`` (``()``: a number);
+    ``rotation``: a 3x3 rotation matrix, checked on arrival like the wire's own rotations."""
 
     shape: tuple[int, ...] = (3,)
     optional: bool = False
     doc: str = ""
+    rotation: bool = False
+
+    def __post_init__(self) -> None:
+        if self.rotation and self.shape != (3, 3):
+            raise AlgorithmError(f"a rotation field has shape (3, 3), not {self.shape}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,6 +149,8 @@ def _check_fields(fields: Mapping[str, Any], spec: Mapping[str, Field], what: st
         shape = np.shape(v)
         if shape != f.shape:
             raise ValueError(f"{what} field {name!r}: shape {shape}, expected {f.shape}")
+        if f.rotation and not rotations_ok(v, ROT_TOL):
+            raise ValueError(f"{what} field {name!r}: not a rotation (R^T R = I, det R = 1 within {ROT_TOL:g})")
     return fields
 
 

@@ -111,6 +111,55 @@ class MemoryBus:
         self._watchers.clear()
         self._cache.clear()
 
+    def session(self) -> MemorySession:
+        """A process's own view of the bus: closing it withdraws its subscriptions, watches
+        and tokens, as a killed process's Zenoh session would (``zswarm sim``'s faults)."""
+        return MemorySession(self)
+
+
+class MemorySession:
+    """One process's session on a :class:`MemoryBus` (see :meth:`MemoryBus.session`)."""
+
+    def __init__(self, bus: MemoryBus) -> None:
+        self.bus = bus
+        self._cbs: list[Any] = []
+        self._tokens: set[str] = set()
+        self.closed = False
+
+    def publisher(self, key: str, block: bool = False) -> Publisher:
+        return self.bus.publisher(key, block)
+
+    def put(self, key: str, payload: bytes) -> None:
+        self.bus.put(key, payload)
+
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
+        self._cbs.append(callback)
+        self.bus.subscribe(key_expr, callback, direct)
+
+    def declare_token(self, key: str) -> None:
+        self._tokens.add(key)
+        self.bus.declare_token(key)
+
+    def undeclare_token(self, key: str) -> None:
+        self._tokens.discard(key)
+        self.bus.undeclare_token(key)
+
+    def watch_alive(self, key_expr: str, callback: AliveCallback) -> None:
+        self._cbs.append(callback)
+        self.bus.watch_alive(key_expr, callback)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        mine = {id(cb) for cb in self._cbs}
+        self.bus._subs = [(k, cb) for k, cb in self.bus._subs if id(cb) not in mine]
+        self.bus._watchers = [(k, cb) for k, cb in self.bus._watchers if id(cb) not in mine]
+        self.bus._cache.clear()
+        for key in sorted(self._tokens):
+            self.bus.undeclare_token(key)
+        self._tokens.clear()
+
 
 # --------------------------------------------------------------------------- Zenoh
 

@@ -26,6 +26,14 @@ def _common_run_args(p: argparse.ArgumentParser) -> None:
         dest="overrides",
         help="override a scenario field, e.g. --set links.delay_ms=50 --set 'links.per_link.\"1->3\".drop=0.5' (repeatable; VALUE is TOML)",
     )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND,FIELD=VALUE,...",
+        dest="faults",
+        help="one more [[faults]] entry, e.g. --fault kill,agent=5,at=10,restart_at=15; stop,agent=3,at=5,duration=2; router,at=8,duration=1; cut,link=1->3,at=4,duration=3 (repeatable)",
+    )
 
 
 def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
@@ -43,10 +51,10 @@ def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
 
 def _load(args: argparse.Namespace) -> Any:
     """The scenario of ``args.topology`` with the ``--set`` overrides (exit 2 on any error)."""
-    from zswarm.scenario import ScenarioError, parse_override
+    from zswarm.scenario import ScenarioError, fault_override, parse_override
 
     try:
-        overrides = [parse_override(o) for o in args.overrides]
+        overrides = [parse_override(o) for o in args.overrides] + [fault_override(f) for f in getattr(args, "faults", [])]
     except ScenarioError as exc:
         procutil.fail_usage(str(exc))
     return procutil.load_or_exit(args.topology, overrides)
@@ -224,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    procutil.die_with_parent()  # as a sweep's child: ends with the sweep
     args = build_parser().parse_args(argv)
     cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid, "generate": cmd_generate}
     return cmds[args.cmd](args)

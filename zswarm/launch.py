@@ -16,13 +16,14 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
 from zswarm import keys, procutil, report, wire
 from zswarm.bus import ZenohBus, zenoh_config
-from zswarm.scenario import Scenario
+from zswarm.scenario import Fault, Scenario
 
 
 def free_port() -> int:
@@ -53,6 +54,8 @@ class Child:
     proc: subprocess.Popen[bytes]
     log: IO[bytes]
     exit_code: int | None = None
+    cmd: list[str] = field(default_factory=list)
+    replaced: bool = False  # killed by a fault (and perhaps restarted as a new child)
 
 
 @dataclass
@@ -65,18 +68,39 @@ class Launch:
     seed: int
     quiet: bool = False
     children: list[Child] = field(default_factory=list)
+    fault_log: list[dict[str, object]] = field(default_factory=list)  # what the launcher did for [[faults]], when
+    endpoint: str = ""
+    run_id: str = ""
 
-    def spawn(self, name: str, role: str, ident: int, cmd: list[str]) -> Child:
-        logf = open(self.out / "logs" / f"{name}.log", "wb")  # noqa: SIM115 - closed in reap()
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+    def write_processes(self, endpoint: str, run_id: str) -> None:
+        """results/processes.json: every child ever started (restarts too), by PID."""
+        self.endpoint, self.run_id = endpoint, run_id
+        (self.out / "processes.json").write_text(
+            json.dumps(
+                {
+                    "router": {"pid": os.getpid(), "endpoint": endpoint},
+                    "run_id": run_id,
+                    "children": [{"name": c.name, "role": c.role, "id": c.ident, "pid": c.proc.pid} for c in self.children],
+                },
+                indent=2,
+            )
+        )
+
+    def spawn(self, name: str, role: str, ident: int, cmd: list[str], log_name: str | None = None) -> Child:
+        logf = open(self.out / "logs" / f"{log_name or name}.log", "wb")  # noqa: SIM115 - closed in reap()
+        env = procutil.child_env(dict(os.environ, PYTHONUNBUFFERED="1"))  # dies with this launcher
         if self.sc.module_dir:
             # A user's algorithm module found beside the scenario file: the children read
             # the results folder's copy of the scenario, so they need that folder too.
             env["PYTHONPATH"] = os.pathsep.join(p for p in (self.sc.module_dir, env.get("PYTHONPATH", "")) if p)
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT, start_new_session=True, env=env)
-        c = Child(name, role, ident, proc, logf)
+        c = Child(name, role, ident, proc, logf, cmd=cmd)
         self.children.append(c)
         return c
+
+    def child(self, role: str, ident: int) -> Child | None:
+        """The current process of (role, id): the newest one of that name."""
+        return next((c for c in reversed(self.children) if c.role == role and c.ident == ident and not c.replaced), None)
 
     def signal_all(self, sig: int, roles: tuple[str, ...]) -> None:
         for c in self.children:
@@ -100,6 +124,7 @@ class Launch:
 
     def stop_all(self, graceful: bool) -> None:
         """Stop every child in order (world+agents, then recorder), escalating to SIGKILL."""
+        self.signal_all(signal.SIGCONT, ("world", "agent", "recorder"))  # one stopped by a fault could not stop
         for roles, t in ((("world", "agent"), 3.0), (("recorder",), 5.0)):
             if graceful:
                 # A normal end: they stop by themselves; only nudge the late ones.
@@ -117,6 +142,131 @@ class Launch:
                 c.proc.kill()
             c.exit_code = c.proc.wait()
             c.log.close()
+
+
+class _Router:
+    """The run's router: this process's own Zenoh session in router mode, which a
+    ``router`` fault closes and opens again on the same endpoint (the clients reconnect
+    within about 0.5 s, with their subscriptions and tokens).  It also watches the run:
+    liveliness, progress, the world's start."""
+
+    def __init__(self, endpoint: str, run_id: str) -> None:
+        self.endpoint, self.run_id = endpoint, run_id
+        self.bus: ZenohBus | None = None
+        self.alive: set[tuple[str, int]] = set()
+        self.progress = [0.0]
+        self.start: dict[str, float] = {}
+
+    def open(self) -> None:
+        self.bus = ZenohBus(zenoh_config("router", listen=[self.endpoint]))
+        self.bus.watch_alive(keys.alive_all(self.run_id), self._on_alive)
+        self.bus.subscribe(keys.ctl(self.run_id, "progress"), self._on_progress)
+        self.bus.subscribe(keys.ctl(self.run_id, "start"), self._on_start)
+
+    def close(self) -> None:
+        if self.bus is not None:
+            self.bus.close()
+            self.bus = None
+            self.alive.clear()
+
+    def _on_alive(self, key: str, up: bool) -> None:
+        who = keys.parse_alive(key)
+        if who:
+            (self.alive.add if up else self.alive.discard)(who)
+
+    def _on_progress(self, key: str, payload: bytes) -> None:
+        try:
+            self.progress[0] = wire.decode(payload, "progress")["t"]
+        except wire.MessageError:
+            pass
+
+    def _on_start(self, key: str, payload: bytes) -> None:
+        try:
+            m = wire.decode_ctl(payload, "start")
+        except wire.MessageError:
+            return
+        self.start.update(epoch=m["epoch"], time_scale=m["time_scale"])
+
+    def world_time(self) -> float | None:
+        """The run's world time now (None before the world's start)."""
+        if not self.start:
+            return None
+        return (time.time() - self.start["epoch"]) * self.start["time_scale"]
+
+
+class FaultRunner:
+    """Carries out ``[[faults]]`` on real processes at their world times: SIGKILL (and a
+    new process of the same command for a restart), SIGSTOP/SIGCONT, the router closed and
+    opened again.  A cut is the link emulation's (zswarm/links.py), nothing to do here.
+    Every action is logged with the world time it was taken at (summary.json
+    ``fault_actions``)."""
+
+    def __init__(self, la: Launch, router: _Router, faults: tuple[Fault, ...], say: Callable[[str], None]) -> None:
+        self.la, self.router, self.say = la, router, say
+        self.todo: list[tuple[float, int, str, Fault]] = []
+        for n, f in enumerate(faults):
+            if f.kind == "kill":
+                self.todo.append((f.at, n, "kill", f))
+                if f.restart_at is not None:
+                    self.todo.append((f.restart_at, n, "restart", f))
+            elif f.kind == "stop":
+                self.todo += [(f.at, n, "stop", f), (f.end, n, "cont", f)]
+            elif f.kind == "router":
+                self.todo += [(f.at, n, "router_down", f), (f.end, n, "router_up", f)]
+        self.todo.sort(key=lambda a: (a[0], a[1]))
+        self.restarts: dict[int, int] = {}
+
+    def wait(self, most: float) -> float:
+        """How long the launcher may sleep before the next action (at most ``most``)."""
+        t = self.router.world_time()
+        if not self.todo or t is None:
+            return most
+        return max(0.0, min(most, (self.todo[0][0] - t) / self.router.start["time_scale"]))
+
+    def poll(self) -> None:
+        t = self.router.world_time()
+        while self.todo and t is not None and self.todo[0][0] <= t:
+            t_plan, _, action, f = self.todo.pop(0)
+            self._do(action, f)
+            t = self.router.world_time() if self.router.start else t
+            self.la.fault_log.append({"action": action, "planned_at": t_plan, "taken_at": None if t is None else round(t, 4), "what": f.describe()})
+
+    def finish(self) -> None:
+        """The run ended: what is left undone is logged as not taken (a router is opened again)."""
+        for t_plan, _, action, f in self.todo:
+            if action == "router_up":
+                self._do(action, f)
+            self.la.fault_log.append({"action": action, "planned_at": t_plan, "taken_at": None, "what": f.describe(), "note": "after the run's end"})
+        self.todo.clear()
+
+    def _do(self, action: str, f: Fault) -> None:
+        la = self.la
+        if action == "router_down":
+            self.say(f"zswarm run: fault: router down ({f.describe()})")
+            self.router.close()
+            return
+        if action == "router_up":
+            self.router.open()
+            self.say("zswarm run: fault: router up again")
+            return
+        assert f.agent is not None
+        c = la.child("agent", f.agent)
+        if action == "restart":
+            n = self.restarts[f.agent] = self.restarts.get(f.agent, 0) + 1
+            self.say(f"zswarm run: fault: agent {f.agent} restarted")
+            old = next(x for x in reversed(la.children) if x.role == "agent" and x.ident == f.agent)
+            la.spawn(f"agent-{f.agent}", "agent", f.agent, old.cmd, log_name=f"agent-{f.agent}.restart{n}")
+            la.write_processes(la.endpoint, la.run_id)
+            return
+        if c is None or c.proc.poll() is not None:
+            self.say(f"zswarm run: fault: agent {f.agent} is not running; {action} skipped")
+            return
+        sig = {"kill": signal.SIGKILL, "stop": signal.SIGSTOP, "cont": signal.SIGCONT}[action]
+        self.say(f"zswarm run: fault: {action} agent {f.agent} (pid {c.proc.pid})")
+        if action == "kill":
+            c.replaced = True
+            c.name = f"{c.name}~killed{self.restarts.get(f.agent, 0) + 1}"
+        os.kill(c.proc.pid, sig)
 
 
 def run(
@@ -151,81 +301,62 @@ def run(
     common = ["--run-id", run_id, "--seed", str(seed), "--connect", endpoint]
     py = sys.executable
     ok_start = False
+    router = _Router(endpoint, run_id)
     try:
-        with ZenohBus(zenoh_config("router", listen=[endpoint])) as bus:
-            alive: set[tuple[str, int]] = set()
-            progress = [0.0]
-
-            def on_alive(key: str, up: bool) -> None:
-                who = keys.parse_alive(key)
-                if who:
-                    (alive.add if up else alive.discard)(who)
-
-            def on_progress(key: str, payload: bytes) -> None:
-                try:
-                    progress[0] = wire.decode(payload, "progress")["t"]
-                except wire.MessageError:
-                    pass
-
-            bus.watch_alive(keys.alive_all(run_id), on_alive)
-            bus.subscribe(keys.ctl(run_id, "progress"), on_progress)
-            say(f"zswarm run: {sc.name}: router on {endpoint}, results in {out}")
-            live_args = [] if live is None else ["--live", f"{live[0]}:{live[1]}"]
-            la.spawn("recorder", "recorder", 0, [py, "-m", "zswarm", "record", topology, "--out", str(out), "--no-report", *live_args, *common])
-            if live is not None:
-                say(f"zswarm run: live view on ws://{live[0]}:{live[1]} (Foxglove or Lichtblick: open connection, Foxglove WebSocket)")
-            for i in sc.ids:
-                la.spawn(f"agent-{i}", "agent", i, [py, "-m", "agent", "--topology", topology, "--id", str(i), *common])
-            la.spawn(
-                "world",
-                "world",
-                0,
-                [py, "-m", "world", "--topology", topology, "--duration", str(duration), "--time-scale", str(time_scale), "--wait-for-recorder", *common],
-            )
-            (out / "processes.json").write_text(
-                json.dumps(
-                    {
-                        "router": {"pid": os.getpid(), "endpoint": endpoint},
-                        "run_id": run_id,
-                        "children": [{"name": c.name, "role": c.role, "id": c.ident, "pid": c.proc.pid} for c in la.children],
-                    },
-                    indent=2,
+        router.open()
+        alive, progress = router.alive, router.progress
+        say(f"zswarm run: {sc.name}: router on {endpoint}, results in {out}")
+        live_args = [] if live is None else ["--live", f"{live[0]}:{live[1]}"]
+        la.spawn("recorder", "recorder", 0, [py, "-m", "zswarm", "record", topology, "--out", str(out), "--no-report", *live_args, *common])
+        if live is not None:
+            say(f"zswarm run: live view on ws://{live[0]}:{live[1]} (Foxglove or Lichtblick: open connection, Foxglove WebSocket)")
+        for i in sc.ids:
+            la.spawn(f"agent-{i}", "agent", i, [py, "-m", "agent", "--topology", topology, "--id", str(i), *common])
+        la.spawn(
+            "world",
+            "world",
+            0,
+            [py, "-m", "world", "--topology", topology, "--duration", str(duration), "--time-scale", str(time_scale), "--wait-for-recorder", *common],
+        )
+        la.write_processes(endpoint, run_id)
+        need = {(c.role, c.ident) for c in la.children}
+        deadline = time.monotonic() + startup_timeout
+        while not need <= alive:
+            dead = [c.name for c in la.children if c.proc.poll() is not None]
+            if dead or interrupted.is_set() or time.monotonic() > deadline:
+                why = (
+                    f"exited during start-up: {', '.join(dead)}"
+                    if dead
+                    else ("interrupted" if interrupted.is_set() else f"not alive after {startup_timeout:.0f} s: {sorted(need - alive)}")
                 )
-            )
-            need = {(c.role, c.ident) for c in la.children}
-            deadline = time.monotonic() + startup_timeout
-            while not need <= alive:
-                dead = [c.name for c in la.children if c.proc.poll() is not None]
-                if dead or interrupted.is_set() or time.monotonic() > deadline:
-                    why = (
-                        f"exited during start-up: {', '.join(dead)}"
-                        if dead
-                        else ("interrupted" if interrupted.is_set() else f"not alive after {startup_timeout:.0f} s: {sorted(need - alive)}")
-                    )
-                    say(f"zswarm run: {why} (logs in {out / 'logs'})")
-                    la.stop_all(graceful=False)
-                    return 1
-                time.sleep(0.05)
-            ok_start = True
-            say(f"zswarm run: {len(la.children)} processes alive; running {duration:g} s of world time at time scale {time_scale:g}")
-            world = next(c for c in la.children if c.role == "world")
-            last_print = 0.0
-            tty = sys.stderr.isatty()
-            while world.proc.poll() is None and not interrupted.is_set():
-                time.sleep(0.1)
-                now = time.monotonic()
-                if not quiet and (tty or now - last_print > 5.0):
-                    n_alive = sum(1 for r, _ in alive if r == "agent")
-                    line = f"t = {progress[0]:6.1f} / {duration:g} s   agents alive: {n_alive}/{len(sc.ids)}"
-                    print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
-                    last_print = now
-            if tty and not quiet:
-                print(file=sys.stderr)
-            if interrupted.is_set():
-                say("zswarm run: interrupted, stopping every process")
-            la.stop_all(graceful=not interrupted.is_set())
+                say(f"zswarm run: {why} (logs in {out / 'logs'})")
+                la.stop_all(graceful=False)
+                return 1
+            time.sleep(0.05)
+        ok_start = True
+        say(f"zswarm run: {len(la.children)} processes alive; running {duration:g} s of world time at time scale {time_scale:g}")
+        world = next(c for c in la.children if c.role == "world")
+        faults = FaultRunner(la, router, sc.faults, say)
+        last_print = 0.0
+        tty = sys.stderr.isatty()
+        while world.proc.poll() is None and not interrupted.is_set():
+            time.sleep(faults.wait(0.1))
+            faults.poll()
+            now = time.monotonic()
+            if not quiet and (tty or now - last_print > 5.0):
+                n_alive = sum(1 for r, _ in alive if r == "agent")
+                line = f"t = {progress[0]:6.1f} / {duration:g} s   agents alive: {n_alive}/{len(sc.ids)}"
+                print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+                last_print = now
+        if tty and not quiet:
+            print(file=sys.stderr)
+        if interrupted.is_set():
+            say("zswarm run: interrupted, stopping every process")
+        faults.finish()
+        la.stop_all(graceful=not interrupted.is_set())
     finally:
         la.reap()
+        router.close()
         on_signals.close()
     if not ok_start:
         return 1
@@ -243,6 +374,8 @@ def run(
         return 1
     summary["exit_codes"] = codes
     summary["interrupted"] = interrupted.is_set()
+    if la.fault_log:
+        summary["fault_actions"] = la.fault_log
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(report.table(summary))
     print(f"results: {out}")

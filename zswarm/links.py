@@ -26,7 +26,9 @@ from __future__ import annotations
 
 import math
 import zlib
+from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -46,10 +48,11 @@ class LinkSpec:
     ge_p_bg: float = 1.0
     ge_loss_good: float = 0.0
     ge_loss_bad: float = 1.0
+    cuts: tuple[tuple[float, float], ...] = ()  # [start, end) intervals (s, receiver's clock) that lose everything: [[faults]] kind "cut"
 
     @property
     def active(self) -> bool:
-        return self.delay_ms > 0 or self.jitter_ms > 0 or self.drop > 0 or self.ge_p_gb > 0
+        return self.delay_ms > 0 or self.jitter_ms > 0 or self.drop > 0 or self.ge_p_gb > 0 or bool(self.cuts)
 
     @property
     def stationary_loss(self) -> float:
@@ -86,7 +89,7 @@ def link_seed(seed: int, name: str) -> list[int]:
 class LinkModel:
     """Decides, message by message, loss and release time on one link."""
 
-    __slots__ = ("spec", "name", "rng", "bad", "last_release", "offered", "dropped", "delays")
+    __slots__ = ("spec", "name", "rng", "bad", "last_release", "offered", "dropped", "delays", "cut")
 
     def __init__(self, spec: LinkSpec, name: str, seed: int) -> None:
         self.spec = spec
@@ -96,6 +99,7 @@ class LinkModel:
         self.last_release = -math.inf
         self.offered = 0
         self.dropped = 0
+        self.cut = 0  # lost to a cut (a fault), not to the model
         self.delays: list[float] = []  # applied delays, s (release − arrival)
 
     def admit(self, t_arrival: float) -> float | None:
@@ -115,6 +119,10 @@ class LinkModel:
         if lost:
             self.dropped += 1
             return None
+        # A cut after the model's draws: outside its interval the link decides exactly as without it.
+        if s.cuts and any(a <= t_arrival < b for a, b in s.cuts):
+            self.cut += 1
+            return None
         d = s.delay_ms
         if s.jitter_ms > 0:
             if s.jitter == "normal":
@@ -130,7 +138,85 @@ class LinkModel:
 
     def counters(self) -> dict[str, float | int]:
         d: dict[str, float | int] = {"offered": self.offered, "link_dropped": self.dropped}
+        if self.spec.cuts:
+            d["link_cut"] = self.cut
         if self.delays:
             q = np.percentile(np.array(self.delays), [50, 99])
             d["applied_delay_p50_ms"], d["applied_delay_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
+        return d
+
+
+# Messages in a row behind the newest one of an incarnation after which the newest is taken
+# for a stray (links are FIFO, so the sender's own stream never goes back): its sequence
+# resumes from them.  One message with seq 2**53 − 1 used to pin a link for the rest of the run.
+RESYNC = 8
+
+
+class LinkCounter:
+    """Counts what arrives on one link and decides which message is the newest.
+
+    Loss is inferred from sequence-number gaps within each incarnation of the
+    sender (``inc``: a restarted process numbers from 0 again under a new one,
+    and is followed at once, counted in ``restarts``).  Also keeps the last 2000
+    latencies (receiver's clock at arrival minus the sender's send stamp):
+    meaningful when the clocks share a base, as they do for processes on one
+    host with no configured offset or drift.
+    """
+
+    __slots__ = ("delivered", "dropped", "max_seq", "reordered", "latency", "inc", "restarts", "resyncs", "_behind", "_before")
+
+    def __init__(self) -> None:
+        self.delivered = 0
+        self.dropped = 0  # sequence numbers skipped within an incarnation, less those that came late
+        self.max_seq = -1
+        self.reordered = 0
+        self.latency: deque[float] = deque(maxlen=2000)
+        self.inc: int | None = None
+        self.restarts = 0
+        self.resyncs = 0
+        self._behind = 0  # messages in a row behind max_seq
+        self._before = (-1, 0)  # (max_seq, dropped) before the newest message
+
+    def see(self, seq: int, inc: int, latency: float) -> bool:
+        """Count one message; True when it is the newest of its link (store it)."""
+        self.delivered += 1
+        self.latency.append(latency)
+        if inc != self.inc:
+            # The sender restarted: messages 0..seq-1 of its new incarnation were lost.  The
+            # first message a receiver sees starts its count (a receiver that started, or
+            # restarted, late did not lose what was sent before it listened).
+            self.restarts += self.inc is not None
+            self.max_seq = -1 if self.inc is not None else seq - 1
+            self.inc = inc
+        elif seq <= self.max_seq:
+            self._behind += 1
+            if self._behind < RESYNC:
+                self.reordered += 1
+                if seq < self.max_seq:
+                    self.dropped = max(0, self.dropped - 1)  # counted lost when the gap opened
+                return False
+            # RESYNC in a row behind: the newest was a stray.  Count as if it had never come:
+            # the gap from the message before it to these (RESYNC of them) is what was lost.
+            self.resyncs += 1
+            self.reordered -= RESYNC - 1
+            before, dropped = self._before
+            self.dropped = dropped + max(0, seq - before - RESYNC)
+            self.max_seq = seq
+            self._behind = 0
+            return True
+        self._before = (self.max_seq, self.dropped)
+        self.dropped += seq - self.max_seq - 1
+        self.max_seq = seq
+        self._behind = 0
+        return True
+
+    def as_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"delivered": self.delivered, "dropped": self.dropped, "reordered": self.reordered}
+        if self.restarts:
+            d["restarts"] = self.restarts
+        if self.resyncs:
+            d["resyncs"] = self.resyncs
+        if self.latency:
+            q = np.percentile(np.array(self.latency), [50, 99])
+            d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
         return d

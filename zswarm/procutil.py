@@ -112,6 +112,46 @@ class SignalEvent:
         self._thread.join(1.0)
 
 
+PARENT_ENV = "ZSWARM_PARENT_PID"  # set by a launcher for its children: see die_with_parent
+
+
+def die_with_parent() -> None:
+    """End this process (SIGTERM: its own clean stop) when the launcher that started it dies,
+    however it dies.
+
+    A launcher that was SIGKILLed left its children running (their own sessions, so no
+    terminal signal reaches them): the world to the end of its duration, processes still
+    starting for up to 120 s.  The launcher names itself in ``ZSWARM_PARENT_PID``; the child
+    asks the kernel for SIGTERM on its parent's death (``PR_SET_PDEATHSIG``, Linux) and then
+    checks that parent is still the one it was started by (it may have died before the ask).
+    Without the variable (a process started by hand) nothing changes.
+    """
+    want = os.environ.pop(PARENT_ENV, None)
+    if want is None or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    PR_SET_PDEATHSIG = 1
+    if ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+        logging.getLogger("zswarm").warning("prctl(PR_SET_PDEATHSIG) failed: errno %d", ctypes.get_errno())
+    if str(os.getppid()) != want:
+        print(f"{os.path.basename(sys.argv[0])}: the launcher (pid {want}) is gone; exiting", file=sys.stderr)
+        os._exit(1)
+
+
+def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
+    """The environment of a child this process launches (see :func:`die_with_parent`)."""
+    return dict(os.environ if env is None else env, **{PARENT_ENV: str(os.getpid())})
+
+
+def incarnation() -> int:
+    """This process's incarnation (wire.py's ``inc``): its start time in µs since the epoch,
+    under 2**53 until the year 2255, new for every (re)start of a process."""
+    import time
+
+    return time.time_ns() // 1000
+
+
 def warm_up() -> None:
     """Pay a process's one-time costs before its run starts, not in the middle of it.
 

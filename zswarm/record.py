@@ -77,6 +77,13 @@ MALFORMED_SCHEMA = object_schema(
 )
 
 
+def run_streams(sc: Scenario) -> frozenset[str]:
+    """Every stream a run of ``sc`` publishes (the recorder's channels)."""
+    per_agent = [f"{kind}/{i}" for i in sc.ids for kind in ("sense", "est", "cmd", "stats/agent")]
+    edges = [f"edge/{s}/{i}" for s, i in sc.edges]
+    return frozenset(["truth", "ctl/start", "ctl/stop", "ctl/progress", "stats/world/0", *per_agent, *edges])
+
+
 def _dumps(obj: Any) -> bytes:
     return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
 
@@ -116,6 +123,7 @@ class ViewerOut:
         if live is not None:
             self.server = foxglove.start_server(name=server_name, host=live[0], port=live[1], context=self.ctx)
         self.views = Views(self.ctx, self.log_json, scenario)
+        self._streams = None if scenario is None else run_streams(scenario)
 
     @property
     def live_port(self) -> int | None:
@@ -129,6 +137,9 @@ class ViewerOut:
         try:
             if expect is None:
                 raise wire.MessageError("not a zswarm stream")
+            if self._streams is not None and stream not in self._streams:
+                # A channel per key would be made for it: 20 000 junk keys, 20 000 channels.
+                raise wire.MessageError("not a stream of this run's scenario")
             m = decode(payload, expect)
         except wire.MessageError as exc:
             self.malformed += 1

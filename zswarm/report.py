@@ -32,9 +32,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import msgpack
 import numpy as np
 
-from zswarm import report_formation, report_sync, so3, wire
+from zswarm import report_faults, report_formation, report_sync, so3, wire
 from zswarm.record import ALIVE_CHANNEL, decode, ensure_recording, read, unpack
 from zswarm.scenario import Scenario
 
@@ -61,10 +62,13 @@ class Recording:
     agent_jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (agent, t, ζ before, ζ after)
     extra: dict[int, list[tuple[float, dict[str, Any]]]] = field(default_factory=dict)  # agent -> (t, named values)
     truth_tau: np.ndarray | None = None  # (T, n, 3): the torques the plant applied (rigid bodies)
+    stats_by_inc: dict[tuple[str, int, int], dict[str, Any]] = field(default_factory=dict)  # (role, src, incarnation): its last stats
+    envelopes: dict[str, list[tuple[float, int, int]]] = field(default_factory=dict)  # stream -> (t, inc, seq) per message, when asked
 
 
-def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
-    """Decode a recording file, or the messages of an in-memory recording."""
+def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool = False) -> Recording:
+    """Decode a recording file, or the messages of an in-memory recording; with ``envelopes``,
+    also every message's ``(t, inc, seq)`` per stream (the loss a fault caused)."""
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
     xi: dict[int, list[tuple[float, float]]] = defaultdict(list)
@@ -78,13 +82,21 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
     counts: dict[str, int] = defaultdict(int)
     streams: dict[str, int] = defaultdict(int)
     malformed = 0
+    env: dict[str, list[tuple[float, int, int]]] = defaultdict(list)
+    by_inc: dict[tuple[str, int, int], dict[str, Any]] = {}
     for topic, payload, _t in read(path) if isinstance(path, (str, Path)) else path:
         counts[topic.split("/")[0]] += 1
         streams[topic] += 1
         if topic == ALIVE_CHANNEL:
-            alive.append(unpack(payload))
+            alive.append({**unpack(payload), "log_t": _t})
             continue
         kind = topic.split("/")[0]
+        if envelopes and kind != "events":
+            try:
+                e = payload if isinstance(payload, dict) else msgpack.unpackb(payload, raw=False, strict_map_key=False)
+                env[topic].append((float(e["t"]), int(e["inc"]), int(e["seq"])))
+            except Exception:  # noqa: BLE001, S112 - malformed: counted where it is decoded
+                pass
         if kind not in ("truth", "est", "stats", "ctl"):
             continue
         try:
@@ -109,6 +121,9 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
             # Keep the final stats if any, else the newest.
             if prev is None or not prev.get("final") or m["counters"].get("final"):
                 stats[(role, m["src"])] = {**m["counters"], "t": m["t"], "seq": m["seq"]}
+            prev = by_inc.get((role, m["src"], m["inc"]))
+            if prev is None or not prev.get("final") or m["counters"].get("final"):
+                by_inc[(role, m["src"], m["inc"])] = {**m["counters"], "t": m["t"], "seq": m["seq"]}
         elif m["type"] == "start":
             start = m
         elif m["type"] == "stop":
@@ -136,6 +151,8 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]]) -> Recording:
         agent_jumps=sorted(agent_jumps, key=lambda j: (j[1], j[0])),
         extra={i: sorted(v, key=lambda e: e[0]) for i, v in sorted(extra.items())},
         truth_tau=np.array([m["tau"] for m in truth]) if all("tau" in m for m in truth) else None,
+        stats_by_inc=by_inc,
+        envelopes=dict(env),
     )
 
 
@@ -465,17 +482,21 @@ def completeness(sc: Scenario, rec: Recording, not_recorded: Sequence[str] = ())
         for link, n in world.get("sent", {}).items():
             expected[f"sense/{link.split('->')[1]}"] = int(n)
     for a in sc.agents:
-        st = rec.stats.get(("agent", a.id))
-        if st is None:
+        # Every incarnation of the agent (a restarted one starts its counts again): the sum.
+        incs = [st for (r, i, _), st in rec.stats_by_inc.items() if r == "agent" and i == a.id] or ([rec.stats[("agent", a.id)]] if ("agent", a.id) in rec.stats else [])
+        if not incs:
             exact = False
             continue
-        exact = exact and bool(st.get("final"))
-        expected[f"est/{a.id}"] = int(st.get("steps", 0))
-        for link, n in st.get("sent", {}).items():
-            src, dst = link.split("->")
-            expected[f"cmd/{src}" if dst == "world" else f"edge/{src}/{dst}"] = int(n)
-    for (role, src), st in rec.stats.items():
-        expected[f"stats/{role}/{src}"] = int(st.get("seq", -1)) + 1
+        exact = exact and all(bool(st.get("final")) for st in incs)
+        expected[f"est/{a.id}"] = sum(int(st.get("steps", 0)) for st in incs)
+        for st in incs:
+            for link, n in st.get("sent", {}).items():
+                src, dst = link.split("->")
+                k = f"cmd/{src}" if dst == "world" else f"edge/{src}/{dst}"
+                expected[k] = expected.get(k, 0) + int(n)
+    for (role, src, _inc), st in rec.stats_by_inc.items() or {(r, s, 0): st for (r, s), st in rec.stats.items()}.items():
+        k = f"stats/{role}/{src}"
+        expected[k] = expected.get(k, 0) + int(st.get("seq", -1)) + 1
     left_out = {p.rstrip("/") for p in not_recorded}  # channel kinds: "sense", "edge", "cmd"
     expected = {k: v for k, v in expected.items() if k.split("/", 1)[0] not in left_out}
     missing = {k: n - rec.streams.get(k, 0) for k, n in sorted(expected.items()) if n > rec.streams.get(k, 0)}
@@ -551,8 +572,9 @@ def write_errors_csv(path: Path, errs: dict[int, np.ndarray]) -> None:
             w.writerow([f"{t:.6f}", i, f"{ea:.6e}", f"{ep:.6e}", f"{ed:.6e}"])
 
 
-def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray]) -> None:
-    """Individual and average error norms, like thesis figures 3.4–3.7."""
+def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], rec: Recording | None = None) -> None:
+    """Individual and average error norms, like thesis figures 3.4–3.7; the faults and the
+    agents' liveliness changes marked (report_faults.mark)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -578,6 +600,7 @@ def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray]) -> None:
         ax2.set_xlabel("t (s)")
         for ax in (ax1, ax2):
             ax.grid(True, alpha=0.3)
+            report_faults.mark(ax, sc, rec)
         fig.tight_layout()
         fig.savefig(out / f"{name}.png", dpi=110)
         plt.close(fig)
@@ -599,12 +622,15 @@ def make_report(
     """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
     write errors.csv, summary.json and plots; return the summary.  ``not_recorded``:
     channel prefixes the recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean)."""
-    rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages)
+    rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults))
     errs = errors(rec)
     sync = report_sync.is_sync(sc)
     sm = report_sync.sync_metrics(sc, rec) if sync else None
     tm = tree_metrics(sc, rec) if sc.info.graph == "tree" and not sync else None
     summary = summarize(sc, rec, errs, engine, duration, time_scale, seed, exit_codes, tm, thresholds, sm, not_recorded)
+    if sc.faults:
+        t_grid, att, _pos = mean_error_series(sc, errs, tm, duration)
+        summary["faults"] = report_faults.summary(sc, rec, engine, t_grid, att, summary["convergence"]["measure"] + " (attitude)")
     write_errors_csv(out_dir / "errors.csv", errs)
     if tm is not None:
         write_edges_csv(out_dir / "edges.csv", sc, tm, rec)
@@ -620,9 +646,9 @@ def make_report(
             report_sync.plot(out_dir / "plots", sc, sm, rec)
         elif fm is not None:
             report_formation.plot(out_dir / "plots", sc, fm)
-            plot(out_dir / "plots", sc, errs)
+            plot(out_dir / "plots", sc, errs, rec)
         elif tm is None:
-            plot(out_dir / "plots", sc, errs)
+            plot(out_dir / "plots", sc, errs, rec)
         else:
             plot_tree(out_dir / "plots", sc, tm, rec)
     return summary

@@ -154,6 +154,46 @@ class AgentSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class Fault:
+    """One ``[[faults]]`` entry (or ``--fault``): something that goes wrong at world time ``at``.
+
+    ``kill``: SIGKILL agent ``agent``; with ``restart_at``, start it again then (a new
+    incarnation, from the scenario's initial estimate).  ``stop``: SIGSTOP agent ``agent``
+    (a hung process), SIGCONT ``duration`` s later.  ``router``: the router goes down for
+    ``duration`` s (``zswarm run`` only: ``sim`` has none).  ``cut``: link ``link``
+    ("j->i", "world->i", "i->world") loses every message for ``duration`` s (link
+    emulation, both engines).
+    """
+
+    kind: str
+    at: float
+    agent: int | None = None
+    restart_at: float | None = None
+    duration: float = 0.0
+    link: str | None = None
+
+    @property
+    def end(self) -> float:
+        """When it is over (the restart, the SIGCONT, the router or link back); inf: never."""
+        if self.kind == "kill":
+            return math.inf if self.restart_at is None else self.restart_at
+        return self.at + self.duration
+
+    def describe(self) -> str:
+        if self.kind == "kill":
+            return f"agent {self.agent} killed at {self.at:g} s" + ("" if self.restart_at is None else f", restarted at {self.restart_at:g} s")
+        if self.kind == "stop":
+            return f"agent {self.agent} stopped (SIGSTOP) at {self.at:g} s for {self.duration:g} s"
+        if self.kind == "router":
+            return f"router down at {self.at:g} s for {self.duration:g} s"
+        return f"link {self.link} cut at {self.at:g} s for {self.duration:g} s"
+
+
+FAULT_KINDS = ("kill", "stop", "router", "cut")
+_FAULT_FIELDS = {"kill": {"agent", "restart_at"}, "stop": {"agent", "duration"}, "router": {"duration"}, "cut": {"link", "duration"}}
+
+
+@dataclass(frozen=True, slots=True)
 class Scenario:
     path: str
     name: str
@@ -189,6 +229,7 @@ class Scenario:
     module: ModuleType | None = field(default=None, repr=False)  # the algorithm (zswarm.algorithm interface)
     leader_module: ModuleType | None = field(default=None, repr=False)  # what agents with role "leader" run
     module_dir: str | None = None  # a directory the algorithm's module was found in (beside the scenario file)
+    faults: tuple[Fault, ...] = ()  # [[faults]] and --fault, in time order
 
     def module_for(self, role: str) -> ModuleType:
         """The algorithm module an agent of ``role`` runs."""
@@ -210,15 +251,23 @@ class Scenario:
     def link_spec(self, name: str) -> LinkSpec:
         """The model of link ``name`` ("world->3", "1->3", "3->world")."""
         if name in self.link_overrides:
-            return self.link_overrides[name]
-        if name.endswith("->world"):
-            return self.command_links
-        return self.sensor_links if name.startswith("world->") else self.links
+            spec = self.link_overrides[name]
+        elif name.endswith("->world"):
+            spec = self.command_links
+        else:
+            spec = self.sensor_links if name.startswith("world->") else self.links
+        cuts = tuple((f.at, f.end) for f in self.faults if f.kind == "cut" and f.link == name)
+        return replace(spec, cuts=cuts) if cuts else spec
 
     @property
     def links_active(self) -> bool:
         """Some agent-side link (sensors, edges) is emulated (the command links are the world's)."""
-        return self.links.active or self.sensor_links.active or any(s.active for n, s in self.link_overrides.items() if not n.endswith("->world"))
+        return (
+            self.links.active
+            or self.sensor_links.active
+            or any(s.active for n, s in self.link_overrides.items() if not n.endswith("->world"))
+            or any(f.kind == "cut" and not str(f.link).endswith("->world") for f in self.faults)
+        )
 
     @property
     def info(self) -> AlgorithmSpec:
@@ -479,17 +528,27 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     With ``overrides``, the scenario's ``text`` is the TOML of the result (what
     a results folder stores as ``scenario.toml``).
     """
-    c = _Ctx(path, {o.field: o.flag for o in overrides})
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: TOML syntax: {exc}") from None
     if overrides:
+        placed = []
         for o in overrides:
-            _apply(doc, o)
+            if o.keys == APPEND_FAULT:  # --fault: one more [[faults]] entry, named by its index
+                faults = doc.setdefault("faults", [])
+                if not isinstance(faults, list):
+                    raise ScenarioError(f"{path}: faults: must be an array of tables ([[faults]])")
+                o = replace(o, field=f"faults[{len(faults)}]", keys=("faults", len(faults)))
+                faults.append(o.value)
+            else:
+                _apply(doc, o)
+            placed.append(o)
+        overrides = placed
         text = render(doc, path, overrides)
+    c = _Ctx(path, {o.field: o.flag for o in overrides})
 
-    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents"}, {"scenario", "algorithm", "agents"})
+    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents", "faults"}, {"scenario", "algorithm", "agents"})
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
     name = c.string(sc["name"], "scenario.name")
     description = c.string(sc.get("description", ""), "scenario.description")
@@ -619,11 +678,9 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
 
-    links, sensor_links, command_links, link_overrides = _links(
-        c,
-        doc.get("links", {}),
-        {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors} | ({f"{a.id}->world" for a in agents} if info.command else set()),
-    )
+    link_names = {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors} | ({f"{a.id}->world" for a in agents} if info.command else set())
+    links, sensor_links, command_links, link_overrides = _links(c, doc.get("links", {}), link_names)
+    faults = _faults(c, doc.get("faults", []), duration, {a.id for a in agents}, link_names)
 
     return Scenario(
         path=path,
@@ -659,7 +716,77 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         module=module,
         leader_module=leader_module,
         module_dir=module_dir,
+        faults=faults,
     )
+
+
+def _faults(c: _Ctx, d: Any, duration: float, ids: set[int], link_names: set[str]) -> tuple[Fault, ...]:
+    """``[[faults]]``: each checked alone (its kind's fields, inside the run, of an agent or
+    a link of the scenario), then against the others (one fault at a time per agent, link,
+    and for the router)."""
+    if not isinstance(d, list):
+        raise c.err("faults", "must be an array of tables ([[faults]])", d)
+    out: list[tuple[Fault, str]] = []
+    for n, raw in enumerate(d):
+        f = f"faults[{n}]"
+        if not isinstance(raw, dict):
+            raise c.err(f, "must be a table", raw)
+        kind = c.string(raw.get("kind"), f"{f}.kind") if "kind" in raw else None
+        if kind not in FAULT_KINDS:
+            raise c.err(f"{f}.kind", f"must be one of {', '.join(FAULT_KINDS)}", kind) if kind is not None else c.err(f"{f}.kind", "missing")
+        extra = _FAULT_FIELDS[kind]
+        t = c.table(raw, f, {"kind", "at"} | extra, {"kind", "at"} | (extra - {"restart_at"}))
+        at = c.num(t["at"], f"{f}.at", nonneg=True)
+        if at >= duration:
+            raise c.err(f"{f}.at", f"must be within the run (< scenario.duration = {duration:g} s)", t["at"])
+        agent = restart_at = link = None
+        dur = 0.0
+        if "agent" in t:
+            agent = c.integer(t["agent"], f"{f}.agent")
+            if agent not in ids:
+                raise c.err(f"{f}.agent", f"no such agent (ids: {sorted(ids)})", agent)
+        if "restart_at" in t:
+            restart_at = c.num(t["restart_at"], f"{f}.restart_at")
+            if not at < restart_at < duration:
+                raise c.err(f"{f}.restart_at", f"must be after at = {at:g} s and before the end ({duration:g} s)", t["restart_at"])
+        if "duration" in t:
+            dur = c.num(t["duration"], f"{f}.duration", nonneg=kind == "router", positive=kind != "router")
+        if "link" in t:
+            link = c.string(t["link"], f"{f}.link")
+            if link not in link_names:
+                raise c.err(f"{f}.link", f"not a link of this scenario (e.g. {', '.join(sorted(link_names)[:4])})", link)
+        fault = Fault(kind, at, agent, restart_at, dur, link)
+        # An agent dead to the end may not be stopped or killed again, and so on: one at a time.
+        who = ("agent", agent) if agent is not None else ("link", link) if link is not None else ("router", 0)
+        for other, g in out:
+            same = ("agent", other.agent) if other.agent is not None else ("link", other.link) if other.link is not None else ("router", 0)
+            if same == who and fault.at <= other.end and other.at <= fault.end:
+                raise c.err(f, f"overlaps {g} ({other.describe()}): one fault at a time per {who[0]}")
+        out.append((fault, f))
+    return tuple(sorted((f for f, _ in out), key=lambda f: f.at))
+
+
+APPEND_FAULT: tuple[str | int, ...] = ("faults", -1)  # an Override's keys: append to [[faults]]
+
+
+def fault_override(text: str, flag: str = "--fault") -> Override:
+    """``--fault KIND,FIELD=VALUE,...`` as an override that appends a ``[[faults]]`` entry."""
+    return Override(f"{flag} {text}", "faults[+]", APPEND_FAULT, parse_fault(text, flag))
+
+
+def parse_fault(text: str, flag: str = "--fault") -> dict[str, Any]:
+    """``--fault KIND,FIELD=VALUE,...`` (e.g. ``kill,agent=5,at=10,restart_at=15``) as the
+    table of a ``[[faults]]`` entry (checked with the rest of the scenario)."""
+    kind, *rest = [p.strip() for p in text.split(",")]
+    if not kind or "=" in kind:
+        raise ScenarioError(f"{flag} {text}: expected KIND,FIELD=VALUE,... (e.g. kill,agent=5,at=10,restart_at=15; kinds: {', '.join(FAULT_KINDS)})")
+    table: dict[str, Any] = {"kind": kind}
+    for p in rest:
+        k, eq, v = p.partition("=")
+        if not eq or not k.strip():
+            raise ScenarioError(f"{flag} {text}: {p!r}: expected FIELD=VALUE")
+        table[k.strip()] = parse_value(v.strip())
+    return table
 
 
 _LINK_FIELDS = ("delay_ms", "jitter_ms", "jitter", "reorder", "drop", "ge_p_gb", "ge_p_bg", "ge_loss_good", "ge_loss_bad")

@@ -21,6 +21,23 @@ from zswarm.scenario import Scenario
 LEAN_SKIP = ("sense/", "edge/", "cmd/")
 
 
+def fault_events(scenario: Scenario, kill: dict[int, float] | None = None) -> list[tuple[float, int, str, int]]:
+    """The scenario's faults as ``sim`` carries them out, in time order: ``(t, order, action,
+    agent)``.  A router fault has no meaning in one process (no router): left out (the
+    report says so); a cut is the link emulation's (zswarm/links.py)."""
+    ev: list[tuple[float, int, str, int]] = []
+    for n, f in enumerate(scenario.faults):
+        if f.kind == "kill" and f.agent is not None:
+            ev.append((f.at, n, "kill", f.agent))
+            if f.restart_at is not None:
+                ev.append((f.restart_at, n, "restart", f.agent))
+        elif f.kind == "stop" and f.agent is not None:
+            ev += [(f.at, n, "stop", f.agent), (f.end, n, "cont", f.agent)]
+    for i, tk in (kill or {}).items():
+        ev.append((tk, -1, "legacy_kill", i))
+    return sorted(ev)
+
+
 def simulate(
     scenario: Scenario,
     out_dir: Path,
@@ -54,47 +71,74 @@ def simulate(
         scenario=scenario,
     )
     world = World(scenario, bus, run, seed, now=lambda: t_now[0])
-    agents = {i: AgentNode(scenario, i, bus, run, seed, now=lambda: t_now[0]) for i in scenario.ids}
+    # Each agent on a session of its own: a kill closes it (its subscriptions and token go,
+    # as with a killed process's Zenoh session); a restart is a new session and node.
+    sessions = {i: bus.session() for i in scenario.ids}
+    agents = {i: AgentNode(scenario, i, sessions[i], run, seed, now=lambda: t_now[0]) for i in scenario.ids}
     ctl_start = bus.publisher(keys.ctl(run, "start"))
     ctl_stop = bus.publisher(keys.ctl(run, "stop"))
     bus.declare_token(keys.alive(run, "world", 0))
     for i in agents:
-        bus.declare_token(keys.alive(run, "agent", i))
+        sessions[i].declare_token(keys.alive(run, "agent", i))
     ctl_start.put(wire.encode("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run))
 
-    # (time, priority, id): world samples have priority 0, agent ticks 1.
-    queue: list[tuple[float, int, int]] = [(world.next_time(), 0, 0)]
+    # (time, priority, id, generation): world samples have priority 0, agent ticks 1; a
+    # restarted agent's ticks carry its new generation (its old ones are dropped).
+    queue: list[tuple[float, int, int, int]] = [(world.next_time(), 0, 0, 0)]
+    gen = dict.fromkeys(agents, 0)
     for i, a in agents.items():
-        queue.append((a.clock.first_tick(0.0), 1, i))
+        queue.append((a.clock.first_tick(0.0), 1, i, 0))
     heapq.heapify(queue)
-    kill = dict(kill or {})
+    events = fault_events(scenario, kill)
+    stopped: dict[int, float] = {}  # agent -> world time of its SIGCONT
     next_flush = 1.0
     next_stats = {i: 1.0 for i in agents}
     while queue:
-        t, prio, who = heapq.heappop(queue)
+        t, prio, who, g = heapq.heappop(queue)
         if t > duration + 1e-9:
             break
-        for i, tk in list(kill.items()):
-            if tk <= t:
-                bus.undeclare_token(keys.alive(run, "agent", i))
-                agents[i].publish_stats(tk)
-                del kill[i]
-                agents.pop(i)
+        while events and events[0][0] <= t:
+            te, _, action, i = events.pop(0)
+            t_now[0] = te
+            if action in ("kill", "legacy_kill") and i in agents:
+                sessions[i].close()
+                if action == "legacy_kill":
+                    agents[i].publish_stats(te)  # kill=: a last word (a fault's SIGKILL has none)
+                del agents[i]
+                stopped.pop(i, None)
+            elif action == "restart":
+                gen[i] += 1
+                sessions[i] = bus.session()
+                a = agents[i] = AgentNode(scenario, i, sessions[i], run, seed, now=lambda: t_now[0], inc=gen[i])
+                sessions[i].declare_token(keys.alive(run, "agent", i))
+                heapq.heappush(queue, (a.clock.first_tick(te), 1, i, gen[i]))
+                next_stats[i] = te + 1.0
+            elif action == "stop":
+                stopped[i] = te
+            elif action == "cont":
+                stopped.pop(i, None)
         t_now[0] = t
         if prio == 0:
             world.sample()
             if world.k % max(1, round(scenario.sensor_rate)) == 0:
                 world.publish_stats(t)
-            heapq.heappush(queue, (world.next_time(), 0, 0))
-        elif who in agents:
+            heapq.heappush(queue, (world.next_time(), 0, 0, 0))
+        elif who in agents and g == gen[who]:
             a = agents[who]
+            if who in stopped:
+                # SIGSTOPped: nothing runs; arrivals wait in its inbox.  The tick is taken at
+                # the SIGCONT, late, and catches up as a late tick of a real process does.
+                cont = next(te for te, _, act, j in events if act == "cont" and j == who)
+                a.missed += max(0, int((cont - t) * a.spec.clock.rate))
+                heapq.heappush(queue, (cont, 1, who, g))
+                continue
             a.tick(t)
             if t >= next_stats[who]:
                 a.publish_stats(t)
                 next_stats[who] += 1.0
             tn, missed = a.clock.next_tick(t)
             a.missed += missed
-            heapq.heappush(queue, (tn, 1, who))
+            heapq.heappush(queue, (tn, 1, who, g))
         if t >= next_flush:
             recorder.flush()
             next_flush += 1.0

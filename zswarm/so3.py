@@ -169,6 +169,20 @@ def is_rotation(R: Mat3, tol: float = 1e-9) -> bool:
     )
 
 
+def rotations_ok(M: NDArray[np.float64], tol: float) -> bool:
+    """True when every 3x3 matrix of the stack ``M`` (..., 3, 3) is a rotation within ``tol``:
+    each entry of ``R^T R − I`` and ``det R − 1`` at most ``tol`` in magnitude (entries finite)."""
+    M = np.asarray(M).reshape(-1, 3, 3)
+    if not M.shape[0]:
+        return True
+    E = np.matmul(M.transpose(0, 2, 1), M) - _EYE
+    a, b, c = M[:, 0, 0], M[:, 0, 1], M[:, 0, 2]
+    d, e, f = M[:, 1, 0], M[:, 1, 1], M[:, 1, 2]
+    g, h, i = M[:, 2, 0], M[:, 2, 1], M[:, 2, 2]
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return bool(np.abs(E).max() <= tol) and bool(np.abs(det - 1.0).max() <= tol)
+
+
 def geodesic_interp(R0: Mat3, R1: Mat3, s: float) -> Mat3:
     """Point at fraction ``s`` of the geodesic from ``R0`` to ``R1`` (``R0 exp(s log(R0^T R1))``)."""
     return R0 @ exp(s * log(R0.T @ R1))

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import report
+from zswarm import procutil, report
 from zswarm.scenario import Override, Scenario, ScenarioError, load, parse_field, parse_override
 
 COLUMNS_RESULT = (
@@ -365,7 +365,7 @@ def run_sweep(
                     shutil.rmtree(folder)  # a run cut short by an interruption starts over
                 folder.mkdir(parents=True)
                 log = open(folder / "log.txt", "wb")  # noqa: SIM115 - the child owns it; closed when reaped
-                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration, keep_recordings), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration, keep_recordings), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=procutil.child_env())
                 log.close()
                 running[job.run_id] = (job, proc, time.monotonic(), folder)
             time.sleep(0.05)

@@ -1,8 +1,9 @@
 """Message types on the wire: msgpack maps, validated on decode.
 
 Every message is a map with ``v`` (schema version), ``type``, ``src``
-(sender id), ``seq`` (per-key sequence number) and ``t`` (world time of the
-content, s) plus type-specific fields.  Arrays travel as ``[shape, bytes]``
+(sender id), ``seq`` (per-key sequence number), ``inc`` (the sender process's
+incarnation: a restarted process numbers its messages from 0 again under a new
+one) and ``t`` (world time of the content, s) plus type-specific fields.  Arrays travel as ``[shape, bytes]``
 with raw little-endian float64 data.  :func:`decode` checks everything and
 raises :class:`MessageError` (never anything else) on a malformed message.
 """
@@ -16,11 +17,25 @@ from typing import Any, Literal, TypeGuard
 import msgpack
 import numpy as np
 
-VERSION = 2  # 2: edge messages carry the fields their algorithm declares (open schema)
+from zswarm.so3 import rotations_ok
+
+VERSION = 3  # 2: edge messages carry the fields their algorithm declares (open schema); 3: inc, bounds
 
 
 class MessageError(ValueError):
     """A message that is not a valid zswarm message."""
+
+
+# Bounds on every field: a message that decodes but carries a value no experiment can
+# produce is malformed, not something for an agent's math to choke on (a gyro of 1e200
+# killed an agent in so3.exp).
+MAX_ABS = 1e12  # any number: the largest legitimate one is the start's epoch (1.8e9 s); products of 25 stay finite
+MAX_SEQ = 1 << 53  # seq and inc are in [0, 2**53): integers JSON (and so the viewers) carry exactly
+MAX_ID = (1 << 31) - 1  # src and agent ids are in [0, 2**31)
+MAX_IDS = 4096  # entries of a map keyed by agent or edge id, of truth's ids, of a jump list
+ROT_TOL = 1e-6  # |R^T R − I| and |det R − 1|, per entry, of every rotation (see _check_semantic)
+UNIT_TOL = 1e-6  # | |b| − 1 | of every bearing
+MAX_STR = 4096
 
 
 # field kinds: "int", "float", "str", (shape,) for float64 arrays,
@@ -55,7 +70,7 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "progress": {"duration": "float"},
 }
 _F8 = np.dtype("<f8")
-ENVELOPE = ("v", "type", "src", "seq", "t")
+ENVELOPE = ("v", "type", "src", "seq", "inc", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
 OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
 # Types whose other keys are named values (a finite number or a float64 array), at most
@@ -71,10 +86,10 @@ def _arr(a: np.ndarray) -> list[Any]:
     return [list(a.shape), a.tobytes()]
 
 
-def encode(mtype: str, src: int, seq: int, t: float, **fields: Any) -> bytes:
-    """Encode a message of type ``mtype``; arrays may be numpy arrays."""
+def encode(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> bytes:
+    """Encode a message of type ``mtype`` from incarnation ``inc`` of ``src``; arrays may be numpy arrays."""
     schema = SCHEMAS[mtype]
-    m: dict[str, Any] = {"v": VERSION, "type": mtype, "src": src, "seq": seq, "t": float(t)}
+    m: dict[str, Any] = {"v": VERSION, "type": mtype, "src": src, "seq": seq, "inc": inc, "t": float(t)}
     for k, v in fields.items():
         kind = schema.get(k, "value" if mtype in OPEN else None)
         if kind is None:
@@ -110,8 +125,7 @@ def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
     fast = _FAST.get(shape)
     if fast is not None and type(v) is list and len(v) == 2 and v[0] == fast[0] and type(v[1]) is bytes and len(v[1]) == fast[1]:
         a = np.frombuffer(v[1], dtype="<f8").reshape(shape)
-        if not all(map(math.isfinite, a.ravel().tolist())):
-            raise MessageError(f"{fld}: non-finite values")
+        _check_values(a.ravel().tolist(), fld)
         return a
     if not (type(v) in (list, tuple) and len(v) == 2 and type(v[1]) is bytes and type(v[0]) in (list, tuple)):
         raise MessageError(f"{fld}: expected [shape, bytes]")
@@ -128,17 +142,27 @@ def _dec_arr(v: Any, shape: tuple[int, ...], fld: str) -> np.ndarray:
     if len(v[1]) != 8 * n:
         raise MessageError(f"{fld}: {len(v[1])} bytes for shape {shp}")
     a = np.frombuffer(v[1], dtype="<f8").reshape(shp)
-    # Plain-Python check for the small arrays that are most messages (≈10x faster than np.isfinite there).
-    if not (all(map(math.isfinite, a.ravel().tolist())) if n <= 32 else bool(np.isfinite(a).all())):
-        raise MessageError(f"{fld}: non-finite values")
+    # Plain-Python check for the small arrays that are most messages (≈10x faster than numpy there).
+    if n <= 32:
+        _check_values(a.ravel().tolist(), fld)
+    elif n and not np.abs(a).max() <= MAX_ABS:  # False for NaN too
+        raise MessageError(f"{fld}: {'non-finite values' if not np.isfinite(a).all() else f'values beyond ±{MAX_ABS:g}'}")
     return a
+
+
+def _check_values(xs: list[float], fld: str) -> None:
+    """Every number of ``xs`` finite and within ±MAX_ABS (raises MessageError)."""
+    if not all(map(math.isfinite, xs)):
+        raise MessageError(f"{fld}: non-finite values")
+    if xs and (max(xs) > MAX_ABS or min(xs) < -MAX_ABS):
+        raise MessageError(f"{fld}: values beyond ±{MAX_ABS:g}")
 
 
 def _dec_value(v: Any, k: str) -> float | np.ndarray:
     """A named value (see OPEN): a finite number, or a float64 array of at most 4 dimensions."""
     if type(v) is float or type(v) is int:
-        if not math.isfinite(v):
-            raise MessageError(f"{k}: non-finite value")
+        if not _finite(v):
+            raise MessageError(f"{k}: expected a finite number within ±{MAX_ABS:g}")
         return float(v)
     if not (type(v) is list and len(v) == 2 and type(v[0]) is list and len(v[0]) <= 4):
         raise MessageError(f"{k}: expected a number or [shape, bytes]")
@@ -155,7 +179,12 @@ def _fields(v: Any, k: str) -> dict[str, float | np.ndarray]:
 
 
 def _finite(x: Any) -> TypeGuard[int | float]:
-    return not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x)
+    """A number (not a bool), finite and within ±MAX_ABS."""
+    return not isinstance(x, bool) and isinstance(x, (int, float)) and -MAX_ABS <= x <= MAX_ABS
+
+
+def _id(j: Any) -> bool:
+    return type(j) is int and 0 <= j <= MAX_ID
 
 
 def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
@@ -170,8 +199,8 @@ def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
         what = "vector" if kind == "vecmap" else "3x3 matrix"
 
         def arrmap(v: Any, k: str) -> dict[int, np.ndarray]:
-            if type(v) is not dict or not all(type(j) is int for j in v):
-                raise MessageError(f"{k}: expected a map of int to {what}")
+            if type(v) is not dict or len(v) > MAX_IDS or not all(map(_id, v)):
+                raise MessageError(f"{k}: expected a map of at most {MAX_IDS} ids to {what}")
             d = {}
             for j, x in v.items():
                 try:
@@ -184,18 +213,16 @@ def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
     if kind == "floatmap":
 
         def floatmap(v: Any, k: str) -> dict[int, float]:
-            if not isinstance(v, dict) or not all(isinstance(j, int) and _finite(x) for j, x in v.items()):
-                raise MessageError(f"{k}: expected a map of int to finite number")
+            if type(v) is not dict or len(v) > MAX_IDS or not all(_id(j) and _finite(x) for j, x in v.items()):
+                raise MessageError(f"{k}: expected a map of at most {MAX_IDS} ids to finite numbers")
             return {j: float(x) for j, x in v.items()}
 
         return floatmap
     if kind == "jumps":
 
         def jumps(v: Any, k: str) -> list[tuple[int, float, float, float]]:
-            if not isinstance(v, list) or not all(
-                isinstance(e, list) and len(e) == 4 and isinstance(e[0], int) and not isinstance(e[0], bool) and all(_finite(x) for x in e[1:]) for e in v
-            ):
-                raise MessageError(f"{k}: expected a list of [edge, t, xi_before, xi_after]")
+            if type(v) is not list or len(v) > MAX_IDS or not all(type(e) is list and len(e) == 4 and _id(e[0]) and all(_finite(x) for x in e[1:]) for e in v):
+                raise MessageError(f"{k}: expected a list of at most {MAX_IDS} [edge, t, xi_before, xi_after]")
             return [(e[0], float(e[1]), float(e[2]), float(e[3])) for e in v]
 
         return jumps
@@ -203,7 +230,7 @@ def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
 
         def flt(v: Any, k: str) -> float:
             if not _finite(v):
-                raise MessageError(f"{k}: expected a finite number")
+                raise MessageError(f"{k}: expected a finite number within ±{MAX_ABS:g}")
             return float(v)
 
         return flt
@@ -218,16 +245,16 @@ def _kind_handler(kind: Any) -> Callable[[Any, str], Any]:
     if kind == "str":
 
         def string(v: Any, k: str) -> str:
-            if not isinstance(v, str):
-                raise MessageError(f"{k}: expected a string")
+            if type(v) is not str or len(v) > MAX_STR:
+                raise MessageError(f"{k}: expected a string of at most {MAX_STR} characters")
             return v
 
         return string
     if kind == "intlist":
 
         def intlist(v: Any, k: str) -> list[int]:
-            if not isinstance(v, list) or not all(type(x) is int for x in v):
-                raise MessageError(f"{k}: expected a list of integers")
+            if type(v) is not list or len(v) > MAX_IDS or not all(map(_id, v)):
+                raise MessageError(f"{k}: expected a list of at most {MAX_IDS} ids")
             return v
 
         return intlist
@@ -264,8 +291,10 @@ def _counters(v: Any, k: str) -> dict[str, Any]:
                 check(y, f"{where}[{i}]", depth + 1)
         elif x is not None and t not in (int, float, str, bool):
             raise MessageError(f"{where}: expected a number, a string, a list or a map")
-        elif t is str and len(x) > 4096:
-            raise MessageError(f"{where}: a string of more than 4096 characters")
+        elif t is str and len(x) > MAX_STR:
+            raise MessageError(f"{where}: a string of more than {MAX_STR} characters")
+        elif t is float and not math.isfinite(x):
+            raise MessageError(f"{where}: not finite")
 
     check(v, k, 0)
     return v
@@ -303,9 +332,14 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
         For anything that is not a well-formed message (of type ``expect``).
     """
     try:
-        m = msgpack.unpackb(payload, raw=False, strict_map_key=False, max_bin_len=1 << 20, max_str_len=1 << 16)
+        # Lengths capped before anything is built: a 3 MB map of 100 000 entries took 0.3 s
+        # to unpack before its first check (no message of a run has a list or map longer
+        # than a process's counters).
+        m = msgpack.unpackb(
+            payload, raw=False, strict_map_key=False, max_bin_len=1 << 20, max_str_len=1 << 16, max_array_len=MAX_COUNTER_ITEMS, max_map_len=MAX_COUNTER_ITEMS
+        )
     except Exception as exc:  # msgpack raises a zoo of types on garbage
-        raise MessageError(f"not msgpack ({type(exc).__name__})") from None
+        raise MessageError(f"not msgpack ({type(exc).__name__}{': ' + str(exc)[:80] if isinstance(exc, ValueError) and 'exceeds' in str(exc) else ''})") from None
     return _validate(m, expect)
 
 
@@ -321,14 +355,16 @@ def _validate(m: Any, expect: str | tuple[str, ...] | None) -> dict[str, Any]:
         raise MessageError(f"unknown type {mtype!r}")
     if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
         raise MessageError(f"type {mtype!r} where {expect!r} was expected")
-    src, seq, t = m.get("src"), m.get("seq"), m.get("t")
-    if type(src) is not int:
-        raise MessageError("src: expected an integer")
-    if type(seq) is not int:
-        raise MessageError("seq: expected an integer")
+    src, seq, inc, t = m.get("src"), m.get("seq"), m.get("inc"), m.get("t")
+    if not _id(src):
+        raise MessageError(f"src: expected an integer in [0, {MAX_ID}]")
+    if type(seq) is not int or not 0 <= seq < MAX_SEQ:
+        raise MessageError("seq: expected an integer in [0, 2**53)")
+    if type(inc) is not int or not 0 <= inc < MAX_SEQ:
+        raise MessageError("inc: expected an integer in [0, 2**53)")
     if not _finite(t):
-        raise MessageError("t: expected a finite number")
-    out: dict[str, Any] = {"type": mtype, "src": src, "seq": seq, "t": float(t)}
+        raise MessageError(f"t: expected a finite number within ±{MAX_ABS:g}")
+    out: dict[str, Any] = {"type": mtype, "src": src, "seq": seq, "inc": inc, "t": float(t)}
     for k, handle, optional in fields:
         v = m.get(k, _MISSING)
         if v is _MISSING:
@@ -344,7 +380,57 @@ def _validate(m: Any, expect: str | tuple[str, ...] | None) -> dict[str, Any]:
             if type(k) is not str or len(k) > 64:
                 raise MessageError("field names must be strings of at most 64 characters")
             out[k] = _dec_value(m[k], k)
+    check = _SEMANTIC.get(mtype)
+    if check is not None:
+        check(out)
     return out
+
+
+# What the fields mean, beyond their shapes: rotations are rotations, bearings unit
+# vectors, the truth's arrays one row per id.  ROT_TOL: attitudes are products of
+# exponentials (never re-orthonormalised); each product adds at most ~1e-16 to
+# |R^T R − I|, so 1e9 of them (a 1e6 s run at 1 kHz) stay under 1e-6 — a matrix beyond
+# that did not come from the world or an observer.
+def _rotations(mats: Any, k: str) -> None:
+    if isinstance(mats, dict):
+        if not mats:
+            return
+        mats = np.stack(list(mats.values()))
+    if not rotations_ok(mats, ROT_TOL):
+        raise MessageError(f"{k}: not a rotation (R^T R = I, det R = 1 within {ROT_TOL:g})")
+
+
+def _unit(vecs: dict[int, np.ndarray], k: str) -> None:
+    if vecs:
+        V = np.stack(list(vecs.values()))
+        if not np.abs(np.einsum("ij,ij->i", V, V) - 1.0).max() <= 2 * UNIT_TOL:  # |b|² − 1 ≈ 2(|b| − 1)
+            raise MessageError(f"{k}: not a unit vector (|b| = 1 within {UNIT_TOL:g})")
+
+
+def _check_sense(m: dict[str, Any]) -> None:
+    for k in ("R", "rel_att"):
+        if k in m:
+            _rotations(m[k], k)
+    if "bearings" in m:
+        _unit(m["bearings"], "bearings")
+
+
+def _check_est(m: dict[str, Any]) -> None:
+    if "R_hat" in m:
+        _rotations(m["R_hat"], "R_hat")
+
+
+def _check_truth(m: dict[str, Any]) -> None:
+    ids = m["ids"]
+    if len(set(ids)) != len(ids):
+        raise MessageError("ids: repeated")
+    for k in ("R", "p", "w", "tau", "u"):
+        if k in m and m[k].shape[0] != len(ids):
+            raise MessageError(f"{k}: {m[k].shape[0]} rows for {len(ids)} ids")
+    _rotations(m["R"], "R")
+
+
+_SEMANTIC: Mapping[str, Callable[[dict[str, Any]], None]] = {"sense": _check_sense, "est": _check_est, "truth": _check_truth}
 
 
 # ---------------------------------------------------------------- the receivers' fast path
@@ -382,7 +468,7 @@ def _fast(mtype: str, plan: list[tuple[str, int, tuple[int, ...], bool]]) -> Cal
     try:
         import msgspec
 
-        fields: list[Any] = [("v", Literal[VERSION]), ("type", Literal[mtype]), ("src", int), ("seq", int), ("t", float)]
+        fields: list[Any] = [("v", Literal[VERSION]), ("type", Literal[mtype]), ("src", int), ("seq", int), ("inc", int), ("t", float)]
         fields += [(n, _fast_type(code, opt), msgspec.UNSET) if opt else (n, _fast_type(code, opt)) for n, code, _, opt in plan]
         struct = msgspec.defstruct(f"_Fast_{mtype}", fields, kw_only=True, forbid_unknown_fields=True)
         dec = msgspec.msgpack.Decoder(struct).decode
@@ -391,13 +477,14 @@ def _fast(mtype: str, plan: list[tuple[str, int, tuple[int, ...], bool]]) -> Cal
     unset = msgspec.UNSET
     steps = [(n, code, list(shape), 8 * math.prod(shape), shape) for n, code, shape, _ in plan]
     isfinite, fsum, frombuffer = math.isfinite, math.fsum, np.frombuffer
+    semantic = _SEMANTIC.get(mtype)
 
     def fast(payload: bytes) -> dict[str, Any]:
         m: Any = dec(payload)
-        t = m.t
-        if not isfinite(t):
+        t, src, seq, inc = m.t, m.src, m.seq, m.inc
+        if not (-MAX_ABS <= t <= MAX_ABS and 0 <= src <= MAX_ID and 0 <= seq < MAX_SEQ and 0 <= inc < MAX_SEQ):
             raise _Slow
-        out: dict[str, Any] = {"type": mtype, "src": m.src, "seq": m.seq, "t": t}
+        out: dict[str, Any] = {"type": mtype, "src": src, "seq": seq, "inc": inc, "t": t}
         bufs: list[bytes] = []
         places: list[tuple[dict[Any, Any], Any, int, tuple[int, ...]]] = []
         for name, code, shp, nb, shape in steps:
@@ -412,27 +499,35 @@ def _fast(mtype: str, plan: list[tuple[str, int, tuple[int, ...], bool]]) -> Cal
                 out[name] = None  # its place in decode's order; the array below
             elif code == _MAP:
                 d: dict[int, Any] = {}
+                if len(x) > MAX_IDS:
+                    raise _Slow
                 for j, y in x.items():
-                    if y[0] != shp or len(y[1]) != nb:
+                    if y[0] != shp or len(y[1]) != nb or not 0 <= j <= MAX_ID:
                         raise _Slow
                     bufs.append(y[1])
                     places.append((d, j, nb >> 3, shape))
                     d[j] = None
                 out[name] = d
             else:
-                if not isfinite(x):
+                if not -MAX_ABS <= x <= MAX_ABS:  # False for NaN
                     raise _Slow
                 out[name] = x
         if bufs:
             # One buffer for every array of the message: read-only views of it, as decode's
             # arrays are read-only.  Finite iff the exact sum is (fsum raises otherwise).
             flat = frombuffer(b"".join(bufs), dtype=_F8)
-            if not isfinite(fsum(flat.tolist())):
+            xs = flat.tolist()
+            if not isfinite(fsum(xs)) or max(xs) > MAX_ABS or min(xs) < -MAX_ABS:
                 raise _Slow
             o = 0
             for d, k, n, shape in places:
                 d[k] = flat[o : o + n].reshape(shape)
                 o += n
+        if semantic is not None:
+            try:
+                semantic(out)
+            except MessageError:
+                raise _Slow from None
         return out
 
     return fast
@@ -617,7 +712,8 @@ def json_schema(mtype: str) -> dict[str, Any]:
         "v": {"const": VERSION},
         "type": {"const": mtype},
         "src": {"type": "integer", "description": "sender id (0: world or control)"},
-        "seq": {"type": "integer", "description": "per-key sequence number"},
+        "seq": {"type": "integer", "minimum": 0, "description": "per-key sequence number"},
+        "inc": {"type": "integer", "minimum": 0, "description": "the sender's incarnation (a restarted process gets a new one)"},
         "t": {"type": "number", "description": "world time of the content, s"},
     }
     props |= {k: _json_kind(kind) for k, kind in SCHEMAS[mtype].items()}

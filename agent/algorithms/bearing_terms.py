@@ -72,7 +72,7 @@ def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple
 # What a §3 agent sends each out-neighbour i: its estimates and its bearing toward i.
 EDGE_FIELDS: Mapping[str, Field] = MappingProxyType(
     {
-        "R_hat": Field((3, 3), doc="R̂_j, the sender's attitude estimate"),
+        "R_hat": Field((3, 3), rotation=True, doc="R̂_j, the sender's attitude estimate"),
         "p_hat": Field((3,), doc="p̂_j, the sender's position estimate"),
         "b": Field((3,), doc="b_ji^j, the sender's body-frame bearing toward the receiver"),
         "vel": Field((3,), optional=True, doc="v_j, the sender's inertial velocity (moving agents)"),

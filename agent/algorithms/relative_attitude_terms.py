@@ -105,7 +105,7 @@ def relative_position_rate(R_hat: Mat3, p_hat: Vec3, edges: tuple[EdgeData, ...]
 # and for the pose observer its bearing toward the receiver and R̂_j v_j^j.
 EDGE_FIELDS: Mapping[str, Field] = MappingProxyType(
     {
-        "R_hat": Field((3, 3), doc="R̂_j"),
+        "R_hat": Field((3, 3), rotation=True, doc="R̂_j"),
         "p_hat": Field((3,), doc="p̂_j (zeros for the attitude observers)"),
         "w": Field((3,), doc="ω_j, the sender's gyro at its tick"),
         "xi": Field((), optional=True, doc="ξ_k, from the head of edge k"),

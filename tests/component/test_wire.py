@@ -3,12 +3,14 @@ import numpy as np
 import pytest
 
 from agent.algorithms import bearing_pose_fixed
-from zswarm import wire
+from zswarm import so3, wire
 
 R = np.eye(3)
+R2 = so3.exp(np.array([0.3, -1.2, 2.0]))
 v = np.array([1.0, 2.0, 3.0])
+u = v / np.linalg.norm(v)  # a bearing
 CASES = {
-    "sense": dict(gyro=v, bearings={1: v, 7: -v}, rel_att={2: R, 4: R.T}, vel=v, vel_body=-v, R=R, p=v),
+    "sense": dict(gyro=v, bearings={1: u, 7: -u}, rel_att={2: R2, 4: R2.T}, vel=v, vel_body=-v, R=R2, p=v),
     "edge": dict(t_local=1.5, R_hat=R, p_hat=v, b=v, w=-v, xi=0.25),
     "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={"sigma": v, "U": 0.5}, xi={1: 0.25, 3: -0.5}, jumps=[(1, 0.01, 0.0, 0.25)], agent_jumps=[(3, 0.01, 0.0, 2.8)]),
     "cmd": dict(t_local=1.5, tau=-v),
@@ -39,7 +41,7 @@ def test_round_trip(mtype):
 
 
 def _raw(**over):
-    m = {"v": 2, "type": "edge", "src": 1, "seq": 0, "t": 0.0, "t_local": 0.0, "R_hat": [[3, 3], R.tobytes()], "p_hat": [[3], v.tobytes()], "b": [[3], v.tobytes()]}
+    m = {"v": wire.VERSION, "type": "edge", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "t_local": 0.0, "R_hat": [[3, 3], R.tobytes()], "p_hat": [[3], v.tobytes()], "b": [[3], v.tobytes()]}
     m.update(over)
     return msgpack.packb({k: x for k, x in m.items() if x is not None}, use_bin_type=True)
 
@@ -114,7 +116,8 @@ def test_json_round_trip_is_exact_and_matches_its_schema(mtype):
     import orjson
 
     rng = np.random.default_rng(7)
-    fields = {k: (v + rng.standard_normal(v.shape) / 3.0 if isinstance(v, np.ndarray) and v.dtype.kind == "f" else v) for k, v in CASES[mtype].items()}
+    # Vectors perturbed (every bit of the mantissa in play); rotations stay rotations.
+    fields = {k: (v + rng.standard_normal(v.shape) / 3.0 if isinstance(v, np.ndarray) and v.shape[-2:] != (3, 3) else v) for k, v in CASES[mtype].items()}
     m = wire.decode(wire.encode(mtype, 3, 42, 1.0 / 3.0, **fields))
     text = orjson.dumps(wire.to_json(m), option=orjson.OPT_NON_STR_KEYS)
     obj = orjson.loads(text)
@@ -219,14 +222,14 @@ def test_fast_decoder_is_decode_on_foreign_and_broken_payloads():
         ok + b"\x00",  # trailing bytes
         ok[:-3],  # cut short
         _raw(),  # an edge message, on the sensor key
-        msgpack.packb({"v": 2, "type": "sense", "src": True, "seq": 0, "t": 0.0}),
-        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": float("nan")}),
-        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "gyro": None}),
-        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "bearings": {True: [[3], v.tobytes()]}}),
-        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "gyro": [[3], v.tobytes()[:16]]}),
-        msgpack.packb({"v": 2, "type": "sense", "src": 0, "seq": 0, "t": 0.0, "gyro": [(3,), v.tobytes(), 1]}),
+        msgpack.packb({"v": 3, "type": "sense", "src": True, "seq": 0, "inc": 0, "t": 0.0}),
+        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": float("nan")}),
+        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": None}),
+        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "bearings": {True: [[3], v.tobytes()]}}),
+        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": [[3], v.tobytes()[:16]]}),
+        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": [(3,), v.tobytes(), 1]}),
         # the same key twice: msgpack keeps the last, and so must the fast path
-        b"\x86" + b"".join(msgpack.packb(x) for x in ("v", 2, "type", "sense", "src", 0, "seq", 0, "t", 0.0, "src", 7)),
+        b"\x87" + b"".join(msgpack.packb(x) for x in ("v", 3, "type", "sense", "src", 0, "seq", 0, "inc", 0, "t", 0.0, "src", 7)),
     ]
     for p in cases:
         _same_outcome("sense", p)
@@ -263,17 +266,17 @@ def test_fast_decoder_property():
         (5, "counters: expected a map"),  # wire-valid before: the report then raised TypeError after the run
         ({1: 2}, "keys must be names"),
         ({"a": {"b": {"c": {"d": {"e": {"f": {"g": 1}}}}}}}, "nested deeper than 6"),
-        ({"a": list(range(30000))}, "more than 20000 entries"),
+        ({"a": list(range(15000)), "b": list(range(15000))}, "more than 20000 entries"),
         ({"a": "x" * 5000}, "more than 4096 characters"),
         ({"a": b"bytes"}, "expected a number, a string, a list or a map"),
     ],
 )
 def test_stats_counters_are_bounded(counters, match):
-    payload = msgpack.packb({"v": 2, "type": "stats", "src": 1, "seq": 0, "t": 0.0, "role": "agent", "counters": counters}, use_bin_type=True)
+    payload = msgpack.packb({"v": 3, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters}, use_bin_type=True)
     with pytest.raises(wire.MessageError, match=match):
         wire.decode(payload)
     with pytest.raises(wire.MessageError, match=match):
-        wire.from_json({"v": 2, "type": "stats", "src": 1, "seq": 0, "t": 0.0, "role": "agent", "counters": counters})
+        wire.from_json({"v": 3, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters})
 
 
 def test_real_counters_pass():
@@ -312,3 +315,88 @@ def test_the_recorder_stops_only_on_the_worlds_stop():
     bus.put("zswarm/t/ctl/stop", wire.encode("stop", 0, 0, 1.0, reason="duration"))
     assert rec.stopped.is_set()
     rec.close()
+
+
+# ---------------------------------------------------------------- bounds on every field (issue 14)
+
+BIG = np.array([1e13, 0.0, 0.0])  # finite, beyond MAX_ABS
+NOT_ROT = np.diag([1.0, 1.0, 1.0 + 1e-5])  # |R^T R − I| = 2e-5 > ROT_TOL
+REFLECT = np.diag([1.0, 1.0, -1.0])  # orthonormal, det −1
+
+
+def _env(**over):
+    """A raw sense message: the envelope and ``over``, as a hostile sender could write it."""
+    m = {"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0}
+    m.update(over)
+    return msgpack.packb({k: x for k, x in m.items() if x is not None}, use_bin_type=True)
+
+
+def _a(x):
+    x = np.asarray(x, dtype=float)
+    return [list(x.shape), x.tobytes()]
+
+
+@pytest.mark.parametrize(
+    "payload, match",
+    [
+        # Each of these decoded before: an agent got a gyro of 1e200 (so3.exp raised and killed
+        # it), a reflection or a scaled matrix as an attitude, a bearing of length 10.
+        (_env(gyro=_a([1e200, 0, 0])), "gyro: values beyond"),
+        (_env(gyro=_a(BIG)), "gyro: values beyond"),
+        (_env(t=1e13), "t: expected a finite number within"),
+        (_env(R=_a(NOT_ROT)), "R: not a rotation"),
+        (_env(R=_a(REFLECT)), "R: not a rotation"),
+        (_env(rel_att={2: _a(np.eye(3)), 5: _a(2 * np.eye(3))}), "rel_att: not a rotation"),
+        (_env(bearings={2: _a([0.0, 0.0, 10.0])}), "bearings: not a unit vector"),
+        (_env(bearings={-1: _a([0.0, 0.0, 1.0])}), "bearings: expected a map of at most 4096 ids"),
+        (_env(rel_pos={j: _a([0.0, 0.0, 1.0]) for j in range(5000)}), "rel_pos: expected a map of at most 4096 ids"),
+        (_env(src=-1), "src: expected an integer in"),
+        (_env(seq=2**63), r"seq: expected an integer in \[0, 2\*\*53\)"),
+        (_env(seq=-5), "seq: expected an integer in"),
+        (_env(inc=None), "inc: expected an integer"),
+        (_env(inc=2**60), "inc: expected an integer"),
+        (_env(type="est", t_local=0.0, R_hat=_a(NOT_ROT)), "R_hat: not a rotation"),
+        (_env(type="est", t_local=0.0, xi={1: 1e300}), "xi: expected a map of at most 4096 ids to finite numbers"),
+        (_env(type="est", t_local=0.0, jumps=[[1, 0.0, 0.0, 1e300]]), "jumps: expected a list"),
+        (_env(type="est", t_local=0.0, extra={"s": 1e300}), "extra.s: expected a finite number within"),
+        (_env(type="edge", t_local=0.0, p_hat=_a(BIG)), "p_hat: values beyond"),
+        (_env(type="edge", t_local=1e300), "t_local: expected a finite number within"),
+        (_env(type="cmd", t_local=0.0, tau=_a(np.full(100, 1e13))), "tau: values beyond"),  # the numpy path (> 32 elements)
+        (_env(type="truth", ids=[1, 2], R=_a([np.eye(3)]), p=_a([[0, 0, 0]] * 2), w=_a([[0, 0, 0]] * 2)), "R: 1 rows for 2 ids"),
+        (_env(type="truth", ids=[1, 1], R=_a([np.eye(3)] * 2), p=_a([[0, 0, 0]] * 2), w=_a([[0, 0, 0]] * 2)), "ids: repeated"),
+        (_env(type="truth", ids=[1], R=_a([REFLECT]), p=_a([[0, 0, 0]]), w=_a([[0, 0, 0]])), "R: not a rotation"),
+        (_env(type="stop", reason="x" * 5000), "reason: expected a string of at most 4096"),
+        (_env(type="stats", role="agent", counters={"x": float("nan")}), r"counters.x: not finite"),
+    ],
+)
+def test_every_field_is_bounded(payload, match):
+    with pytest.raises(wire.MessageError, match=match):
+        wire.decode(payload)
+    if b"sense" in payload:
+        _same_outcome("sense", payload)  # the fast path rejects it too (through decode)
+
+
+def test_wire_bounds_pass_what_the_papers_produce():
+    """The bounds' edges: a rotation off by 1e-7 (beyond anything a run accumulates, see
+    ROT_TOL) and values of 1e12 still decode."""
+    R_ok = np.diag([1.0, 1.0, 1.0 + 1e-7 / 2])  # |R^T R − I| = 1e-7
+    m = wire.decode(_env(R=_a(R_ok), gyro=_a([1e12, -1e12, 0.0]), bearings={7: _a([0.0, 0.6, 0.8])}))
+    assert m["gyro"][0] == 1e12 and set(m["bearings"]) == {7}
+    _same_outcome("sense", _env(R=_a(R_ok), gyro=_a([1e12, -1e12, 0.0])))
+
+
+def test_an_edge_rotation_field_is_checked_by_the_receiver():
+    """Open edge fields: the receiver's declaration says R_hat is a rotation (Field.rotation)."""
+    m = wire.decode(_raw(R_hat=_a(REFLECT)), "edge")
+    with pytest.raises(ValueError, match="'R_hat': not a rotation"):
+        bearing_pose_fixed.SPEC.check_edge(m)
+    bearing_pose_fixed.SPEC.check_edge(wire.decode(_raw(R_hat=_a(R2)), "edge"))
+
+
+def test_lengths_are_capped_before_anything_is_built():
+    """A map of 100 000 entries took 0.3 s to unpack before its first check; msgpack now
+    refuses any list or map longer than a process's counters may be, at its header (the
+    reason names the header's limit, not a check made after building)."""
+    payload = msgpack.packb({"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "bearings": {j: [[3], bytes(24)] for j in range(100_000)}})
+    with pytest.raises(wire.MessageError, match="exceeds max_map_len"):
+        wire.decode(payload)

@@ -122,3 +122,27 @@ def test_a_run_that_cannot_keep_up_says_so(procs, tmp_path):
     assert ov["overloaded"] and ov["reasons"], ov
     assert max(ov["agents_missed_pct"].values()) > ov["threshold_pct"] or ov["world_skipped_pct"] > ov["threshold_pct"]
     assert "OVERLOADED: " in log and ov["reasons"][0] in log
+
+
+@pytest.mark.parametrize("when", ["running", "starting"])
+def test_a_killed_launcher_takes_its_children_with_it(procs, tmp_path, when):
+    """SIGKILL of ``zswarm run`` (no handler runs, nothing is reaped by it): each child gets
+    SIGTERM from the kernel (PR_SET_PDEATHSIG) and stops by itself.  Before, they ran on in
+    their own sessions: the world to the end of its duration, processes still starting for
+    up to 120 s.  The recorder's SIGTERM is its clean stop: the recording stays readable."""
+    out = tmp_path / "out"
+    p = procs.start(zswarm("run", str(TOPO / "thesis-3.2-fixed8.toml"), "--duration", "60", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
+    if when == "running":
+        wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+        time.sleep(1.0)
+    os.kill(p.pid, signal.SIGKILL)
+    p.wait(10)
+    # 20 s: a stop takes the world and agents ≤ 3 s and the recorder ≤ 5 s when the launcher
+    # stops them (launch.stop_all's own deadlines); here each also finds its router gone.
+    wait_for(lambda: not [c for c in kids if pid_alive(c["pid"])], 20, "every child gone after the launcher's SIGKILL")
+    if when == "running":
+        from zswarm.record import ensure_recording
+
+        rec = load_recording(ensure_recording(out, None))  # what `zswarm report DIR` reads
+        assert rec.counts.get("truth", 0) > 0 and rec.counts.get("est", 0) > 0  # what was recorded up to the kill

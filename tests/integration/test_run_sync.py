@@ -36,7 +36,7 @@ NAME = "thesis-5.6-hybrid7"
 def _bad_commands(run: str) -> list[tuple[str, bytes]]:
     """Five commands the world must drop: garbage, a NaN torque, a wrong shape, another
     agent's src on agent 3's key, an agent the scenario does not have."""
-    nan = msgpack.packb({"v": wire.VERSION, "type": "cmd", "src": 3, "seq": 10**6, "t": 1.0, "t_local": 1.0, "tau": [[3], np.array([np.nan, 0.0, 0.0]).tobytes()]})
+    nan = msgpack.packb({"v": wire.VERSION, "type": "cmd", "src": 3, "seq": 10**6, "inc": 0, "t": 1.0, "t_local": 1.0, "tau": [[3], np.array([np.nan, 0.0, 0.0]).tobytes()]})
     return [
         (keys.cmd(run, 2), b"\x93garbage"),
         (keys.cmd(run, 3), nan),

@@ -1,0 +1,119 @@
+"""Fuzzing over Zenoh, with real processes (issue 14): 10⁵ hostile and broken messages at an
+agent, and 10⁵ at a run's world and recorder.  No process crashes, and every message is
+counted by the process it reached: delivered on a link or counted malformed (the agent,
+the world's command links, from their own stats), written or described as malformed
+(the recorder's file).  The MemoryBus counterpart: tests/component/test_fuzz.py."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from tests.conftest import TOPO
+from tests.fuzz_messages import Fuzzer, valid_cmd, valid_for_agent, valid_for_recorder
+from tests.integration.conftest import wait_for, zswarm
+from zswarm import keys, wire
+from zswarm.bus import ZenohBus, zenoh_config
+from zswarm.launch import free_port
+from zswarm.record import ensure_recording, read, run_streams
+from zswarm.scenario import load
+
+pytestmark = pytest.mark.integration
+N = 100_000
+T32, T56 = TOPO / "thesis-3.2-fixed8.toml", TOPO / "thesis-5.6-hybrid7.toml"
+STREAM_TYPES = {"truth": "truth", "sense": "sense", "edge": "edge", "est": "est", "cmd": "cmd", "stats": "stats", "ctl": ("start", "stop", "progress")}
+
+
+def _delivered(c: dict) -> int:
+    return sum(link["delivered"] for link in c["links"].values())
+
+
+def test_fuzz_over_zenoh(procs, tmp_path):
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    procs.start(zswarm("router", "--listen", ep), log=tmp_path / "router.log")
+    sc32, sc56 = load(T32), load(T56)
+    out = tmp_path / "out"
+    alive: set = set()
+    last: dict[str, dict] = {}
+
+    def on_stats(name):
+        def cb(key, payload):
+            last[name] = wire.decode(payload, "stats")["counters"]
+
+        return cb
+
+    with ZenohBus(zenoh_config("client", connect=[ep])) as bus:
+        bus.watch_alive(keys.alive_all("fza"), lambda k, up: (alive.add if up else alive.discard)(keys.parse_alive(k)))
+        bus.watch_alive(keys.alive_all("fzb"), lambda k, up: (alive.add if up else alive.discard)(("b",) + keys.parse_alive(k)))
+        bus.subscribe(keys.stats("fza", "world", 0), on_stats("world"))
+        bus.subscribe(keys.stats("fzb", "agent", 3), on_stats("agent"))
+        # Run A: the world of §5.6 (rigid bodies under cmd/<i>) and a recorder; this test
+        # holds the agents' tokens, so no real command reaches the world.
+        for i in sc56.ids:
+            bus.declare_token(keys.alive("fza", "agent", i))
+        rec = procs.start(zswarm("record", str(T56), "--out", str(out), "--run-id", "fza", "--connect", ep), log=tmp_path / "rec.log")
+        wait_for(lambda: ("recorder", 0) in alive, 60, "recorder alive")
+        world = procs.start([sys.executable, "-m", "world", "--topology", str(T56), "--duration", "600", "--wait-for-recorder", "--run-id", "fza", "--connect", ep], log=tmp_path / "world.log")
+        # Run B: agent 3 of §3.2 alone; this test is its world (a valid start, then only fuzz).
+        agent = procs.start([sys.executable, "-m", "agent", "--topology", str(T32), "--id", "3", "--run-id", "fzb", "--connect", ep], log=tmp_path / "agent.log")
+        wait_for(lambda: ("b", "agent", 3) in alive and "start:" in (tmp_path / "world.log").read_text(), 60, "agent alive, world started")
+        bus.publisher(keys.ctl("fzb", "start"), block=True).put(wire.encode("start", 0, 0, 0.0, epoch=time.time() + 0.2, time_scale=1.0, duration=600.0, seed=1, run="fzb"))
+        wait_for(lambda: "agent" in last, 30, "the agent's first stats")
+
+        # Every message is put on a blocking publisher: none is dropped on the way, so what
+        # each receiver counts must add up to what was sent to it.
+        pubs: dict[str, object] = {}
+
+        def put(key, payload):
+            p = pubs.get(key)
+            if p is None:
+                p = pubs[key] = bus.publisher(key, block=True)
+            p.put(payload)
+
+        rng = np.random.default_rng(11)
+        agent_keys = [keys.sense("fzb", 3), keys.edge("fzb", 1, 3), keys.edge("fzb", 2, 3), keys.edge("fzb", 9, 3), "zswarm/fzb/edge/x/3"]
+        for payload in Fuzzer(12, valid_for_agent(sc32, 3)).messages(N):
+            put(agent_keys[int(rng.integers(0, len(agent_keys)))], payload)
+        # Run A: half on the command keys (the world), all of it recorded.
+        streams = [*(f"cmd/{i}" for i in sc56.ids), "cmd/99", "truth", "sense/3", "est/3", "stats/agent/3", "ctl/progress", "edge/x/y", "nope"]
+        to_world, bad_for_recorder, known = 0, 0, run_streams(sc56)
+        cmd, other = Fuzzer(13, valid_cmd(sc56)).messages(N), Fuzzer(14, valid_for_recorder(sc56)).messages(N)
+        for _ in range(N):
+            stream = streams[int(rng.integers(0, len(streams)))]
+            payload = next(cmd) if stream.startswith("cmd/") else next(other)
+            to_world += stream.startswith("cmd/")
+            put(f"zswarm/fza/{stream}", payload)
+            try:
+                expect = STREAM_TYPES.get(stream.split("/")[0])
+                if expect is None or stream not in known:
+                    raise wire.MessageError("not a stream of the run")
+                wire.decode(payload, expect)
+            except wire.MessageError:
+                bad_for_recorder += 1
+
+        # Each process's stats (every second) say what it has taken; wait until every message is.
+        def counted(name, malformed):
+            c = last.get(name)
+            return c is not None and c[malformed] + _delivered(c) >= (N if name == "agent" else to_world)
+
+        try:
+            wait_for(lambda: counted("agent", "malformed"), 120, "the agent to count every message")
+            wait_for(lambda: counted("world", "commands_malformed"), 120, "the world to count every command")
+        finally:
+            print("agent:", {k: last.get("agent", {}).get(k) for k in ("malformed", "links", "step_failures")}, file=sys.stderr)
+        a, w = last["agent"], last["world"]
+        assert a["malformed"] + _delivered(a) == N and a["malformed"] > N // 2
+        assert w["commands_malformed"] + _delivered(w) == to_world and w["commands_malformed"] > to_world // 2
+        # Nobody crashed: each stops cleanly on SIGINT (exit 0), the recorder on the world's stop.
+        for p in (agent, world):
+            p.send_signal(signal.SIGINT)
+            assert p.wait(30) == 0
+        assert rec.wait(60) == 0
+    got = list(read(ensure_recording(out, sc56)))
+    malformed = [m for s, m, _ in got if s == "events/malformed"]
+    # The recorder's own words for malformed also cover the world's real traffic, all valid.
+    assert len(malformed) == bad_for_recorder, (len(malformed), bad_for_recorder)
