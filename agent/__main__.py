@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     sc = procutil.load_or_exit(args.topology)
     if args.id not in sc.ids:
         procutil.fail_usage(f"--id: no agent {args.id} in {args.topology} (ids: {list(sc.ids)})")
-    conf = procutil.zenoh_conf(args)
+    conf = procutil.zenoh_conf(args, f"agent-{args.id}")
     log = procutil.setup_logging(f"agent-{args.id}")
     run = keys.check_run_id(args.run_id)
     seed = sc.seed if args.seed is None else args.seed

@@ -2,12 +2,14 @@
 
 Prints:
   * raw zenoh-python pub/sub latency (client -> router -> client, 100 Hz, the
-    payload size of a zswarm edge message), p50/p99;
+    payload size of a zswarm edge message), p50/p99, over TCP and over mutual TLS
+    with the router's access control (what `zswarm run --secure` uses);
   * for `zswarm run` of the §3.2 scenario: sensor->agent and agent->neighbour
     latency p50/p99 (receiver's arrival clock minus sender's send stamp; one
     host, clocks without offset or drift), agent step compute time, achieved
     step rates, missed deadlines, and CPU per process (from /proc, over a
-    window in the middle of the run).
+    window in the middle of the run); then the same with --secure (the cost of the
+    authenticated profile).
 
 Usage: python bench/bench_runtime.py [--duration S] [--topology F] [--time-scale X]
 """
@@ -32,7 +34,8 @@ RAW_PUB = r"""
 import sys, time, msgpack, zenoh
 from zswarm.bus import zenoh_config
 ep, n, size = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
-with zenoh.open(zenoh_config("client", connect=[ep])) as s:
+sec = (sys.argv[4], "pub") if len(sys.argv) > 4 else None
+with zenoh.open(zenoh_config("client", connect=[ep], secure=sec)) as s:
     pub = s.declare_publisher("bench/raw", congestion_control=zenoh.CongestionControl.DROP, priority=zenoh.Priority.REAL_TIME)
     time.sleep(1.0)
     pad = b"x" * size
@@ -48,6 +51,7 @@ RAW_SUB = r"""
 import sys, time, json, threading, msgpack, zenoh
 from zswarm.bus import zenoh_config
 ep, n, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+sec = (sys.argv[4], "sub") if len(sys.argv) > 4 else None
 lat = []
 done = threading.Event()
 def cb(sample):
@@ -56,7 +60,7 @@ def cb(sample):
     lat.append(now - m["t"])
     if len(lat) >= n:
         done.set()
-with zenoh.open(zenoh_config("client", connect=[ep])) as s:
+with zenoh.open(zenoh_config("client", connect=[ep], secure=sec)) as s:
     sub = s.declare_subscriber("bench/raw", cb)
     done.wait(n * 0.01 + 30)
     sub.undeclare()
@@ -73,16 +77,38 @@ def cpu_seconds(pid: int) -> float | None:
         return None
 
 
-def raw_zenoh(n: int, size: int) -> np.ndarray:
+def raw_zenoh(n: int, size: int, secure: bool = False) -> np.ndarray:
+    """Latencies of raw pub/sub via a router; ``secure``: mutual TLS, and an access control
+    that lets the publisher put on its key only (as zswarm.secure.acl does per process)."""
+    from zswarm import secure as sec
     from zswarm.bus import ZenohBus, zenoh_config
     from zswarm.launch import free_port
 
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    with tempfile.TemporaryDirectory() as d, ZenohBus(zenoh_config("router", listen=[ep])):
+    ep = f"{'tls' if secure else 'tcp'}/127.0.0.1:{free_port()}"
+    with tempfile.TemporaryDirectory() as d:
+        extra: list[str] = []
+        conf = zenoh_config("router", listen=[ep])
+        if secure:
+            sec.make_certs(Path(d), ["pub", "sub"])
+            rules = [
+                {"id": "read", "permission": "allow", "flows": ["ingress", "egress"], "messages": ["declare_subscriber"], "key_exprs": ["bench/**"]},
+                {"id": "deliver", "permission": "allow", "flows": ["egress"], "messages": ["put"], "key_exprs": ["bench/**"]},
+                {"id": "pub", "permission": "allow", "flows": ["ingress"], "messages": ["put"], "key_exprs": ["bench/raw"]},
+            ]
+            acl = {
+                "enabled": True,
+                "default_permission": "deny",
+                "rules": rules,
+                "subjects": [{"id": "anyone"}, {"id": "pub", "cert_common_names": ["pub"]}],
+                "policies": [{"rules": ["read", "deliver"], "subjects": ["anyone"]}, {"rules": ["pub"], "subjects": ["pub"]}],
+            }
+            conf = zenoh_config("router", listen=[ep], secure=(d, sec.ROUTER), acl=acl)
+            extra = [d]
+        router = ZenohBus(conf)
         out = Path(d) / "lat.json"
         env = dict(os.environ, PYTHONPATH=str(ROOT))
-        sub = subprocess.Popen([sys.executable, "-c", RAW_SUB, ep, str(n), str(out)], env=env)
-        pub = subprocess.Popen([sys.executable, "-c", RAW_PUB, ep, str(n), str(size)], env=env)
+        sub = subprocess.Popen([sys.executable, "-c", RAW_SUB, ep, str(n), str(out), *extra], env=env)
+        pub = subprocess.Popen([sys.executable, "-c", RAW_PUB, ep, str(n), str(size), *extra], env=env)
         try:
             pub.wait(n * 0.01 + 60)
             sub.wait(60)
@@ -91,6 +117,7 @@ def raw_zenoh(n: int, size: int) -> np.ndarray:
                 if p.poll() is None:
                     p.kill()
                     p.wait()
+            router.close()
         return np.array(json.loads(out.read_text()))
 
 
@@ -102,12 +129,21 @@ def main() -> int:
     args = ap.parse_args()
 
     print(f"machine: {os.cpu_count()} cores; python {sys.version.split()[0]}")
-    raw = raw_zenoh(1500, 250)
-    print(f"raw zenoh-python pub/sub via router, 100 Hz, 250 B pad: n={raw.size} p50 {1e3 * np.percentile(raw, 50):.3f} ms  p99 {1e3 * np.percentile(raw, 99):.3f} ms")
+    for secure in (False, True):
+        raw = raw_zenoh(1500, 250, secure)
+        how = "mutual TLS + access control" if secure else "TCP"
+        print(f"raw zenoh-python pub/sub via router, {how}, 100 Hz, 250 B pad: n={raw.size} p50 {1e3 * np.percentile(raw, 50):.3f} ms  p99 {1e3 * np.percentile(raw, 99):.3f} ms")
+    for secure in (False, True):
+        if run_zswarm(args, secure):
+            return 1
+    return 0
 
+
+def run_zswarm(args: argparse.Namespace, secure: bool) -> int:
     with tempfile.TemporaryDirectory() as d:
         out = Path(d) / "run"
         cmd = [sys.executable, "-m", "zswarm", "run", args.topology, "--duration", str(args.duration), "--time-scale", str(args.time_scale), "--out", str(out), "--quiet"]
+        cmd += ["--secure"] if secure else []
         launcher = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             while not (out / "processes.json").exists():
@@ -141,7 +177,7 @@ def main() -> int:
         p99 = [v["latency_p99_ms"] for k, v in links.items() if pred(k) and "latency_p99_ms" in v]
         return f"p50 {np.median(p50):.3f} ms (links: {min(p50):.3f}-{max(p50):.3f})  p99 {np.median(p99):.3f} ms (max {max(p99):.3f})"
 
-    print(f"\nzswarm run {Path(args.topology).name}: {args.duration:g} s at time scale {args.time_scale:g}, {len(s['agents'])} agents")
+    print(f"\nzswarm run {'--secure ' if secure else ''}{Path(args.topology).name}: {args.duration:g} s at time scale {args.time_scale:g}, {len(s['agents'])} agents")
     print(f"  sensor->agent   latency {pct(s['links'], lambda k: k.startswith('world->'))}")
     print(f"  agent->neighbour latency {pct(s['links'], lambda k: not k.startswith('world->'))}")
     comp = [a["compute_mean_us"] for a in s["agents"].values()]

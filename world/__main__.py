@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     procutil.die_with_parent()
     args = parse(argv)
     sc = procutil.load_or_exit(args.topology)
-    conf = procutil.zenoh_conf(args)
+    conf = procutil.zenoh_conf(args, "world")
     log = procutil.setup_logging("world")
     seed = sc.seed if args.seed is None else args.seed
     duration = sc.duration if args.duration is None else args.duration

@@ -170,6 +170,8 @@ def zenoh_config(
     listen: Sequence[str] = (),
     config_file: str | None = None,
     lease_ms: int = 1000,
+    secure: tuple[str, str] | None = None,
+    acl: dict[str, Any] | None = None,
 ) -> Any:
     """A ``zenoh.Config`` for zswarm: no multicast scouting, explicit endpoints, short lease.
 
@@ -198,6 +200,12 @@ def zenoh_config(
     # batches (the maximum) absorb such stalls; DROP still bounds the latency.
     for prio in ("real_time", "data"):
         conf.insert_json5(f"transport/link/tx/queue/size/{prio}", "16")
+    if secure is not None:  # (certificate folder, this process's name): zswarm/secure.py
+        from pathlib import Path
+
+        from zswarm import secure as sec
+
+        sec.apply(conf, Path(secure[0]), secure[1], acl)
     return conf
 
 

@@ -69,6 +69,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     _live_arg(r, "serve the recording's channels on a Foxglove WebSocket server while the run goes on (open it in Foxglove or Lichtblick)")
+    r.add_argument(
+        "--secure",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="DIR",
+        help="mutual TLS and access control: certificates made for the run in DIR (default: the results folder's secure/); each process may publish only its own keys",
+    )
 
     s = sub.add_parser("sim", help="run the same world and agents in one process on a virtual clock")
     _common_run_args(s)
@@ -243,7 +251,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     sc = _load(args)
     _warn(sc)
-    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live)
+    secure = None if args.secure is None else Path(args.secure) if args.secure else True
+    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure)
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
@@ -490,7 +499,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     from zswarm.record import RAW_SUFFIX, Recorder
 
     sc = procutil.load_or_exit(args.topology)
-    conf = procutil.zenoh_conf(args)
+    conf = procutil.zenoh_conf(args, "recorder")
     log = procutil.setup_logging("recorder")
     run = keys.check_run_id(args.run_id)
     out = results_dir(args.out, sc.name)

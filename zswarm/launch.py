@@ -150,15 +150,22 @@ class _Router:
     within about 0.5 s, with their subscriptions and tokens).  It also watches the run:
     liveliness, progress, the world's start."""
 
-    def __init__(self, endpoint: str, run_id: str) -> None:
+    def __init__(self, endpoint: str, run_id: str, certs: Path | None = None, procs: list[tuple[str, int]] | None = None) -> None:
         self.endpoint, self.run_id = endpoint, run_id
+        self.certs, self.procs = certs, procs or []
         self.bus: ZenohBus | None = None
         self.alive: set[tuple[str, int]] = set()
         self.progress = [0.0]
         self.start: dict[str, float] = {}
 
     def open(self) -> None:
-        self.bus = ZenohBus(zenoh_config("router", listen=[self.endpoint]))
+        if self.certs is not None:
+            from zswarm import secure as sec
+
+            conf = zenoh_config("router", listen=[self.endpoint], secure=(str(self.certs), sec.ROUTER), acl=sec.acl(self.run_id, self.procs))
+        else:
+            conf = zenoh_config("router", listen=[self.endpoint])
+        self.bus = ZenohBus(conf)
         self.bus.watch_alive(keys.alive_all(self.run_id), self._on_alive)
         self.bus.subscribe(keys.ctl(self.run_id, "progress"), self._on_progress)
         self.bus.subscribe(keys.ctl(self.run_id, "start"), self._on_start)
@@ -279,6 +286,7 @@ def run(
     quiet: bool = False,
     startup_timeout: float = 60.0,
     live: tuple[str, int] | None = None,
+    secure: Path | bool | None = None,
 ) -> int:
     """Run the scenario over real processes; return the exit code for the CLI."""
     duration = sc.duration if duration is None else duration
@@ -289,7 +297,14 @@ def run(
     (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
     topology = str(out / "scenario.toml")
     run_id = keys.check_run_id(f"r{os.getpid()}-{int(time.time())}")
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    certs: Path | None = None
+    if secure:
+        # Mutual TLS and access control (zswarm/secure.py): a certificate per process, made now.
+        from zswarm import secure as sec
+
+        certs = (out / "secure") if secure is True else Path(secure)
+        sec.make_certs(certs, [sec.name_of("agent", i) for i in sc.ids] + ["world", "recorder"])
+    endpoint = f"{'tls' if certs else 'tcp'}/127.0.0.1:{free_port()}"
     la = Launch(sc, topology, out, duration, time_scale, seed, quiet)
     interrupted = threading.Event()
     on_signals = procutil.SignalEvent(interrupted)
@@ -298,10 +313,10 @@ def run(
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    common = ["--run-id", run_id, "--seed", str(seed), "--connect", endpoint]
+    common = ["--run-id", run_id, "--seed", str(seed), "--connect", endpoint] + (["--secure", str(certs)] if certs else [])
     py = sys.executable
     ok_start = False
-    router = _Router(endpoint, run_id)
+    router = _Router(endpoint, run_id, certs, [("agent", i) for i in sc.ids] + [("world", 0), ("recorder", 0)])
     try:
         router.open()
         alive, progress = router.alive, router.progress

@@ -25,14 +25,24 @@ def add_zenoh_args(p: argparse.ArgumentParser, default_mode: str = "client") -> 
     g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
     g.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config file (endpoints above override it)")
     g.add_argument("--mode", choices=("client", "peer", "router"), default=default_mode, help=f"Zenoh session mode (default {default_mode})")
+    g.add_argument("--secure", metavar="DIR", default=None, help="mutual TLS with this process's certificate from DIR (made by zswarm run --secure; endpoints tls/...)")
 
 
-def zenoh_conf(args: argparse.Namespace) -> Any:
+def zenoh_conf(args: argparse.Namespace, name: str | None = None) -> Any:
+    """The Zenoh config of the flags; ``name``: this process's certificate name (--secure)."""
     from zswarm.bus import zenoh_config
 
     if not args.connect and not args.listen and not args.config and args.mode == "client":
         fail_usage("a client needs --connect ENDPOINT (or --config FILE)")
-    return zenoh_config(args.mode, args.connect, args.listen, args.config)
+    secure = None
+    if getattr(args, "secure", None):
+        if name is None:
+            fail_usage("--secure: this command has no certificate of its own (zswarm run --secure makes them for its processes)")
+        for f in ("ca.pem", f"{name}.pem", f"{name}.key"):
+            if not os.path.isfile(os.path.join(args.secure, f)):
+                fail_usage(f"--secure {args.secure}: {f} is missing (zswarm run --secure makes a run's certificates)")
+        secure = (args.secure, name)
+    return zenoh_config(args.mode, args.connect, args.listen, args.config, secure=secure)
 
 
 def add_run_args(p: argparse.ArgumentParser) -> None:

@@ -1,0 +1,68 @@
+"""The authenticated profile (issue 14): ``zswarm run --secure`` runs every process with
+mutual TLS and the router's access control.  A process that holds a valid certificate
+(agent 4's) but claims to be agent 3 gets nothing delivered; on its own keys it gets
+through (so its silence as agent 3 is the ACL's doing, not a dead connection).  A process
+without a certificate, or with one from another CA, cannot connect."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+
+from tests.conftest import TOPO
+from tests.integration.conftest import wait_for, zswarm
+from zswarm import keys, so3, wire
+from zswarm.bus import zenoh_config
+from zswarm.record import ensure_recording, read
+from zswarm.secure import make_certs
+
+pytestmark = pytest.mark.integration
+T32 = str(TOPO / "thesis-3.2-fixed8.toml")
+SPOOF_INC, OWN_INC = 777, 778
+
+
+def _edge(src: int, seq: int, inc: int) -> bytes:
+    return wire.encode("edge", src, seq, 1.0, inc=inc, t_local=1.0, R_hat=so3.exp(np.array([0.1, 0.2, 0.3])), p_hat=np.zeros(3), b=np.array([0.0, 0.0, 1.0]))
+
+
+def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
+    out = tmp_path / "out"
+    p = procs.start(zswarm("run", T32, "--duration", "10", "--time-scale", "0.5", "--out", str(out), "--quiet", "--secure"), log=tmp_path / "launcher.log")
+    wait_for(lambda: procs.adopt(out), 60, "processes.json")
+    info = json.loads((out / "processes.json").read_text())
+    ep, run = info["router"]["endpoint"], info["run_id"]
+    assert ep.startswith("tls/")
+    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    certs = out / "secure"
+
+    # A stranger: no client certificate (mTLS), or one signed by another CA.
+    other = make_certs(tmp_path / "other", ["agent-3"])
+    for conf in (zenoh_config("client", connect=[ep]), zenoh_config("client", connect=[ep], secure=(str(other), "agent-3"))):
+        conf.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(certs / "ca.pem")))  # it trusts the router
+        conf.insert_json5("connect/timeout_ms", "{router: -1, peer: -1, client: 3000}")
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(conf).close()
+
+    # An insider with agent 4's certificate: as agent 3 on 3->4, and as itself on 4->5.
+    with zenoh.open(zenoh_config("client", connect=[ep], secure=(str(certs), "agent-4"))) as s:
+        spoof, own = s.declare_publisher(keys.edge(run, 3, 4)), s.declare_publisher(keys.edge(run, 4, 5))
+        for k in range(200):
+            spoof.put(_edge(3, 10**6 + k, SPOOF_INC))
+            own.put(_edge(4, 10**6 + k, OWN_INC))
+            time.sleep(0.005)
+    assert p.wait(120) == 0, (tmp_path / "launcher.log").read_text()[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    incs: dict[str, set[int]] = {}
+    for stream, m, _ in read(ensure_recording(out, None)):
+        if stream in ("edge/3/4", "edge/4/5"):
+            e = m if isinstance(m, dict) else msgpack.unpackb(m)
+            incs.setdefault(stream, set()).add(e["inc"])
+    assert SPOOF_INC not in incs["edge/3/4"]  # not one spoofed message reached anyone
+    assert s["links"]["3->4"].get("restarts", 0) == 0 and s["agents"]["4"]["malformed_received"] == 0
+    assert OWN_INC in incs["edge/4/5"] and s["links"]["4->5"]["restarts"] >= 1  # its own key: delivered
+    assert all(c == 0 for c in s["exit_codes"].values())

@@ -1,0 +1,137 @@
+"""The authenticated profile (``zswarm run --secure``): mutual TLS and Zenoh access control.
+
+Every process of a run gets a certificate of its own, signed by a CA made for the run
+(:func:`make_certs`, with the ``cryptography`` package): the common name says who it is
+(``agent-3``, ``world``, ``recorder``; the router is ``router``).  Links are TLS with
+client certificates required (``enable_mtls``): a process without one signed by the
+run's CA cannot connect.  The router's access control (:func:`acl`) lets each process
+put only on its own keys and declare only its own liveliness token — agent i publishes
+``edge/i/*``, ``est/i``, ``cmd/i``, ``stats/agent/i`` and ``alive/agent/i``, the world
+the truth, the sensors, run control and its stats — so a process that claims to be
+agent 3 with another certificate gets nothing delivered.  Everyone may subscribe to the
+run's keys.  Zenoh's own features (TLS links, ACL by certificate common name), no
+home-made authentication.
+"""
+
+from __future__ import annotations
+
+import datetime
+import ipaddress
+import json
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from zswarm import keys
+
+CA = "ca"
+ROUTER = "router"
+VALID_DAYS = 7  # the run's certificates: long enough for a soak, useless after
+
+
+def name_of(role: str, ident: int) -> str:
+    """A process's certificate name (its common name and file stem)."""
+    return f"agent-{ident}" if role == "agent" else role
+
+
+def make_certs(folder: Path, names: Iterable[str]) -> Path:
+    """A CA and one certificate per name (plus the router's) in ``folder``: ``<name>.pem``
+    (certificate) and ``<name>.key`` (its key, mode 0600).  EC P-256; every certificate
+    is valid for localhost and 127.0.0.1, for server and client use."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+    folder.mkdir(parents=True, exist_ok=True)
+    now = datetime.datetime.now(datetime.UTC)
+    start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=VALID_DAYS)
+
+    def write(stem: str, key: Any, cert: Any) -> None:
+        kp = folder / f"{stem}.key"
+        kp.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
+        kp.chmod(0o600)
+        (folder / f"{stem}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+
+    ca_key = ec.generate_private_key(ec.SECP256R1())
+    ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "zswarm run CA")])
+    usage = {k: False for k in ("digital_signature", "content_commitment", "key_encipherment", "data_encipherment", "key_agreement", "key_cert_sign", "crl_sign", "encipher_only", "decipher_only")}
+    ca = (
+        x509.CertificateBuilder()
+        .subject_name(ca_name)
+        .issuer_name(ca_name)
+        .public_key(ca_key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(end)
+        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+        .add_extension(x509.KeyUsage(**(usage | {"digital_signature": True, "key_cert_sign": True, "crl_sign": True})), critical=True)
+        .sign(ca_key, hashes.SHA256())
+    )
+    write(CA, ca_key, ca)
+    for name in [ROUTER, *names]:
+        key = ec.generate_private_key(ec.SECP256R1())
+        cert = (
+            x509.CertificateBuilder()
+            .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
+            .issuer_name(ca_name)
+            .public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(start)
+            .not_valid_after(end)
+            .add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]), critical=False)
+            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False)
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .sign(ca_key, hashes.SHA256())
+        )
+        write(name, key, cert)
+    return folder
+
+
+def tls(folder: Path, name: str, listen: bool) -> dict[str, Any]:
+    """The ``transport/link/tls`` section of process ``name`` (``listen``: the router)."""
+    d: dict[str, Any] = {"root_ca_certificate": str(folder / f"{CA}.pem"), "enable_mtls": True}
+    side = "listen" if listen else "connect"
+    d[f"{side}_private_key"] = str(folder / f"{name}.key")
+    d[f"{side}_certificate"] = str(folder / f"{name}.pem")
+    return d
+
+
+def own_keys(run: str, role: str, ident: int) -> tuple[list[str], list[str]]:
+    """(keys it may put on, liveliness tokens it may declare) for a process of ``run``."""
+    if role == "agent":
+        i = ident
+        puts = [f"{keys.ROOT}/{run}/edge/{i}/*", keys.est(run, i), keys.cmd(run, i), keys.stats(run, "agent", i)]
+    elif role == "world":
+        puts = [keys.truth(run), f"{keys.ROOT}/{run}/sense/*", f"{keys.ROOT}/{run}/ctl/*", keys.stats(run, "world", 0)]
+    else:
+        puts = []
+    return puts, [keys.alive(run, role, ident)]
+
+
+def acl(run: str, procs: Iterable[tuple[str, int]]) -> dict[str, Any]:
+    """The router's ``access_control`` for a run of the processes ``procs`` ((role, id)):
+    deny by default; everyone may subscribe and receive; each may put only its own keys."""
+    prefix = f"{keys.ROOT}/{run}/**"
+    rules: list[dict[str, Any]] = [
+        {"id": "read", "permission": "allow", "flows": ["ingress", "egress"], "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], "key_exprs": [prefix]},
+        {"id": "deliver", "permission": "allow", "flows": ["egress"], "messages": ["put", "liveliness_token"], "key_exprs": [prefix]},
+    ]
+    subjects: list[dict[str, Any]] = [{"id": "anyone"}]
+    policies: list[dict[str, Any]] = [{"rules": ["read", "deliver"], "subjects": ["anyone"]}]
+    for role, ident in procs:
+        name = name_of(role, ident)
+        puts, tokens = own_keys(run, role, ident)
+        own = [{"id": f"put {name}", "permission": "allow", "flows": ["ingress"], "messages": ["put"], "key_exprs": puts}] if puts else []
+        own.append({"id": f"token {name}", "permission": "allow", "flows": ["ingress"], "messages": ["liveliness_token"], "key_exprs": tokens})
+        rules += own
+        subjects.append({"id": name, "cert_common_names": [name]})
+        policies.append({"rules": [r["id"] for r in own], "subjects": [name]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
+
+
+def apply(conf: Any, folder: Path, name: str, router_acl: dict[str, Any] | None = None) -> None:
+    """Put the TLS (and, for the router, access control) sections into a ``zenoh.Config``."""
+    conf.insert_json5("transport/link/tls", json.dumps(tls(folder, name, listen=router_acl is not None)))
+    if router_acl is not None:
+        conf.insert_json5("access_control", json.dumps(router_acl))
