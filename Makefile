@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast bench bench-capacity sim clean
+.PHONY: demo test test-fast bench bench-capacity soak sim clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,10 @@ test-fast: $(STAMP)
 ## make bench: latency, step time, rate and CPU over real processes, beside raw zenoh pub/sub
 bench: $(STAMP)
 	$(PY) bench/bench_runtime.py
+
+## make soak: one hour of zswarm run with every process's RSS sampled each minute (bench/soak.py)
+soak: $(STAMP)
+	$(PY) bench/soak.py
 
 ## make bench-capacity: zswarm run beside a raw zenoh-python swarm at N = 4..24 agents (about 7 minutes)
 bench-capacity: $(STAMP)

@@ -130,7 +130,14 @@ class Fuzzer:
         return self.r.choice(self._huge)
 
     def _make_huge(self, c: int) -> bytes:
-        env = {"v": wire.VERSION, "type": msgpack.unpackb(self.valid(self.rng), raw=False, strict_map_key=False)["type"], "src": 0, "seq": 0, "inc": 0, "t": 0.0}
+        env = {
+            "v": wire.VERSION,
+            "type": msgpack.unpackb(self.valid(self.rng), raw=False, strict_map_key=False)["type"],
+            "src": 0,
+            "seq": 0,
+            "inc": 0,
+            "t": 0.0,
+        }
         if c == 0:  # 100 000 nested one-element arrays (fixarray 0x91), then nil
             return b"\x91" * 100_000 + b"\xc0"
         if c == 1:
@@ -192,7 +199,9 @@ def valid_for_recorder(sc: Any) -> Callable[[np.random.Generator], bytes]:
             return agent(r) if c == 0 else cmd(r)
         if c == 2:
             n = len(ids)
-            return wire.encode("truth", 0, 0, 0.0, ids=ids, R=np.stack([so3.exp(r.standard_normal(3)) for _ in ids]), p=r.standard_normal((n, 3)), w=r.standard_normal((n, 3)))
+            return wire.encode(
+                "truth", 0, 0, 0.0, ids=ids, R=np.stack([so3.exp(r.standard_normal(3)) for _ in ids]), p=r.standard_normal((n, 3)), w=r.standard_normal((n, 3))
+            )
         if c == 3:
             return wire.encode("est", 3, 0, 0.0, t_local=0.0, R_hat=so3.exp(r.standard_normal(3)), p_hat=r.standard_normal(3), xi={1: 0.5})
         if c == 4:

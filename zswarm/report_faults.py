@@ -124,7 +124,10 @@ def summary(sc: Scenario, rec: Recording, engine: str, t: np.ndarray, err: np.nd
                 evs = [e for st in _incarnations(rec, a.id) for e in st.get("neighbor_events", []) if e[0] == f.agent]
                 lost = next((e[1] for e in evs if not e[2] and e[1] >= f.at - 0.05), None)
                 back = next((e[1] for e in evs if e[2] and lost is not None and e[1] >= lost), None)
-                detected[str(a.id)] = {"lost_after_s": None if lost is None else round(lost - f.at, 4), "back_after_end_s": None if back is None or not math.isfinite(f.end) else round(back - f.end, 4)}
+                detected[str(a.id)] = {
+                    "lost_after_s": None if lost is None else round(lost - f.at, 4),
+                    "back_after_end_s": None if back is None or not math.isfinite(f.end) else round(back - f.end, 4),
+                }
             d["detected_by"] = detected
             rate = sc.agent(f.agent).clock.rate
             end = min(f.end, float(rec.truth_t[-1])) if len(rec.truth_t) else f.end

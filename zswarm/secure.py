@@ -55,7 +55,20 @@ def make_certs(folder: Path, names: Iterable[str]) -> Path:
 
     ca_key = ec.generate_private_key(ec.SECP256R1())
     ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "zswarm run CA")])
-    usage = {k: False for k in ("digital_signature", "content_commitment", "key_encipherment", "data_encipherment", "key_agreement", "key_cert_sign", "crl_sign", "encipher_only", "decipher_only")}
+    usage = {
+        k: False
+        for k in (
+            "digital_signature",
+            "content_commitment",
+            "key_encipherment",
+            "data_encipherment",
+            "key_agreement",
+            "key_cert_sign",
+            "crl_sign",
+            "encipher_only",
+            "decipher_only",
+        )
+    }
     ca = (
         x509.CertificateBuilder()
         .subject_name(ca_name)
@@ -114,7 +127,13 @@ def acl(run: str, procs: Iterable[tuple[str, int]]) -> dict[str, Any]:
     deny by default; everyone may subscribe and receive; each may put only its own keys."""
     prefix = f"{keys.ROOT}/{run}/**"
     rules: list[dict[str, Any]] = [
-        {"id": "read", "permission": "allow", "flows": ["ingress", "egress"], "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"], "key_exprs": [prefix]},
+        {
+            "id": "read",
+            "permission": "allow",
+            "flows": ["ingress", "egress"],
+            "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            "key_exprs": [prefix],
+        },
         {"id": "deliver", "permission": "allow", "flows": ["egress"], "messages": ["put", "liveliness_token"], "key_exprs": [prefix]},
     ]
     subjects: list[dict[str, Any]] = [{"id": "anyone"}]

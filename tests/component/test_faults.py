@@ -48,7 +48,13 @@ def test_faults_in_the_file_and_one_at_a_time(tmp_path):
 
 
 def test_the_cli_says_which_fault_is_wrong_and_exits_2(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "zswarm", "sim", str(T32), "--out", str(tmp_path), "--fault", "kill,agent=5,at=-1"], cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "zswarm", "sim", str(T32), "--out", str(tmp_path), "--fault", "kill,agent=5,at=-1"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert r.returncode == 2 and "--fault kill,agent=5,at=-1: faults[0].at: must be >= 0" in r.stderr, r.stderr
 
 
@@ -62,7 +68,7 @@ def killed(tmp_path_factory):
 
 
 def test_a_killed_agent_is_flagged_restarted_and_the_team_reconverges(killed):
-    sc, s, out = killed
+    _sc, s, out = killed
     (f,) = s["faults"]
     assert f["applied"] and f["token"]["lost_at"] == 10.0 and f["token"]["back_at"] == 15.0
     # Agent 6, its out-neighbour, marks it lost and back at the instant sim withdraws and
@@ -88,6 +94,7 @@ def test_a_stopped_agent_catches_up_and_the_router_fault_is_left_to_run(tmp_path
     msgs = simulate(sc, tmp_path, 12.0, sc.seed, record=False)
     s = make_report(tmp_path, sc, "sim", 12.0, 0.0, sc.seed, plots=False, messages=msgs)
     router, cut, stop = s["faults"]
+    assert cut["applied"] and cut["link"] == "1->3"
     assert not router["applied"] and "zswarm run" in router["note"]
     # SIGSTOP for 2 s: 200 ticks not taken on time, caught up at the SIGCONT (steps go on).
     assert stop["steps_missed"] == 200 and s["agents"]["4"]["missed_deadlines"] >= 199

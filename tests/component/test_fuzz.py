@@ -81,7 +81,9 @@ def test_the_recorder_takes_every_message_without_crashing(tmp_path, seed):
     for k, payload in enumerate(fz.messages(N)):
         stream = streams[int(rng.integers(0, len(streams)))]
         bus.put(f"zswarm/f/{stream}", payload)
-        expect = {"truth": "truth", "sense": "sense", "edge": "edge", "est": "est", "cmd": "cmd", "stats": "stats", "ctl": ("start", "stop", "progress")}.get(stream.split("/")[0])
+        expect = {"truth": "truth", "sense": "sense", "edge": "edge", "est": "est", "cmd": "cmd", "stats": "stats", "ctl": ("start", "stop", "progress")}.get(
+            stream.split("/")[0]
+        )
         try:
             if expect is not None and stream in known:  # a junk stream would be a channel of its own
                 wire.decode(payload, expect)

@@ -79,6 +79,35 @@ class Procs:
         return leftovers
 
 
+def _children(pid: int) -> list[int]:
+    """PIDs whose parent is ``pid`` (from /proc), alive (zombies excluded)."""
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                out.append(int(d))
+    return out
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_process_left():
+    """After the integration layer, no process this test session started is left (the
+    per-test ``procs`` fixture checks each launcher's children by PID as well)."""
+    yield
+    left = [p for p in _children(os.getpid()) if pid_alive(p)]
+    for p in left:
+        try:
+            os.kill(p, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not left, f"processes left after the integration tests: {left}"
+
+
 @pytest.fixture
 def procs():
     ps = Procs()

@@ -66,7 +66,7 @@ def test_a_killed_agent_is_flagged_rejoins_and_the_team_reconverges(procs, tmp_p
 
 
 def test_a_router_restart_and_a_hung_agent(procs, tmp_path):
-    s, out, log = _run(procs, tmp_path, 14, "router,at=5,duration=1", "stop,agent=5,at=9,duration=2")
+    s, _out, _log = _run(procs, tmp_path, 14, "router,at=5,duration=1", "stop,agent=5,at=9,duration=2")
     f, hung = s["faults"]
     acts = {a["action"]: a["taken_at"] for a in s["fault_actions"]}
     down = acts["router_up"] - acts["router_down"]

@@ -57,11 +57,18 @@ def test_fuzz_over_zenoh(procs, tmp_path):
             bus.declare_token(keys.alive("fza", "agent", i))
         rec = procs.start(zswarm("record", str(T56), "--out", str(out), "--run-id", "fza", "--connect", ep), log=tmp_path / "rec.log")
         wait_for(lambda: ("recorder", 0) in alive, 60, "recorder alive")
-        world = procs.start([sys.executable, "-m", "world", "--topology", str(T56), "--duration", "600", "--wait-for-recorder", "--run-id", "fza", "--connect", ep], log=tmp_path / "world.log")
+        world = procs.start(
+            [sys.executable, "-m", "world", "--topology", str(T56), "--duration", "600", "--wait-for-recorder", "--run-id", "fza", "--connect", ep],
+            log=tmp_path / "world.log",
+        )
         # Run B: agent 3 of §3.2 alone; this test is its world (a valid start, then only fuzz).
-        agent = procs.start([sys.executable, "-m", "agent", "--topology", str(T32), "--id", "3", "--run-id", "fzb", "--connect", ep], log=tmp_path / "agent.log")
+        agent = procs.start(
+            [sys.executable, "-m", "agent", "--topology", str(T32), "--id", "3", "--run-id", "fzb", "--connect", ep], log=tmp_path / "agent.log"
+        )
         wait_for(lambda: ("b", "agent", 3) in alive and "start:" in (tmp_path / "world.log").read_text(), 60, "agent alive, world started")
-        bus.publisher(keys.ctl("fzb", "start"), block=True).put(wire.encode("start", 0, 0, 0.0, epoch=time.time() + 0.2, time_scale=1.0, duration=600.0, seed=1, run="fzb"))
+        bus.publisher(keys.ctl("fzb", "start"), block=True).put(
+            wire.encode("start", 0, 0, 0.0, epoch=time.time() + 0.2, time_scale=1.0, duration=600.0, seed=1, run="fzb")
+        )
         wait_for(lambda: "agent" in last, 30, "the agent's first stats")
 
         # Every message is put on a blocking publisher: none is dropped on the way, so what
