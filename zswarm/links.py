@@ -150,6 +150,9 @@ class LinkModel:
 # for a stray (links are FIFO, so the sender's own stream never goes back): its sequence
 # resumes from them.  One message with seq 2**53 − 1 used to pin a link for the rest of the run.
 RESYNC = 8
+# ...and only when they are this far behind it: emulated reordering (links.reorder, jitter
+# of a few periods) puts a message behind a handful of others, never a thousand.
+RESYNC_GAP = 1024
 
 
 class LinkCounter:
@@ -190,7 +193,7 @@ class LinkCounter:
             self.inc = inc
         elif seq <= self.max_seq:
             self._behind += 1
-            if self._behind < RESYNC:
+            if self._behind < RESYNC or self.max_seq - seq < RESYNC_GAP:
                 self.reordered += 1
                 if seq < self.max_seq:
                     self.dropped = max(0, self.dropped - 1)  # counted lost when the gap opened

@@ -56,3 +56,12 @@ def test_a_receiver_counts_from_the_first_message_it_sees():
     c = LinkCounter()
     feed(c, [(s, 1) for s in range(3000, 3010)] + [(3012, 1)])
     assert (c.dropped, c.restarts) == (2, 0)
+
+
+def test_reordering_is_not_taken_for_a_stray():
+    """Emulated reordering puts a message ahead of a few older ones: ten of them arriving
+    after it are reorders, not a reason to go back (a resync needs RESYNC_GAP)."""
+    c = LinkCounter()
+    feed(c, [(s, 1) for s in range(100)])
+    assert feed(c, [(111, 1)] + [(s, 1) for s in range(100, 111)]) == [True] + [False] * 11
+    assert (c.resyncs, c.reordered, c.dropped, c.max_seq) == (0, 11, 0, 111)
