@@ -171,16 +171,38 @@ def is_rotation(R: Mat3, tol: float = 1e-9) -> bool:
 
 def rotations_ok(M: NDArray[np.float64], tol: float) -> bool:
     """True when every 3x3 matrix of the stack ``M`` (..., 3, 3) is a rotation within ``tol``:
-    each entry of ``R^T R − I`` and ``det R − 1`` at most ``tol`` in magnitude (entries finite)."""
-    M = np.asarray(M).reshape(-1, 3, 3)
+    each entry of ``R^T R − I`` and ``det R − 1`` at most ``tol`` in magnitude (entries finite).
+
+    One matrix (what most messages carry) in plain Python: 2 µs against 70 µs of numpy's
+    per-call overhead for the stacked form, which was a third of a ``sim`` run's time."""
+    M = np.asarray(M)
+    if M.shape == (3, 3):
+        return _rotation_ok(M.ravel().tolist(), tol)
+    M = M.reshape(-1, 3, 3)
     if not M.shape[0]:
         return True
+    if M.shape[0] <= 8:
+        return all(_rotation_ok(R.ravel().tolist(), tol) for R in M)
     E = np.matmul(M.transpose(0, 2, 1), M) - _EYE
     a, b, c = M[:, 0, 0], M[:, 0, 1], M[:, 0, 2]
     d, e, f = M[:, 1, 0], M[:, 1, 1], M[:, 1, 2]
     g, h, i = M[:, 2, 0], M[:, 2, 1], M[:, 2, 2]
     det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
     return bool(np.abs(E).max() <= tol) and bool(np.abs(det - 1.0).max() <= tol)
+
+
+def _rotation_ok(m: list[float], tol: float) -> bool:
+    """:func:`rotations_ok` of one matrix given row-major as 9 floats (False for NaN)."""
+    a, b, c, d, e, f, g, h, i = m
+    return (
+        abs(a * a + d * d + g * g - 1.0) <= tol
+        and abs(b * b + e * e + h * h - 1.0) <= tol
+        and abs(c * c + f * f + i * i - 1.0) <= tol
+        and abs(a * b + d * e + g * h) <= tol
+        and abs(a * c + d * f + g * i) <= tol
+        and abs(b * c + e * f + h * i) <= tol
+        and abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) - 1.0) <= tol
+    )
 
 
 def geodesic_interp(R0: Mat3, R1: Mat3, s: float) -> Mat3:
