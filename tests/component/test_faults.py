@@ -76,8 +76,10 @@ def test_a_killed_agent_is_flagged_restarted_and_the_team_reconverges(killed):
     assert f["detected_by"] == {"6": {"lost_after_s": 0.0, "back_after_end_s": 0.0}}
     assert f["steps_missed"] == 500  # 5 s at 100 Hz: not one step while dead
     r = f["reconvergence"]
-    # The restarted agent starts from its initial estimate, so the mean error jumps, then
-    # comes back below its level before the kill within the run.
+    # The restarted agent starts from its initial estimate (0.3π about x: |R̃|_I = sin(0.15π)
+    # = 0.45), so the mean over the 6 followers rises by about 0.45/6 = 0.075, over 4x the
+    # level before the kill (0.016): 2x is a floor.  It must come back below that level
+    # before the run ends, 15 s after the restart.
     assert r["peak_after"] > 2 * r["level"] and r["reconvergence_s"] is not None and 0 < r["reconvergence_s"] < 15
     # Agent 5 again: a new incarnation that stepped from 15 s on; the link 5->6 followed it
     # at once (it used to stay on the dead one's last message until the seq passed it).
@@ -86,7 +88,8 @@ def test_a_killed_agent_is_flagged_restarted_and_the_team_reconverges(killed):
     link = s["links"]["5->6"]
     assert link["restarts"] == 1 and link["dropped"] == 0
     assert s["recording"]["missing_total"] == 0
-    assert (out / "plots" / "attitude_error.png").stat().st_size > 10_000
+    # The axes of this figure alone make a 15.6 kB PNG; with the curves and the shading 73-76 kB.
+    assert (out / "plots" / "attitude_error.png").stat().st_size > 30_000
 
 
 def test_a_stopped_agent_catches_up_and_the_router_fault_is_left_to_run(tmp_path):
@@ -96,7 +99,9 @@ def test_a_stopped_agent_catches_up_and_the_router_fault_is_left_to_run(tmp_path
     router, cut, stop = s["faults"]
     assert cut["applied"] and cut["link"] == "1->3"
     assert not router["applied"] and "zswarm run" in router["note"]
-    # SIGSTOP for 2 s: 200 ticks not taken on time, caught up at the SIGCONT (steps go on).
+    # SIGSTOP for 2 s: 200 ticks not taken on time (the one at the SIGCONT is taken late, so
+    # at least 199 missed), caught up there; the steps go on: 12 s at 100 Hz is 1201, less
+    # the 200 not taken.
     assert stop["steps_missed"] == 200 and s["agents"]["4"]["missed_deadlines"] >= 199
     assert s["agents"]["4"]["steps"] > 1000
     # A cut of 1->3 for 3 s: every message of it lost (100 Hz), counted as cut, not as the model's loss.
