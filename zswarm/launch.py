@@ -23,7 +23,7 @@ from typing import IO
 
 from zswarm import keys, procutil, report, wire
 from zswarm.bus import ZenohBus, zenoh_config
-from zswarm.scenario import Fault, Scenario
+from zswarm.scenario import Fault, Scenario, fault_actions
 
 
 def free_port() -> int:
@@ -210,17 +210,7 @@ class FaultRunner:
 
     def __init__(self, la: Launch, router: _Router, faults: tuple[Fault, ...], say: Callable[[str], None]) -> None:
         self.la, self.router, self.say = la, router, say
-        self.todo: list[tuple[float, int, str, Fault]] = []
-        for n, f in enumerate(faults):
-            if f.kind == "kill":
-                self.todo.append((f.at, n, "kill", f))
-                if f.restart_at is not None:
-                    self.todo.append((f.restart_at, n, "restart", f))
-            elif f.kind == "stop":
-                self.todo += [(f.at, n, "stop", f), (f.end, n, "cont", f)]
-            elif f.kind == "router":
-                self.todo += [(f.at, n, "router_down", f), (f.end, n, "router_up", f)]
-        self.todo.sort(key=lambda a: (a[0], a[1]))
+        self.todo = fault_actions(faults)
         self.restarts: dict[int, int] = {}
 
     def wait(self, most: float) -> float:

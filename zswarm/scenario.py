@@ -189,6 +189,23 @@ class Fault:
         return f"link {self.link} cut at {self.at:g} s for {self.duration:g} s"
 
 
+def fault_actions(faults: Sequence[Fault]) -> list[tuple[float, int, str, Fault]]:
+    """What carrying out ``faults`` takes, in time order: ``(world time, the fault's index,
+    action, fault)``, actions ``kill``, ``restart``, ``stop``, ``cont``, ``router_down``,
+    ``router_up`` (a cut is the link emulation's: no action).  Both engines read this."""
+    acts: list[tuple[float, int, str, Fault]] = []
+    for n, f in enumerate(faults):
+        if f.kind == "kill":
+            acts.append((f.at, n, "kill", f))
+            if f.restart_at is not None:
+                acts.append((f.restart_at, n, "restart", f))
+        elif f.kind == "stop":
+            acts += [(f.at, n, "stop", f), (f.end, n, "cont", f)]
+        elif f.kind == "router":
+            acts += [(f.at, n, "router_down", f), (f.end, n, "router_up", f)]
+    return sorted(acts, key=lambda a: (a[0], a[1]))
+
+
 FAULT_KINDS = ("kill", "stop", "router", "cut")
 _FAULT_FIELDS = {"kill": {"agent", "restart_at"}, "stop": {"agent", "duration"}, "router": {"duration"}, "cut": {"link", "duration"}}
 

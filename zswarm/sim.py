@@ -16,7 +16,7 @@ from world.node import World
 from zswarm import keys, wire
 from zswarm.bus import MemoryBus
 from zswarm.record import Recorder
-from zswarm.scenario import Scenario
+from zswarm.scenario import Scenario, fault_actions
 
 LEAN_SKIP = ("sense/", "edge/", "cmd/")
 
@@ -25,14 +25,7 @@ def fault_events(scenario: Scenario, kill: dict[int, float] | None = None) -> li
     """The scenario's faults as ``sim`` carries them out, in time order: ``(t, order, action,
     agent)``.  A router fault has no meaning in one process (no router): left out (the
     report says so); a cut is the link emulation's (zswarm/links.py)."""
-    ev: list[tuple[float, int, str, int]] = []
-    for n, f in enumerate(scenario.faults):
-        if f.kind == "kill" and f.agent is not None:
-            ev.append((f.at, n, "kill", f.agent))
-            if f.restart_at is not None:
-                ev.append((f.restart_at, n, "restart", f.agent))
-        elif f.kind == "stop" and f.agent is not None:
-            ev += [(f.at, n, "stop", f.agent), (f.end, n, "cont", f.agent)]
+    ev = [(t, n, action, f.agent) for t, n, action, f in fault_actions(scenario.faults) if f.agent is not None]
     for i, tk in (kill or {}).items():
         ev.append((tk, -1, "legacy_kill", i))
     return sorted(ev)
