@@ -35,7 +35,14 @@ pytestmark = pytest.mark.integration
 NET = "10.201.0"
 HOSTS = {"router": 1, "world": 2, "fleet-a": 3, "fleet-b": 4, "lone": 5}
 PLACE = {**{i: "fleet-a" for i in (1, 2, 3, 4)}, **{i: "fleet-b" for i in (5, 6, 7)}, 8: "lone"}
-CUT_S = 3.0  # > the 1 s lease (zswarm.bus.zenoh_config): the router closes agent 8's session
+CUT_S = 3.0  # wall seconds, > the 1 s lease (zswarm.bus.zenoh_config): the router closes agent 8's session
+LEASE_S = 1.0
+# Eight agents at 100 Hz, the world at 200 Hz, the recorder and the router on 2 cores at
+# time scale 1 are at the machine's capacity (measured on a quiet machine: 1585-1802 of
+# 2000 steps in 20 s, estimate gaps of up to 0.335 s anywhere in the run, cut or not), so
+# the run goes at time scale 0.5 as the suite's other long runs do: world time is half the
+# wall time, the cut 1.5 s of world time.
+SCALE = 0.5
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
@@ -115,7 +122,7 @@ def test_agents_on_separate_hosts_and_a_pulled_cable(procs, network, tmp_path):
     rec = procs.start(network.exec("world", zswarm("record", topo, "--out", str(out), *run)), log=logs / "recorder.log")
     for i, host in PLACE.items():
         procs.start(network.exec(host, [sys.executable, "-m", "agent", "--topology", topo, "--id", str(i), *run]), log=logs / f"agent-{i}.log")
-    world = procs.start(network.exec("world", [sys.executable, "-m", "world", "--topology", topo, "--duration", "20", "--wait-for-recorder", *run]), log=logs / "world.log")
+    world = procs.start(network.exec("world", [sys.executable, "-m", "world", "--topology", topo, "--duration", "20", "--time-scale", str(SCALE), "--wait-for-recorder", *run]), log=logs / "world.log")
     wait_for(lambda: "started" in (logs / "agent-8.log").read_text(), 90, "agent 8 started")
     time.sleep(5.0)
     t_down = time.time()
@@ -131,37 +138,41 @@ def test_agents_on_separate_hosts_and_a_pulled_cable(procs, network, tmp_path):
     s = json.loads((out / "summary.json").read_text())
     r = load_recording(out / "recording.mcap")
     epoch = r.start["epoch"]
-    w_down, w_up = t_down - epoch, t_up - epoch  # world time (time scale 1)
+    w_down, w_up = (t_down - epoch) * SCALE, (t_up - epoch) * SCALE  # world time
     # The others went on through the cut: estimates all along, converged (sim: 7e-5 at 20 s).
     for i in range(1, 8):
         a = s["agents"][str(i)]
         assert a["alive_at_end"] and a["last_estimate_t"] > 19.9, (i, a)
         t = np.array([e[0] for e in r.est[i]])
-        # No gap in theirs.  Anything the cut does to the others happens at the earliest when
-        # the 1 s lease expires and lasts until agent 8 is back (the 3 s cut), so a gap it
-        # caused is ≥ 1 s; a tenth of the cut (0.3 s) stays below that and above a busy
-        # machine's scheduling stalls (155 ms measured with a core kept busy).
-        assert np.max(np.diff(t[(t > w_down - 1) & (t < w_up + 1)])) < 0.1 * CUT_S, i
+        # No gap in theirs.  What the cut could do to the others (the router held up by
+        # agent 8's stalled link, then closing its session) lasts from the cut until the
+        # lease expires: a gap it caused is ≥ the lease (1 s of wall time, LEASE_S * SCALE
+        # of world time).  Half of that is the bound: above a busy machine's scheduling
+        # stalls (at most 0.335 s of wall time measured at time scale 1, which loads the
+        # machine more than 0.5 does), below a stall caused by the cut.
+        win = (t > w_down - SCALE) & (t < w_up + SCALE)
+        assert np.max(np.diff(t[win])) < 0.5 * LEASE_S * SCALE, i
         if i > 2:
             assert a["attitude_error_final"] < 1e-2, (i, a)
     # The cut in the counters: every link into agent 8 (its sensors at 200 Hz, its
-    # in-neighbours 1 and 7 at 100 Hz; it has no out-edges) lost at least half the cut.
+    # in-neighbours 1 and 7 at 100 Hz of world time; it has no out-edges) lost at least
+    # half the cut (CUT_S * SCALE of world time).
     links = s["links"]
     into_8 = {k: v for k, v in links.items() if k.endswith("->8")}
     assert set(into_8) == {"world->8", "1->8", "7->8"}, into_8
     for k, v in into_8.items():
         rate = 200 if k.startswith("world") else 100
-        assert v["dropped"] > 0.5 * CUT_S * rate, (k, v)
+        assert v["dropped"] > 0.5 * CUT_S * SCALE * rate, (k, v)
     for k, v in links.items():
         if "8" not in k.split("->"):
             assert v["dropped"] == 0, (k, v)  # nobody else lost anything
     # Agent 8 left (its session closed after the lease) and came back.
     ev8 = [(e["t_wall"], e["alive"]) for e in r.alive_events if e["key"].endswith("/alive/agent/8")]
-    assert any(not up and w_down + epoch <= tw <= t_up + 1 for tw, up in ev8), ev8
+    assert any(not up and t_down <= tw <= t_up + 1 for tw, up in ev8), ev8
     assert any(up and tw >= t_up for tw, up in ev8), ev8
     t8 = np.array([e[0] for e in r.est[8]])
     gap = np.diff(t8)
-    assert np.max(gap) > 0.5 * CUT_S, "no gap in agent 8's estimates"
+    assert np.max(gap) > 0.5 * CUT_S * SCALE, "no gap in agent 8's estimates"
     assert t8[-1] > 19.9 and s["agents"]["8"]["alive_at_end"], s["agents"]["8"]
     assert s["agents"]["8"]["attitude_error_final"] < 1e-2, s["agents"]["8"]
     assert any(st == "events/alive" for st, _, _ in read(out / "recording.mcap"))
