@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from zswarm.record import RawOut, read, transcode
 from zswarm.report import completeness, load_recording, make_report
@@ -71,11 +72,18 @@ def test_the_raw_recording_transcodes_to_the_same_recording(tmp_path, fixed8):
     report exactly what the JSON path gives."""
     sc, msgs = fixed8
     raw = RawOut(tmp_path / "recording.raw.mcap", {"engine": "test"})
-    for stream, payload, t in msgs:
+    for k, (stream, payload, t) in enumerate(msgs):
         raw.message(stream, payload, t)
+        if k % 500 == 0:
+            raw.flush()  # many chunks, as the recorder's flush every 0.5 s makes them
     raw.close()
+    with open(tmp_path / "recording.raw.mcap", "rb") as f:  # written without chunk indexes (RawOut)
+        assert make_reader(f).get_summary().chunk_indexes == []
     assert transcode(tmp_path / "recording.raw.mcap", tmp_path / "recording.mcap", sc) == 0
     assert not (tmp_path / "recording.raw.mcap").exists()
+    with open(tmp_path / "recording.mcap", "rb") as f:  # the raw file's metadata carried over
+        meta = {k: v for m in make_reader(f).iter_metadata() if m.name == "zswarm" for k, v in m.metadata.items()}
+    assert meta["engine"] == "test" and meta["transcoded_from"] == "recording.raw.mcap", meta
     a, b = load_recording(msgs), load_recording(tmp_path / "recording.mcap")
     assert a.streams == b.streams
     assert (a.truth_R == b.truth_R).all() and all((x[1] == y[1]).all() for x, y in zip(a.est[5], b.est[5], strict=True))
