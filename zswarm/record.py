@@ -204,13 +204,14 @@ class RawOut:
 
         self.ctx = foxglove.Context()
         # No chunk or message indexes: the writer keeps every chunk's index in memory
-        # until it writes the summary at close, about 1.6 kB per chunk with ~50 channels.
-        # The recorder ends a chunk every 0.5 s (a file cut short stays readable up to
-        # there), so that is 7200 chunks and +11-20 MiB of RSS per hour of run (measured
-        # in the 1-hour soak, bench/soak.py: the recorder 62 -> 71 MiB in 12 min while
-        # every other process stayed flat).  Nothing needs them: this file is read
-        # front to back (:func:`read`, by :func:`transcode`), and the viewer recording
-        # made from it has its indexes.
+        # until it writes the summary at close, and the recorder ends a chunk every 0.5 s
+        # (a file cut short stays readable up to there).  Measured with the writer alone,
+        # 56 channels and a chunk per flush: +10.9 MiB of RSS over 6900 chunks (an hour of
+        # the recorder) with the indexes, +0.9 MiB without.  Nothing needs them: this file
+        # is read front to back (:func:`read`, by :func:`transcode`), and the viewer
+        # recording made from it has its indexes.  (The recorder's RSS still grows by
+        # about 0.2 MiB/min in the 1-hour soak, bench/soak.py, with or without them: a
+        # cause not found yet.)
         opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="", emit_chunk_indexes=False, emit_message_indexes=False)
         self.writer: Any = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
         if metadata:
