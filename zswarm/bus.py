@@ -163,13 +163,15 @@ class MemorySession:
 
 # --------------------------------------------------------------------------- Zenoh
 
+LEASE_MS = 1000  # Zenoh's session lease here (Zenoh's default is 10 s): see zenoh_config
+
 
 def zenoh_config(
     mode: str = "client",
     connect: Sequence[str] = (),
     listen: Sequence[str] = (),
     config_file: str | None = None,
-    lease_ms: int = 1000,
+    lease_ms: int = LEASE_MS,
     secure: tuple[str, str] | None = None,
     acl: dict[str, Any] | None = None,
 ) -> Any:

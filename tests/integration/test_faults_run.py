@@ -10,6 +10,7 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
+from zswarm.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
 T32 = str(TOPO / "thesis-3.2-fixed8.toml")
@@ -24,7 +25,7 @@ DETECT_BOUND_S = 1.0
 # A hung (SIGSTOPped) process keeps its connection: the router drops it when its lease
 # runs out, 1 s of wall time after its last keep-alive (sent every quarter lease): at most
 # 1.25 s, measured 0.93 s.  In world time at time scale 0.5: half that, with 0.25 s margin.
-HUNG_BOUND_S = 0.5 * (1.25 + 0.25)
+HUNG_BOUND_S = 0.5 * (1.25 * LEASE_MS / 1000 + 0.25)
 
 
 def _run(procs, tmp_path, duration, *faults):

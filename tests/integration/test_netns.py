@@ -27,6 +27,7 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
+from zswarm.bus import LEASE_MS
 from zswarm.record import read
 from zswarm.report import load_recording
 
@@ -36,7 +37,7 @@ NET = "10.201.0"
 HOSTS = {"router": 1, "world": 2, "fleet-a": 3, "fleet-b": 4, "lone": 5}
 PLACE = {**{i: "fleet-a" for i in (1, 2, 3, 4)}, **{i: "fleet-b" for i in (5, 6, 7)}, 8: "lone"}
 CUT_S = 3.0  # wall seconds, > the 1 s lease (zswarm.bus.zenoh_config): the router closes agent 8's session
-LEASE_S = 1.0
+LEASE_S = LEASE_MS / 1000
 # Eight agents at 100 Hz, the world at 200 Hz, the recorder and the router on 2 cores at
 # time scale 1 are at the machine's capacity (measured on a quiet machine: 1585-1802 of
 # 2000 steps in 20 s, estimate gaps of up to 0.335 s anywhere in the run, cut or not), so
@@ -122,7 +123,10 @@ def test_agents_on_separate_hosts_and_a_pulled_cable(procs, network, tmp_path):
     rec = procs.start(network.exec("world", zswarm("record", topo, "--out", str(out), *run)), log=logs / "recorder.log")
     for i, host in PLACE.items():
         procs.start(network.exec(host, [sys.executable, "-m", "agent", "--topology", topo, "--id", str(i), *run]), log=logs / f"agent-{i}.log")
-    world = procs.start(network.exec("world", [sys.executable, "-m", "world", "--topology", topo, "--duration", "20", "--time-scale", str(SCALE), "--wait-for-recorder", *run]), log=logs / "world.log")
+    world = procs.start(
+        network.exec("world", [sys.executable, "-m", "world", "--topology", topo, "--duration", "20", "--time-scale", str(SCALE), "--wait-for-recorder", *run]),
+        log=logs / "world.log",
+    )
     wait_for(lambda: "started" in (logs / "agent-8.log").read_text(), 90, "agent 8 started")
     time.sleep(5.0)
     t_down = time.time()
@@ -155,8 +159,11 @@ def test_agents_on_separate_hosts_and_a_pulled_cable(procs, network, tmp_path):
         if i > 2:
             assert a["attitude_error_final"] < 1e-2, (i, a)
     # The cut in the counters: every link into agent 8 (its sensors at 200 Hz, its
-    # in-neighbours 1 and 7 at 100 Hz of world time; it has no out-edges) lost at least
-    # half the cut (CUT_S * SCALE of world time).
+    # in-neighbours 1 and 7 at 100 Hz of world time; it has no out-edges) lost everything
+    # sent during the cut (CUT_S * SCALE of world time) and the reconnection.  At least half
+    # of that: agents behind on a busy machine publish fewer messages in the window (up to
+    # a third of their ticks missed under stress at time scale 1), and a link that lost
+    # nothing fails it.
     links = s["links"]
     into_8 = {k: v for k, v in links.items() if k.endswith("->8")}
     assert set(into_8) == {"world->8", "1->8", "7->8"}, into_8
