@@ -47,6 +47,7 @@ from types import MappingProxyType, ModuleType
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from zswarm import hybrid, so3
 from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, StalePolicy, resolve
@@ -392,6 +393,18 @@ class _Ctx:
         x, y, z = (self.num(e, f"{fld}[{k}]") for k, e in enumerate(v))
         return (x, y, z)
 
+    def axis(self, v: Any, fld: str) -> NDArray[np.float64]:
+        """A direction: the unit vector along a non-zero 3-vector.  Scaled by its largest
+        entry first, so that neither [1e300, 1e300, 0] (whose norm overflows to inf, which
+        made the axis 0 with a RuntimeWarning) nor [1e-200, 1e-200, 0] (whose squares
+        underflow, which read as a zero axis) is mistaken."""
+        x = np.array(self.vec3(v, fld))
+        m = float(np.max(np.abs(x)))
+        if m == 0.0:
+            raise self.err(fld, "must be non-zero", v)
+        x = x / m
+        return x / np.linalg.norm(x)
+
     def expr(self, v: Any, fld: str) -> Expr:
         try:
             return parse(v)
@@ -403,10 +416,7 @@ class _Ctx:
         if isinstance(v, dict):
             self.table(v, fld, {"angle", "axis"}, {"angle", "axis"})
             theta = float(self.expr(v["angle"], f"{fld}.angle")(0.0))
-            axis = np.array(self.vec3(v["axis"], f"{fld}.axis"))
-            if np.linalg.norm(axis) == 0:
-                raise self.err(f"{fld}.axis", "must be non-zero", v["axis"])
-            return tuple(so3.Ra(theta, axis).ravel().tolist())
+            return tuple(so3.Ra(theta, self.axis(v["axis"], f"{fld}.axis")).ravel().tolist())
         if isinstance(v, list) and len(v) == 3 and all(isinstance(r, list) and len(r) == 3 for r in v):
             R = np.array([[self.num(e, f"{fld}[{a}][{b}]") for b, e in enumerate(r)] for a, r in enumerate(v)])
             if not so3.is_rotation(R, 1e-6):
@@ -611,11 +621,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     formation = None
     if "formation" in w:
         fm = c.table(w["formation"], "world.formation", {"axis", "rate"}, {"axis", "rate"})
-        axis = np.array(c.vec3(fm["axis"], "world.formation.axis"))
-        if np.linalg.norm(axis) == 0:
-            raise c.err("world.formation.axis", "must be non-zero", fm["axis"])
+        ax = c.axis(fm["axis"], "world.formation.axis")
         rate = float(c.expr(fm["rate"], "world.formation.rate")(0.0))
-        ax = axis / np.linalg.norm(axis)
         formation = Formation((float(ax[0]), float(ax[1]), float(ax[2])), rate)
     plant, commands, fitted = _plant(c, w, info, algo, formation is not None)
 

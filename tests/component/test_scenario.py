@@ -3,6 +3,7 @@
 import math
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -59,6 +60,27 @@ def test_bad_input_names_file_field_problem(fixed8_text, old, new, match):
     assert old in fixed8_text
     with pytest.raises(ScenarioError, match=match):
         loads(fixed8_text.replace(old, new, 1), "x.toml")
+
+
+@pytest.mark.parametrize("axis, unit", [("[1e300, 1e300, 0]", (0.5**0.5, 0.5**0.5, 0.0)), ("[1e-200, 0, 1e-200]", (0.5**0.5, 0.0, 0.5**0.5)), ("[0, 3, 4]", (0.0, 0.6, 0.8))])
+def test_axes_far_from_unit_length(axis, unit):
+    """Axes whose norm overflows or underflows in floats are still directions: the
+    formation's axis was (0, 0, 0) for the first (norm inf) with a RuntimeWarning, and the
+    rotation's was refused as zero for the second."""
+    text = (TOPO / "thesis-3.3-moving5.toml").read_text()
+    old = "formation = { axis = [1, 0, 0]"
+    assert old in text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow on the way
+        sc = loads(text.replace(old, f"formation = {{ axis = {axis}", 1), "x.toml")
+    assert sc.formation is not None
+    assert sc.formation.axis == pytest.approx(unit, abs=1e-15)  # one division each: a few ulps
+    fixed8 = (TOPO / "thesis-3.2-fixed8.toml").read_text()
+    sc8 = loads(fixed8.replace('R = { angle = "0.1*pi", axis = [1, 0, 0] }', f'R = {{ angle = "0.1*pi", axis = {axis} }}', 1), "x.toml")
+    R = np.array(sc8.agent(3).estimate.R_hat).reshape(3, 3)
+    assert np.allclose(R, so3.Ra(0.1 * math.pi, np.array(unit)), atol=1e-15)
+    with pytest.raises(ScenarioError, match=r"x\.toml: world\.formation\.axis: must be non-zero"):
+        loads(text.replace(old, "formation = { axis = [0, -0.0, 0]", 1), "x.toml")
 
 
 def test_collinear_bearings_rejected(fixed8_text):
