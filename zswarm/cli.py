@@ -153,6 +153,22 @@ def build_parser() -> argparse.ArgumentParser:
     ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
     procutil.add_zenoh_args(ro, default_mode="router")
     ro.add_argument("--exit-after-run", metavar="RUN_ID", default=None, help="exit once the recorder of this run has come and gone (compose: the run ends by itself)")
+    ro.add_argument(
+        "--run-id",
+        default="default",
+        help="with --secure: the run whose keys the access control is for (default: default); each process with a certificate in DIR may put only its own",
+    )
+
+    ce = sub.add_parser(
+        "certs",
+        help="make a CA and a certificate per process of a scenario, for processes started by hand with --secure DIR",
+        description="Writes ca.pem, router.pem, world.pem, recorder.pem and agent-<i>.pem (each with its .key, mode 0600) "
+        "into DIR: EC P-256, valid for localhost and 127.0.0.1 (and --host names) for a week.  Then: zswarm router --secure DIR "
+        "--run-id R --listen tls/HOST:PORT, and every other process with --secure DIR --connect tls/HOST:PORT.",
+    )
+    ce.add_argument("dir", type=Path, help="folder for the certificates (created; existing files of the same names are replaced)")
+    ce.add_argument("topology", help="scenario TOML file (its agents get a certificate each)")
+    ce.add_argument("--host", action="append", default=[], metavar="NAME|IP", help="another name or address the router is reached at (repeatable)")
 
     co = sub.add_parser(
         "compose",
@@ -242,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     procutil.die_with_parent()  # as a sweep's child: ends with the sweep
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid, "generate": cmd_generate}
+    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid, "generate": cmd_generate, "certs": cmd_certs}
     return cmds[args.cmd](args)
 
 
@@ -427,12 +443,25 @@ def cmd_basin_compare(args: argparse.Namespace) -> int:
 
 
 def cmd_router(args: argparse.Namespace) -> int:
+    from zswarm import secure as sec
     from zswarm.bus import ZenohBus
 
     if not args.listen and not args.config:
         procutil.fail_usage("router needs --listen ENDPOINT, e.g. --listen tcp/127.0.0.1:7447")
+    acl = None
+    if args.secure:
+        run = keys.check_run_id(args.run_id)
+        plain = [e for e in args.listen if not e.startswith("tls/")]
+        if plain:
+            procutil.fail_usage(f"router --secure listens on tls/ endpoints only (got {', '.join(plain)})")
+        procs = sec.processes_in(Path(args.secure))
+        if not procs:
+            procutil.fail_usage(f"--secure {args.secure}: no process certificates there (zswarm certs DIR TOPOLOGY makes them)")
+        acl = sec.acl(run, procs)
     log = procutil.setup_logging("router")
-    with ZenohBus(procutil.zenoh_conf(args)) as bus:
+    with ZenohBus(procutil.zenoh_conf(args, sec.ROUTER, acl=acl)) as bus:
+        if acl is not None:
+            log.info("mutual TLS; run %r: %d processes may put their own keys (%s)", args.run_id, len(procs), ", ".join(sec.name_of(r, i) for r, i in procs))
         stop = procutil.stop_on_signals()
         log.info("zenoh %s listening on %s; Ctrl-C to stop", args.mode, ", ".join(args.listen) or "(config)")
         if args.exit_after_run:
@@ -448,6 +477,16 @@ def cmd_router(args: argparse.Namespace) -> int:
 
             bus.watch_alive(keys.alive(run, "recorder", 0), on_recorder)
         stop.wait()
+    return 0
+
+
+def cmd_certs(args: argparse.Namespace) -> int:
+    from zswarm import secure as sec
+
+    sc = procutil.load_or_exit(args.topology)
+    names = [sec.name_of(r, i) for r, i in sec.processes(sc.ids)]
+    sec.make_certs(args.dir, names, hosts=args.host)
+    print(f"{args.dir}: ca.pem, {sec.ROUTER}.pem, " + ", ".join(f"{n}.pem" for n in names) + " (and their .key)")
     return 0
 
 

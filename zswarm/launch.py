@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import IO
 
 from zswarm import keys, procutil, report, wire
+from zswarm import secure as sec
 from zswarm.bus import ZenohBus, zenoh_config
 from zswarm.scenario import Fault, Scenario, fault_actions
 
@@ -160,8 +161,6 @@ class _Router:
 
     def open(self) -> None:
         if self.certs is not None:
-            from zswarm import secure as sec
-
             conf = zenoh_config("router", listen=[self.endpoint], secure=(str(self.certs), sec.ROUTER), acl=sec.acl(self.run_id, self.procs))
         else:
             conf = zenoh_config("router", listen=[self.endpoint])
@@ -290,10 +289,8 @@ def run(
     certs: Path | None = None
     if secure:
         # Mutual TLS and access control (zswarm/secure.py): a certificate per process, made now.
-        from zswarm import secure as sec
-
         certs = (out / "secure") if secure is True else Path(secure)
-        sec.make_certs(certs, [sec.name_of("agent", i) for i in sc.ids] + ["world", "recorder"])
+        sec.make_certs(certs, [sec.name_of(r, i) for r, i in sec.processes(sc.ids)])
     endpoint = f"{'tls' if certs else 'tcp'}/127.0.0.1:{free_port()}"
     la = Launch(sc, topology, out, duration, time_scale, seed, quiet)
     interrupted = threading.Event()
@@ -306,7 +303,7 @@ def run(
     common = ["--run-id", run_id, "--seed", str(seed), "--connect", endpoint] + (["--secure", str(certs)] if certs else [])
     py = sys.executable
     ok_start = False
-    router = _Router(endpoint, run_id, certs, [("agent", i) for i in sc.ids] + [("world", 0), ("recorder", 0)])
+    router = _Router(endpoint, run_id, certs, sec.processes(sc.ids))
     try:
         router.open()
         alive, progress = router.alive, router.progress

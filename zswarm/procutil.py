@@ -25,11 +25,12 @@ def add_zenoh_args(p: argparse.ArgumentParser, default_mode: str = "client") -> 
     g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on (repeatable)")
     g.add_argument("--config", metavar="FILE", help="a Zenoh JSON5 config file (endpoints above override it)")
     g.add_argument("--mode", choices=("client", "peer", "router"), default=default_mode, help=f"Zenoh session mode (default {default_mode})")
-    g.add_argument("--secure", metavar="DIR", default=None, help="mutual TLS with this process's certificate from DIR (made by zswarm run --secure; endpoints tls/...)")
+    g.add_argument("--secure", metavar="DIR", default=None, help="mutual TLS with this process's certificate from DIR (made by zswarm certs or zswarm run --secure; endpoints tls/...)")
 
 
-def zenoh_conf(args: argparse.Namespace, name: str | None = None) -> Any:
-    """The Zenoh config of the flags; ``name``: this process's certificate name (--secure)."""
+def zenoh_conf(args: argparse.Namespace, name: str | None = None, acl: dict[str, Any] | None = None) -> Any:
+    """The Zenoh config of the flags; ``name``: this process's certificate name (--secure);
+    ``acl``: the access control a router enforces (zswarm/secure.py)."""
     from zswarm.bus import zenoh_config
 
     if not args.connect and not args.listen and not args.config and args.mode == "client":
@@ -40,9 +41,9 @@ def zenoh_conf(args: argparse.Namespace, name: str | None = None) -> Any:
             fail_usage("--secure: this command has no certificate of its own (zswarm run --secure makes them for its processes)")
         for f in ("ca.pem", f"{name}.pem", f"{name}.key"):
             if not os.path.isfile(os.path.join(args.secure, f)):
-                fail_usage(f"--secure {args.secure}: {f} is missing (zswarm run --secure makes a run's certificates)")
+                fail_usage(f"--secure {args.secure}: {f} is missing (zswarm certs or zswarm run --secure make a run's certificates)")
         secure = (args.secure, name)
-    return zenoh_config(args.mode, args.connect, args.listen, args.config, secure=secure)
+    return zenoh_config(args.mode, args.connect, args.listen, args.config, secure=secure, acl=acl)
 
 
 def add_run_args(p: argparse.ArgumentParser) -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import json
+import os
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -34,10 +35,13 @@ def name_of(role: str, ident: int) -> str:
     return f"agent-{ident}" if role == "agent" else role
 
 
-def make_certs(folder: Path, names: Iterable[str]) -> Path:
-    """A CA and one certificate per name (plus the router's) in ``folder``: ``<name>.pem``
-    (certificate) and ``<name>.key`` (its key, mode 0600).  EC P-256; every certificate
-    is valid for localhost and 127.0.0.1, for server and client use."""
+def make_certs(folder: Path, names: Iterable[str], hosts: Iterable[str] = ()) -> Path:
+    """A CA (``ca.pem``; its key is not kept) and one certificate per name (plus the
+    router's) in ``folder``: ``<name>.pem`` (certificate) and ``<name>.key`` (its key,
+    mode 0600).  EC P-256; every certificate
+    is valid for localhost and 127.0.0.1 and the names or addresses ``hosts`` (where a
+    router started by hand is reached: TLS checks the endpoint's host against them), for
+    server and client use."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -48,9 +52,11 @@ def make_certs(folder: Path, names: Iterable[str]) -> Path:
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=VALID_DAYS)
 
     def write(stem: str, key: Any, cert: Any) -> None:
-        kp = folder / f"{stem}.key"
-        kp.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
-        kp.chmod(0o600)
+        # Created 0600 (never readable by others, not even for a moment); an old file too.
+        fd = os.open(folder / f"{stem}.key", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
         (folder / f"{stem}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
 
     ca_key = ec.generate_private_key(ec.SECP256R1())
@@ -81,7 +87,18 @@ def make_certs(folder: Path, names: Iterable[str]) -> Path:
         .add_extension(x509.KeyUsage(**(usage | {"digital_signature": True, "key_cert_sign": True, "crl_sign": True})), critical=True)
         .sign(ca_key, hashes.SHA256())
     )
-    write(CA, ca_key, ca)
+    # The CA's key is not written: once these are made nothing more can be signed by the
+    # run's CA, so a copied folder gives no way to mint another process's identity.
+    (folder / f"{CA}.pem").write_bytes(ca.public_bytes(serialization.Encoding.PEM))
+    alt_names: list[Any] = []
+    for h in ["localhost", "127.0.0.1", *hosts]:
+        alt: Any
+        try:
+            alt = x509.IPAddress(ipaddress.ip_address(h))
+        except ValueError:
+            alt = x509.DNSName(h)
+        if alt not in alt_names:
+            alt_names.append(alt)
     for name in [ROUTER, *names]:
         key = ec.generate_private_key(ec.SECP256R1())
         cert = (
@@ -92,13 +109,32 @@ def make_certs(folder: Path, names: Iterable[str]) -> Path:
             .serial_number(x509.random_serial_number())
             .not_valid_before(start)
             .not_valid_after(end)
-            .add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]), critical=False)
+            .add_extension(x509.SubjectAlternativeName(alt_names), critical=False)
             .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False)
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .sign(ca_key, hashes.SHA256())
         )
         write(name, key, cert)
     return folder
+
+
+def processes(sc_ids: Iterable[int]) -> list[tuple[str, int]]:
+    """The (role, id) of every process of a run with agents ``sc_ids`` (the router aside)."""
+    return [("agent", i) for i in sc_ids] + [("world", 0), ("recorder", 0)]
+
+
+def processes_in(folder: Path) -> list[tuple[str, int]]:
+    """The (role, id) of the processes whose certificates are in ``folder`` (``agent-<i>.pem``,
+    ``world.pem``, ``recorder.pem``): whom a router started by hand (``zswarm router
+    --secure DIR``) gives the rights of :func:`acl`."""
+    out: list[tuple[str, int]] = []
+    for pem in sorted(folder.glob("*.pem")):
+        stem = pem.stem
+        if stem in ("world", "recorder"):
+            out.append((stem, 0))
+        elif stem.startswith("agent-") and stem[6:].isdigit():
+            out.append(("agent", int(stem[6:])))
+    return out
 
 
 def tls(folder: Path, name: str, listen: bool) -> dict[str, Any]:

@@ -18,6 +18,7 @@ from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
 from zswarm import keys, so3, wire
 from zswarm.bus import zenoh_config
+from zswarm.launch import free_port
 from zswarm.record import ensure_recording, read
 from zswarm.secure import make_certs
 
@@ -66,3 +67,43 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
     assert s["links"]["3->4"].get("restarts", 0) == 0 and s["agents"]["4"]["malformed_received"] == 0
     assert OWN_INC in incs["edge/4/5"] and s["links"]["4->5"]["restarts"] >= 1  # its own key: delivered
     assert all(c == 0 for c in s["exit_codes"].values())
+
+
+def test_secure_router_started_by_hand(procs, tmp_path):
+    """`zswarm certs` and `zswarm router --secure`: the profile without `zswarm run` (processes
+    started by hand, on other hosts).  The router gives the rights of the certificates in
+    its folder for its --run-id: agent 4 on its own key is delivered, as agent 3 it is not;
+    a process without a certificate cannot connect."""
+    certs, run = tmp_path / "certs", "byhand"
+    made = procs.start(zswarm("certs", str(certs), T32, "--host", "10.9.8.7"), log=tmp_path / "certs.log")
+    assert made.wait(60) == 0, (tmp_path / "certs.log").read_text()
+    assert not (certs / "ca.key").exists()  # nothing more can be signed by this CA
+    assert oct((certs / "agent-3.key").stat().st_mode & 0o777) == "0o600"
+    ep = f"tls/127.0.0.1:{free_port()}"
+    procs.start(zswarm("router", "--secure", str(certs), "--run-id", run, "--listen", ep), log=tmp_path / "router.log")
+    wait_for(lambda: "mutual TLS" in (tmp_path / "router.log").read_text(), 60, "router up")
+
+    conf = zenoh_config("client", connect=[ep])
+    conf.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(certs / "ca.pem")))
+    conf.insert_json5("connect/timeout_ms", "{router: -1, peer: -1, client: 3000}")
+    with pytest.raises(zenoh.ZError):
+        zenoh.open(conf).close()
+
+    got: dict[str, set[int]] = {}
+    with zenoh.open(zenoh_config("client", connect=[ep], secure=(str(certs), "recorder"))) as rec:
+
+        def on(sample):
+            got.setdefault(str(sample.key_expr), set()).add(msgpack.unpackb(sample.payload.to_bytes())["inc"])
+
+        sub = rec.declare_subscriber(keys.everything(run), on)
+        with zenoh.open(zenoh_config("client", connect=[ep], secure=(str(certs), "agent-4"))) as s:
+            spoof, own = s.declare_publisher(keys.edge(run, 3, 4)), s.declare_publisher(keys.edge(run, 4, 5))
+            # Until the subscriber's declaration has reached the router, puts go nowhere: wait
+            # for its own key to arrive, then send both for the count.
+            wait_for(lambda: (own.put(_edge(4, 0, OWN_INC)), keys.edge(run, 4, 5) in got)[1], 30, "own key delivered", step=0.1)
+            for k in range(100):
+                spoof.put(_edge(3, k, SPOOF_INC))
+                own.put(_edge(4, k + 1, OWN_INC + 1))
+            wait_for(lambda: OWN_INC + 1 in got[keys.edge(run, 4, 5)], 30, "the second batch delivered")
+        sub.undeclare()
+    assert keys.edge(run, 3, 4) not in got  # not one spoofed message delivered
