@@ -484,7 +484,7 @@ def cmd_certs(args: argparse.Namespace) -> int:
     from zswarm import secure as sec
 
     sc = procutil.load_or_exit(args.topology)
-    names = [sec.name_of(r, i) for r, i in sec.processes(sc.ids)]
+    names = sec.certificate_names(sc.ids)
     sec.make_certs(args.dir, names, hosts=args.host)
     print(f"{args.dir}: ca.pem, {sec.ROUTER}.pem, " + ", ".join(f"{n}.pem" for n in names) + " (and their .key)")
     return 0

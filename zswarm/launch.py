@@ -290,7 +290,7 @@ def run(
     if secure:
         # Mutual TLS and access control (zswarm/secure.py): a certificate per process, made now.
         certs = (out / "secure") if secure is True else Path(secure)
-        sec.make_certs(certs, [sec.name_of(r, i) for r, i in sec.processes(sc.ids)])
+        sec.make_certs(certs, sec.certificate_names(sc.ids))
     endpoint = f"{'tls' if certs else 'tcp'}/127.0.0.1:{free_port()}"
     la = Launch(sc, topology, out, duration, time_scale, seed, quiet)
     interrupted = threading.Event()

@@ -38,10 +38,9 @@ def name_of(role: str, ident: int) -> str:
 def make_certs(folder: Path, names: Iterable[str], hosts: Iterable[str] = ()) -> Path:
     """A CA (``ca.pem``; its key is not kept) and one certificate per name (plus the
     router's) in ``folder``: ``<name>.pem`` (certificate) and ``<name>.key`` (its key,
-    mode 0600).  EC P-256; every certificate
-    is valid for localhost and 127.0.0.1 and the names or addresses ``hosts`` (where a
-    router started by hand is reached: TLS checks the endpoint's host against them), for
-    server and client use."""
+    mode 0600).  EC P-256; every certificate is valid for localhost and 127.0.0.1 and the
+    names or addresses ``hosts`` (where a router started by hand is reached: TLS checks
+    the endpoint's host against them), for server and client use."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -121,6 +120,13 @@ def make_certs(folder: Path, names: Iterable[str], hosts: Iterable[str] = ()) ->
 def processes(sc_ids: Iterable[int]) -> list[tuple[str, int]]:
     """The (role, id) of every process of a run with agents ``sc_ids`` (the router aside)."""
     return [("agent", i) for i in sc_ids] + [("world", 0), ("recorder", 0)]
+
+
+def certificate_names(sc_ids: Iterable[int]) -> list[str]:
+    """The certificate names of every process of a run with agents ``sc_ids`` (the router's
+    is made anyway): what :func:`make_certs` is given by ``zswarm run --secure`` and
+    ``zswarm certs``."""
+    return [name_of(r, i) for r, i in processes(sc_ids)]
 
 
 def processes_in(folder: Path) -> list[tuple[str, int]]:

@@ -78,6 +78,7 @@ def test_axes_far_from_unit_length(axis, unit):
     fixed8 = (TOPO / "thesis-3.2-fixed8.toml").read_text()
     sc8 = loads(fixed8.replace('R = { angle = "0.1*pi", axis = [1, 0, 0] }', f'R = {{ angle = "0.1*pi", axis = {axis} }}', 1), "x.toml")
     R = np.array(sc8.agent(3).estimate.R_hat).reshape(3, 3)
+    # The same rotation of axes equal to a few ulps (above): entries within ~1e-16 each.
     assert np.allclose(R, so3.Ra(0.1 * math.pi, np.array(unit)), atol=1e-15)
     with pytest.raises(ScenarioError, match=r"x\.toml: world\.formation\.axis: must be non-zero"):
         loads(text.replace(old, "formation = { axis = [0, -0.0, 0]", 1), "x.toml")
