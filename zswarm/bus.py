@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import threading
+import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
@@ -163,6 +165,7 @@ class MemorySession:
 
 # --------------------------------------------------------------------------- Zenoh
 
+_POLLED_FIFO = 1024  # samples in Zenoh's FIFO of subscribe_polled (its thread empties it as they come)
 LEASE_MS = 1000  # Zenoh's session lease here (Zenoh's default is 10 s): see zenoh_config
 
 
@@ -229,6 +232,7 @@ class ZenohBus:
         self.session = zenoh.open(conf)
         self._objs: list[Any] = []
         self._tokens: dict[str, Any] = {}
+        self._threads: list[threading.Thread] = []  # subscribe_polled's
         self._lock = threading.Lock()
         self._closed = False
 
@@ -264,27 +268,50 @@ class ZenohBus:
         handler = self._z.handlers.Callback(_cb, indirect=False) if direct else _cb
         self._objs.append(self.session.declare_subscriber(key_expr, handler))
 
-    def subscribe_polled(self, key_expr: str, capacity: int = 1 << 18) -> Callable[[], list[tuple[str, bytes]]]:
-        """Samples of ``key_expr`` queued on Zenoh's side (a FIFO channel, no Python
-        callback); the returned function takes what has arrived.
+    def subscribe_polled(
+        self, key_expr: str, stamp: Callable[[], int], capacity: int = 1 << 18
+    ) -> Callable[[], list[tuple[str, bytes, int]]]:
+        """Samples of ``key_expr`` as ``(key, payload, stamp())``, copied off Zenoh's receive
+        buffers as they arrive by a thread of this bus; the returned function takes what
+        has arrived.
 
-        For a subscriber that does real work per message (the recorder): it never
-        holds the GIL against Zenoh's threads, which a callback would have to wait
-        for (up to the 5 ms switch interval each) while the main thread computes.
-        When the FIFO is full Zenoh waits, and the router drops for this
+        For a subscriber that does real work per message (the recorder).  Not a callback:
+        Zenoh's receive task would wait for the GIL (up to the 5 ms switch interval per
+        sample) while the owner computes.  The thread waits in the FIFO channel's ``recv``
+        with the GIL released and holds it only to copy a sample out.  Not the owner
+        polling the FIFO either (as this did up to 2026-12-02): a sample waiting in
+        Zenoh's FIFO keeps the 64 KiB receive batch it arrived in, and Zenoh allocates a
+        fresh batch for every read meanwhile; a recorder 1 s behind held ~14 MiB of them
+        (heaptrack), memory glibc kept after the catch-up, and the recorder's RSS
+        ratcheted up over a soak.  Stamped on arrival, not when the owner gets round to
+        the sample.
+
+        At most ``capacity`` samples wait: then the thread stops taking them, Zenoh's
+        FIFO (a few batches) fills, Zenoh waits, and the router drops for this
         subscriber only (DROP congestion control).
         """
-        sub = self.session.declare_subscriber(key_expr, self._z.handlers.FifoChannel(capacity))
+        sub = self.session.declare_subscriber(key_expr, self._z.handlers.FifoChannel(_POLLED_FIFO))
         self._objs.append(sub)
+        fifo = sub.handler  # recv on the handler: undeclaring the subscriber closes it and ends the thread
+        arrived: deque[tuple[str, bytes, int]] = deque()
 
-        def drain(limit: int = 100_000) -> list[tuple[str, bytes]]:
-            out = []
-            for _ in range(limit):
-                sample = sub.try_recv()
-                if sample is None:
-                    break
-                out.append((str(sample.key_expr), sample.payload.to_bytes()))
-            return out
+        def pump() -> None:
+            while True:
+                try:
+                    sample = fifo.recv()
+                except Exception:  # noqa: BLE001 - ZError "channel is empty and closed": the bus closed
+                    return
+                arrived.append((str(sample.key_expr), sample.payload.to_bytes(), stamp()))
+                del sample  # its receive batch goes back to Zenoh now, not at the next sample
+                while len(arrived) >= capacity and not self._closed:
+                    time.sleep(0.001)
+
+        thread = threading.Thread(target=pump, name=f"zenoh-fifo {key_expr}", daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+        def drain(limit: int = 100_000) -> list[tuple[str, bytes, int]]:
+            return [arrived.popleft() for _ in range(min(limit, len(arrived)))]
 
         return drain
 
@@ -318,4 +345,6 @@ class ZenohBus:
             except Exception:  # noqa: BLE001 - best effort; the session close below is what matters
                 pass
         self._objs.clear()
+        for thread in self._threads:  # their channels closed with the subscribers: they end
+            thread.join(timeout=2.0)  # before the interpreter (a thread inside Zenoh at exit aborts it)
         self.session.close()

@@ -283,9 +283,9 @@ def ensure_recording(results: Path, scenario: Scenario | None) -> Path:
 class Recorder:
     """Subscribes to everything of a run and writes it to ``path`` (and/or serves it live).
 
-    Over Zenoh, samples wait in a FIFO on Zenoh's side; :meth:`poll` (the
-    owner's loop, every ~10 ms) takes them, stamps them, decodes and writes
-    them; :meth:`flush` (at least every second) also ends the MCAP chunk, so
+    Over Zenoh, samples are copied and stamped as they arrive by the bus's thread
+    (:meth:`ZenohBus.subscribe_polled`); :meth:`poll` (the owner's loop, every
+    ~10 ms) takes them, decodes and writes them; :meth:`flush` (at least every second) also ends the MCAP chunk, so
     a file cut short by a crash is readable up to the last flush.  ``path``
     None and no ``live``: keep the raw messages in memory (``messages``)
     instead (``zswarm sweep``, the step-size study).
@@ -325,10 +325,10 @@ class Recorder:
             self.out = RawOut(self.path, meta)
         elif self.path is not None or live is not None:
             self.out = ViewerOut(self.path, live, scenario, meta, server_name=f"zswarm {run}")
-        # A real bus: samples wait on Zenoh's side until poll() takes them (no
-        # callback contending for the GIL with the decoding); in-process: callbacks,
+        # A real bus: samples copied and stamped on arrival by the bus's thread, taken by
+        # poll() (no callback contending for the GIL with the decoding); in-process: callbacks,
         # stamped at the virtual time they are delivered.
-        self._drain = bus.subscribe_polled(keys.everything(run)) if hasattr(bus, "subscribe_polled") else None
+        self._drain = bus.subscribe_polled(keys.everything(run), self.now_ns) if hasattr(bus, "subscribe_polled") else None
         if self._drain is None:
             bus.subscribe(keys.everything(run), self._on_data)
         bus.watch_alive(keys.alive_all(run), self._on_alive)
@@ -376,8 +376,8 @@ class Recorder:
             self._buf.append((ALIVE_CHANNEL, event if self.out is not None else msgpack.packb(event), t))
 
     def poll(self) -> None:
-        """Take what has arrived (stamped now: call it every ~10 ms) and write it to
-        the outputs, without ending the MCAP chunk."""
+        """Take what has arrived (call it every ~10 ms) and write it to the outputs,
+        without ending the MCAP chunk."""
         self._take(flush=False)
 
     def flush(self) -> None:
@@ -386,8 +386,7 @@ class Recorder:
 
     def _take(self, flush: bool) -> None:
         if self._drain is not None:
-            t = self.now_ns()
-            for key, payload in self._drain():
+            for key, payload, t in self._drain():
                 self._on_data(key, payload, t)
         with self._lock:
             buf, self._buf = self._buf, []
