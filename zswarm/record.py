@@ -209,9 +209,9 @@ class RawOut:
         # 56 channels and a chunk per flush: +10.9 MiB of RSS over 6900 chunks (an hour of
         # the recorder) with the indexes, +0.9 MiB without.  Nothing needs them: this file
         # is read front to back (:func:`read`, by :func:`transcode`), and the viewer
-        # recording made from it has its indexes.  (The recorder's RSS still grows by
-        # about 0.2 MiB/min in the 1-hour soak, bench/soak.py, with or without them: a
-        # cause not found yet.)
+        # recording made from it has its indexes.  (What else grew in the 1-hour soak,
+        # bench/soak.py, was Zenoh's receive batches held by samples waiting for the
+        # recorder's poll: see ZenohBus.subscribe_polled.)
         opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="", emit_chunk_indexes=False, emit_message_indexes=False)
         self.writer: Any = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
         if metadata:
