@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import functools
 import logging
 import math
 import os
@@ -163,9 +164,6 @@ def incarnation() -> int:
     return time.time_ns() // 1000
 
 
-_malloc_trim: Any = None
-
-
 def trim_heap() -> bool:
     """Give the memory the C heap holds free back to the system (glibc's ``malloc_trim(0)``,
     every arena); False where there is none (another libc).
@@ -176,12 +174,19 @@ def trim_heap() -> bool:
     70 to 79 MiB at minute 41 and stayed there; ``malloc_trim(0)``, called by hand (gdb) at
     minute 54, took it from 80.2 to 69.3 MiB: the 11 MiB were free memory, not a leak.
     """
-    global _malloc_trim
-    if _malloc_trim is None:
-        import ctypes
+    trim = _malloc_trim()
+    if trim is None:
+        return False
+    trim(0)  # 1 if memory was given back, 0 if none was free: either is fine
+    return True
 
-        _malloc_trim = getattr(ctypes.CDLL(None), "malloc_trim", False)
-    return bool(_malloc_trim and _malloc_trim(0) is not None)
+
+@functools.cache
+def _malloc_trim() -> Any:
+    """glibc's ``malloc_trim`` (looked up once), or None under another libc."""
+    import ctypes
+
+    return getattr(ctypes.CDLL(None), "malloc_trim", None)
 
 
 def warm_up() -> None:

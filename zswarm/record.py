@@ -285,8 +285,9 @@ class Recorder:
 
     Over Zenoh, samples are copied and stamped as they arrive by the bus's thread
     (:meth:`ZenohBus.subscribe_polled`); :meth:`poll` (the owner's loop, every
-    ~10 ms) takes them, decodes and writes them; :meth:`flush` (at least every second) also ends the MCAP chunk, so
-    a file cut short by a crash is readable up to the last flush.  ``path``
+    ~10 ms) takes them, decodes and writes them; :meth:`flush` (at least every
+    second) also ends the MCAP chunk, so a file cut short by a crash is readable
+    up to the last flush.  ``path``
     None and no ``live``: keep the raw messages in memory (``messages``)
     instead (``zswarm sweep``, the step-size study).
     """
