@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -116,6 +117,52 @@ def procs():
     finally:
         left = ps.reap()
     assert not left, f"processes left behind: {left}"
+
+
+class StallMeter:
+    """How long this machine stopped running a thread that asked to run: a thread of the
+    test process sleeps ``period`` at a time and keeps each wake-up's lateness.
+
+    A sleeping thread woken by its timer is run soon by the scheduler on a loaded
+    machine (it has used little CPU): with 11 busy-looping processes beside it, late
+    by milliseconds; squeezed into 0.45 of a core by a CPU quota with 16 agents,
+    late by up to 0.28 s (measured 2026-12-02).  Lateness near a second means the
+    machine itself stopped (a virtual machine's vCPU descheduled by its host, a
+    freeze), which stops every zswarm process too: a Zenoh link silent for its lease
+    is then a true "gone" by the lease's own definition, and a test may tell that
+    from a runtime fault with this.
+    """
+
+    def __init__(self, period: float = 0.01) -> None:
+        self.period = period
+        self.stalls: list[tuple[float, float]] = []  # (monotonic time of the wake-up, lateness s), lateness > 0.1 s
+        self.max_late = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="stall-meter", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        due = time.monotonic() + self.period
+        while not self._stop.wait(max(0.0, due - time.monotonic())):
+            now = time.monotonic()
+            late = now - due
+            self.max_late = max(self.max_late, late)
+            if late > 0.1:
+                self.stalls.append((now, late))
+            due = now + self.period
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+
+@pytest.fixture
+def stall_meter():
+    m = StallMeter()
+    try:
+        yield m
+    finally:
+        m.stop()
 
 
 def wait_for(pred, timeout: float, what: str, step: float = 0.05):

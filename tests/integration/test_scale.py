@@ -13,6 +13,18 @@ the slower days of this machine (a raw Zenoh agent at 8–9 % of a core instead 
 agents' sessions still dropped and re-joined once in 20 s (a 28 ms reconnect).
 That is recorded as open in issue 13; this test holds the runtime to "loaded, not
 dead" near capacity.
+
+Overload alone does not make a token flap (measured 2026-12-02 with every process
+of the test in a CPU-quota cgroup: at 0.7 of a core agents ran at 52 Hz with 245
+missed deadlines, at 0.45 of a core at 31 Hz with 746; beside 11 busy-looping
+processes at 100 Hz; no flap in any).  CI's machine once flapped one agent's
+session (2026-12-02: lost every token, back 0.6 s later; agents there at 61 Hz):
+a link silent for the 1 s lease, which overload does not do, and a machine that
+stops (a virtual CPU descheduled by its host) does.  So a flap is accepted only
+when the test process itself measured such a stop (``StallMeter``) and the token
+came back; without one it fails the test as before.  (At 0.45 of a core the
+quota itself made the meter late by up to 0.28 s: well below the 0.75 s taken as
+a stop.)
 """
 
 from __future__ import annotations
@@ -23,14 +35,16 @@ from collections import defaultdict
 import pytest
 
 from tests.integration.conftest import pid_alive, zswarm
+from zswarm.bus import LEASE_MS
 from zswarm.generate import generate
 from zswarm.record import read
 
 pytestmark = pytest.mark.integration
 N, DURATION = 16, 20.0
+LEASE_S = LEASE_MS / 1000
 
 
-def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path):
+def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path, stall_meter):
     text, sc = generate("bearing-fixed", N, 1, duration=DURATION)
     topo = tmp_path / "gen16.toml"
     topo.write_text(text)
@@ -43,13 +57,24 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     assert s["completed"]
     assert all(a["alive_at_end"] for a in s["agents"].values()), {i: a["alive_at_end"] for i, a in s["agents"].items()}
     assert all(v == 0 for v in s["exit_codes"].values()), s["exit_codes"]
-    # No agent gave up on the world while the run was on (the world's token goes at the end,
-    # after the agents' last tick: an agent may log that, never a stop before its last step).
+    stall_meter.stop()
+    # A flap (a token gone and back while its process ran) is a false failure unless the
+    # machine itself stopped: every link carries a message at least every 20 ms of wall
+    # time here and a keep-alive every lease/4 when idle, so a link is silent for the
+    # lease only if its ends were stopped for at least lease - lease/4.  The stall meter
+    # (conftest.StallMeter) sees such a stop of the machine; a flap without one is the
+    # runtime's fault (as when Zenoh's receiving thread waited for the GIL: 5 of 16
+    # agents flapped in 20 s on an idle machine).
+    machine_stopped = stall_meter.max_late >= 0.75 * LEASE_S
+    longest = sorted(stall_meter.stalls, key=lambda st: -st[1])[:5]
+    why = f"the machine's longest stop: {stall_meter.max_late:.3f} s ({len(stall_meter.stalls)} over 0.1 s; longest at: {longest})"
+    # No agent gave up on the world (the world's token goes at the end, after the agents'
+    # last tick: an agent may log that, never a stop before its last step).
     for i in sc.ids:
         log = (out / "logs" / f"agent-{i}.log").read_text()
         assert "did not come back" not in log, (i, log[-2000:])
         before_end = log.split("stopped after")[0]
-        assert "lost the world's token" not in before_end, (i, log[-2000:])
+        assert machine_stopped or "lost the world's token" not in before_end, (i, why, log[-2000:])
     # Liveliness: every token appeared once and went at most once (at the end), and only
     # the keys of processes the run started appeared.
     changes: dict[str, list[bool]] = defaultdict(list)
@@ -62,7 +87,10 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     expected = {f"zswarm/{run_id}/alive/agent/{i}" for i in sc.ids} | {f"zswarm/{run_id}/alive/world/0", f"zswarm/{run_id}/alive/recorder/0"}
     assert set(changes) == expected, set(changes) ^ expected
     for key, seq in changes.items():
-        assert seq in ([True], [True, False]), (key, seq)
+        # after a stop of the machine, a token may go and come back, alternating, and
+        # must be back before the end (every agent alive at the end: asserted above)
+        flapped = seq[:1] == [True] and all(a != b for a, b in zip(seq, seq[1:]))
+        assert seq in ([True], [True, False]) or (machine_stopped and flapped), (key, seq, why)
     assert topics <= {"truth", "sense", "edge", "est", "stats", "ctl", "events"}, topics
     # The recording: what each process says it published (final stats), per channel,
     # against what was recorded.  Either nothing is missing or the count says how much.
@@ -74,3 +102,4 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     # published: a truth and N sense messages per world sample, an est per step, edges, stats
     assert rec["published"] > s["world"]["samples"] * (N + 1) + steps
     assert not [c for c in procs.adopt(out) if pid_alive(c["pid"])]
+    print(why)
