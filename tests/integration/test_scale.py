@@ -64,7 +64,7 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     # lease only if its ends were stopped for at least lease - lease/4.  The stall meter
     # (conftest.StallMeter) sees such a stop of the machine; a flap without one is the
     # runtime's fault (as when Zenoh's receiving thread waited for the GIL: 5 of 16
-    # agents flapped in 20 s on an idle machine).
+    # agents flapped in a 20 s run at time scale 1, over this machine's capacity).
     machine_stopped = stall_meter.max_late >= 0.75 * LEASE_S
     longest = sorted(stall_meter.stalls, key=lambda st: -st[1])[:5]
     why = f"the machine's longest stop: {stall_meter.max_late:.3f} s ({len(stall_meter.stalls)} over 0.1 s; longest at: {longest})"
