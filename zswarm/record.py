@@ -211,7 +211,8 @@ class RawOut:
         # is read front to back (:func:`read`, by :func:`transcode`), and the viewer
         # recording made from it has its indexes.  (What else grew in the 1-hour soak,
         # bench/soak.py, was Zenoh's receive batches held by samples waiting for the
-        # recorder's poll: see ZenohBus.subscribe_polled.)
+        # recorder's poll, see ZenohBus.subscribe_polled, and the free memory glibc kept
+        # after a catch-up, which cli.cmd_record gives back with procutil.trim_heap.)
         opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="", emit_chunk_indexes=False, emit_message_indexes=False)
         self.writer: Any = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
         if metadata:
