@@ -600,6 +600,14 @@ def cmd_record(args: argparse.Namespace) -> int:
                 while not stop.is_set() and time.monotonic() < end:
                     stop.wait(0.01)
                     rec.poll()
+                rec.poll()
+                missing = rec.missing_finals(procs)
+                if missing:  # the report will call them not alive at the end: say what was seen of them
+                    log.warning(
+                        "no final stats from %s (token up at the end: %s)",
+                        ", ".join(f"{r} {i}" for r, i in missing),
+                        ", ".join(f"{r} {i}: {rec.alive.get(keys.alive(run, r, i))}" for r, i in missing),
+                    )
         finally:
             rec.close()
             log.info("closed recording: %d messages", rec.count)

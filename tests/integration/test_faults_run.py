@@ -9,7 +9,7 @@ import json
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import wait_for, zswarm
+from tests.integration.conftest import not_alive, wait_for, zswarm
 from zswarm.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
@@ -70,7 +70,7 @@ def test_a_killed_agent_is_flagged_rejoins_and_the_team_reconverges(procs, tmp_p
 
 
 def test_a_router_restart_and_a_hung_agent(procs, tmp_path):
-    s, _out, _log = _run(procs, tmp_path, 14, "router,at=5,duration=1", "stop,agent=5,at=9,duration=2")
+    s, out, _log = _run(procs, tmp_path, 14, "router,at=5,duration=1", "stop,agent=5,at=9,duration=2")
     f, hung = s["faults"]
     acts = {a["action"]: a["taken_at"] for a in s["fault_actions"]}
     down = acts["router_up"] - acts["router_down"]
@@ -80,7 +80,7 @@ def test_a_router_restart_and_a_hung_agent(procs, tmp_path):
     assert 0.9 < down < 1.5, s["fault_actions"]
     # Every process came back: exit 0, every agent's final stats recorded.
     assert all(c == 0 for c in s["exit_codes"].values()), s["exit_codes"]
-    assert all(a["alive_at_end"] for a in s["agents"].values())
+    assert not (why := not_alive(out, s)), why
     # Loss counted from sequence numbers: each sensor stream lost the world's samples of the
     # outage (200 Hz of world time), plus those sent while the clients reconnected (≤ 0.5 s
     # of wall time measured, 0.25 s of world time at 0.5; 1 s allowed).

@@ -28,7 +28,7 @@ import math
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import stop_tail, zswarm
+from tests.integration.conftest import not_alive, stop_tail, zswarm
 from zswarm.report import make_report
 from zswarm.scenario import load, parse_override
 from zswarm.sim import simulate
@@ -46,7 +46,8 @@ def run(procs, tmp_path, sets, duration, scale=1.0):
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()
     s = json.loads((out / "summary.json").read_text())
-    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["completed"]
+    assert not (why := not_alive(out, s)), why
     return out, s
 
 

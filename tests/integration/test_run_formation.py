@@ -31,7 +31,7 @@ import json
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import zswarm
+from tests.integration.conftest import not_alive, zswarm
 from zswarm.report import make_report
 from zswarm.scenario import load
 from zswarm.sim import simulate
@@ -52,7 +52,8 @@ def test_decarli_over_zenoh_matches_sim(procs, tmp_path):
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()
     s = json.loads((out / "summary.json").read_text())
-    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["completed"]
+    assert not (why := not_alive(out, s)), why
     sim_out = tmp_path / "sim"
     sim_out.mkdir()
     msgs = simulate(sc, sim_out, DURATION, sc.seed, lean=True, record=False)  # in memory: the report needs no file

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import stop_tail, wait_for, zswarm
+from tests.integration.conftest import not_alive, stop_tail, wait_for, zswarm
 from zswarm import keys, wire
 from zswarm.bus import ZenohBus, zenoh_config
 from zswarm.report import make_report
@@ -71,7 +71,8 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
-    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["completed"]
+    assert not (why := not_alive(out, s)), why
 
     # Every bad command counted, none applied (a NaN torque would never let the run settle).
     assert s["commands"]["malformed"] == 5, s["commands"]
@@ -140,7 +141,8 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
-    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["completed"]
+    assert not (why := not_alive(out, s)), why
     for e in s["edges"].values():
         j = e["jump_log"][0]
         assert j["t"] < 0.1 and j["xi_after"] == pytest.approx(0.9 * math.pi)

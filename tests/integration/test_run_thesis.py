@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import assert_run_matches_sim, zswarm
+from tests.integration.conftest import assert_run_matches_sim, not_alive, zswarm
 from zswarm.report import make_report
 from zswarm.scenario import load
 from zswarm.sim import simulate
@@ -38,7 +38,8 @@ def run(procs, tmp_path, name, time_scale=1.0):
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()
     s = json.loads((out / "summary.json").read_text())
-    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["completed"]
+    assert not (why := not_alive(out, s)), why
     assert all(c["dropped"] == 0 for c in s["links"].values()), s["links"]
     sim_out = tmp_path / "sim"
     sim_out.mkdir()

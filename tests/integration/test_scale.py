@@ -34,7 +34,7 @@ from collections import defaultdict
 
 import pytest
 
-from tests.integration.conftest import pid_alive, zswarm
+from tests.integration.conftest import not_alive, pid_alive, zswarm
 from zswarm.bus import LEASE_MS
 from zswarm.generate import generate
 from zswarm.record import read
@@ -55,7 +55,7 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert s["completed"]
-    assert all(a["alive_at_end"] for a in s["agents"].values()), {i: a["alive_at_end"] for i, a in s["agents"].items()}
+    assert not (why := not_alive(out, s)), why
     assert all(v == 0 for v in s["exit_codes"].values()), s["exit_codes"]
     stall_meter.stop()
     # A flap (a token gone and back while its process ran) is a false failure unless the

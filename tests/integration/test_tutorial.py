@@ -19,7 +19,7 @@ import sys
 import pytest
 
 from tests.conftest import ROOT
-from tests.integration.conftest import assert_run_matches_sim, zswarm
+from tests.integration.conftest import assert_run_matches_sim, not_alive, zswarm
 
 pytestmark = pytest.mark.integration
 
@@ -51,7 +51,8 @@ def test_tutorial_observer_on_sim_and_run(procs, tmp_path):
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()
     s = json.loads((out / "summary.json").read_text())
-    assert s["completed"] and all(a["alive_at_end"] for a in s["agents"].values())
+    assert s["completed"]
+    assert not (why := not_alive(out, s)), why
     assert_run_matches_sim(s, ss, ("mean_position_error_final",), tmp_path / "launcher.log")
     assert all(a["malformed_received"] == 0 for a in s["agents"].values())
 
