@@ -129,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         node.publish_stats(min(clock[0].now(), start["duration"]), final=True)
         c = node.counters()
         log.info("stopped after %d steps (%.2f Hz, %d missed deadlines)", c["steps"], c["step_rate_hz"], c["missed_deadlines"])
+        procutil.confirm_final(bus, keys.recorded(run, "agent", args.id), log)
     return 0
 
 

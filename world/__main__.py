@@ -107,8 +107,9 @@ def main(argv: list[str] | None = None) -> int:
         world.publish_stats(end_t, final=True)
         pub_stop.put(wire.encode("stop", 0, 0, end_t, inc=world.inc, reason=reason))
         log.info("stopped (%s) at t = %.3f s after %d samples, %d late", reason, end_t, world.samples, world.late)
-        # Give the stop message time to leave before the session closes.
-        time.sleep(0.1)
+        # Asked after the stop: once the recorder answers, the router has passed the stop on too.
+        if not procutil.confirm_final(bus, keys.recorded(run, "world", 0), log):
+            time.sleep(0.1)  # no recorder: give the stop message time to leave before the session closes
     return 0
 
 

@@ -315,6 +315,30 @@ class ZenohBus:
 
         return drain
 
+    def queryable_polled(self, key_expr: str, capacity: int = 256) -> Callable[[], list[Any]]:
+        """Queries on ``key_expr`` waiting in a FIFO; the returned function takes them (Zenoh
+        ``Query`` objects: the owner replies and then ``drop()``s each, which ends it for the
+        querier).  Polled like :meth:`subscribe_polled`: the owner answers from its own loop."""
+        q = self.session.declare_queryable(key_expr, self._z.handlers.FifoChannel(capacity))
+        self._objs.append(q)
+
+        def take() -> list[Any]:
+            out = []
+            while (query := q.try_recv()) is not None:
+                out.append(query)
+            return out
+
+        return take
+
+    def confirm(self, key: str, timeout: float) -> bool:
+        """Ask ``key`` (a Zenoh query) and wait up to ``timeout`` s for a reply: True if one
+        came.  False at once when nothing serves ``key`` (Zenoh ends such a query
+        immediately).  The query goes after everything this session has sent on the same
+        priority, and the session stays open meanwhile (see
+        :func:`zswarm.keys.recorded`)."""
+        replies = self.session.get(key, timeout=timeout)
+        return any(reply.ok is not None for reply in replies)
+
     def declare_token(self, key: str) -> None:
         token = self.session.liveliness().declare_token(key)
         self._objs.append(token)

@@ -68,6 +68,27 @@ def alive_all(run: str) -> str:
     return f"{ROOT}/{run}/alive/**"
 
 
+def recorded(run: str, role: str, i: int) -> str:
+    """Asked (a Zenoh query) by a process that has sent its final stats, answered by the
+    recorder once it has them: the process keeps its session open until then."""
+    return f"{ROOT}/{run}/recorded/{role}/{i}"
+
+
+def recorded_all(run: str) -> str:
+    return f"{ROOT}/{run}/recorded/*/*"
+
+
+def parse_recorded(run: str, key: str) -> tuple[str, int] | None:
+    """``(role, id)`` of a :func:`recorded` key of ``run``, or None if it is not one."""
+    parts = key.split("/")
+    if len(parts) != 5 or parts[:3] != [ROOT, run, "recorded"] or parts[3] not in ("agent", "world"):
+        return None
+    try:
+        return parts[3], int(parts[4])
+    except ValueError:
+        return None
+
+
 def everything(run: str) -> str:
     return f"{ROOT}/{run}/**"
 

@@ -11,6 +11,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
@@ -210,6 +211,32 @@ def warm_up() -> None:
     np.percentile(np.arange(4.0), [50, 99])
     gc.collect()
     gc.freeze()
+
+
+# How long a process that sent its final stats waits for the recorder to confirm them
+# before it closes its session.  Closing at once lost them: with the recorder frozen for
+# 0.5 s as the run ended (cgroup freezer, 2026-12-02), 4 of 8 agents' final stats never
+# left the router, seen neither by the recorder nor by a second subscriber that was not
+# frozen, while the router delivered the world's stop to that subscriber 60 ms late.
+# `zswarm run` gives its processes 6 s after the world's end before it kills them: 3 s
+# leaves the rest for an agent behind its schedule.
+FINAL_CONFIRM_S = 3.0
+
+
+def confirm_final(bus: Any, key: str, log: logging.Logger, timeout: float = FINAL_CONFIRM_S) -> bool:
+    """After a process's final stats: wait until the recorder has them (``key``, a
+    :func:`zswarm.keys.recorded` key) before the session closes, at most ``timeout`` s.
+    False at once when no recorder serves the run (then nothing was lost by closing)."""
+    t0 = time.monotonic()
+    ok = bus.confirm(key, timeout)
+    waited = time.monotonic() - t0
+    if ok:
+        log.info("final stats recorded (confirmed in %.3f s)", waited)
+    elif waited >= 0.9 * timeout:
+        log.warning("final stats not confirmed by the recorder within %.1f s", timeout)
+    else:
+        log.info("final stats not confirmed: no recorder answered")
+    return ok
 
 
 def stop_on_signals() -> threading.Event:

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -52,12 +53,14 @@ from zswarm.viz import object_schema
 log = logging.getLogger("zswarm.record")
 
 ALIVE_CHANNEL = "events/alive"
-# The final stats of a process whose token went up to this long before the world's stop
-# arrived are still waited for (Recorder.awaiting_finals): a clean stop goes after the
-# stop was sent, and only the recorder's lag and stops of the machine put it before; 2 s
-# is over 3x the longest stop inferred on CI (0.6 s, README "How many agents?"), and the
-# recorder's whole wait stays bounded by cli.FINAL_STATS_WAIT_S.
-GONE_GRACE_S = 2.0
+# After the world's stop, the final stats of a process that sent stats this recently (in
+# world time) before the stop's time are waited for even if its token is gone
+# (Recorder.awaiting_finals): every process sends stats once a second of world time, so
+# one that ran to the end sent some within the last second; 2 s allows a late one.
+RECENT_STATS_S = 2.0
+# A process's question "are my final stats recorded?" (keys.recorded) is held this long
+# for them to arrive, then let go; the asker gives up earlier (procutil.FINAL_CONFIRM_S).
+HOLD_RECORDED_S = 5.0
 MALFORMED_CHANNEL = "events/malformed"
 # The message type(s) each stream kind carries.
 STREAM_TYPES: dict[str, str | tuple[str, ...]] = {
@@ -324,8 +327,8 @@ class Recorder:
         self.count = 0
         self.alive: dict[str, bool] = {}
         self.finals: set[str] = set()  # stats keys whose final counters have arrived
-        self.gone_at: dict[str, int] = {}  # liveliness key -> when its token went (now_ns)
-        self.stop_t: int | None = None  # when the world's stop arrived (now_ns)
+        self.stats_t: dict[str, float] = {}  # stats key -> world time of its latest stats
+        self.stop_t: float | None = None  # world time of the world's stop
         self.stopped = threading.Event()
         self._closed = False
         self.out: ViewerOut | RawOut | None = None
@@ -341,6 +344,11 @@ class Recorder:
         self._drain = bus.subscribe_polled(keys.everything(run), self.now_ns) if hasattr(bus, "subscribe_polled") else None
         if self._drain is None:
             bus.subscribe(keys.everything(run), self._on_data)
+        # Processes asking whether their final stats are recorded (keys.recorded): answered
+        # once they are, from poll(); held at most HOLD_RECORDED_S.
+        self._queries = bus.queryable_polled(keys.recorded_all(run)) if hasattr(bus, "queryable_polled") else None
+        self._held: list[tuple[Any, str, float]] = []  # (query, stats key, time.monotonic() to give up)
+        self.confirmed = 0  # finals confirmed to their senders
         bus.watch_alive(keys.alive_all(run), self._on_alive)
 
     @property
@@ -360,39 +368,45 @@ class Recorder:
             self._buf.append((stream, payload, t))
         if key.endswith("/ctl/stop"):
             try:
-                wire.decode_ctl(payload, "stop")  # only the world's stop ends the recording
+                m = wire.decode_ctl(payload, "stop")  # only the world's stop ends the recording
                 if self.stop_t is None:
-                    self.stop_t = t
+                    self.stop_t = m["t"]
                 self.stopped.set()
             except wire.MessageError:
                 pass  # recorded as it came, counted as malformed where it is written
         elif "/stats/" in key and key not in self.finals:  # once a second per process: decoding is cheap
             try:
-                if decode(payload, "stats")["counters"].get("final"):
-                    self.finals.add(key)
+                m = decode(payload, "stats")
+                final = m["counters"].get("final")
             except (wire.MessageError, AttributeError):
-                pass  # counted as malformed where it is written
+                return  # counted as malformed where it is written
+            with self._lock:
+                self.stats_t[key] = max(m["t"], self.stats_t.get(key, -math.inf))
+                if final:
+                    self.finals.add(key)
 
-    def awaiting_finals(self, procs: list[tuple[str, int]], grace_s: float = GONE_GRACE_S) -> list[tuple[str, int]]:
+    def awaiting_finals(self, procs: list[tuple[str, int]], recent_s: float = RECENT_STATS_S) -> list[tuple[str, int]]:
         """The processes (role, id) whose final stats have not arrived and that are still up
-        (liveliness token present) or whose token went after ``grace_s`` before the world's
-        stop arrived (before now if it has not): each sends them as it stops, and the
+        (liveliness token present) or, once the world's stop has come, sent stats less
+        than ``recent_s`` of world time before it: each sends them as it stops, and the
         report's "alive at the end" and what the recording lacks rest on them.
 
-        Why the gone ones: a process sends its final stats and then closes its session,
-        but the token's going can be seen here first: it is handled on Zenoh's thread at
-        once, while a sample waits for the bus's thread and then for :meth:`poll` (a §3.2
-        run of 2026-12-02 had the final stats stamped 0.1 ms after the token went, for 2
-        of its 8 agents), and a recorder behind on its backlog sees the world's stop late.
-        A process killed mid-run went long before the stop: not waited for."""
-        ref = self.now_ns() if self.stop_t is None else self.stop_t
-        since = ref - int(grace_s * 1e9)
+        Why not the token alone: a process sends its final stats and then closes its
+        session, but the token's going can be seen here first.  It is a declaration,
+        which Zenoh sends ahead of data (control priority; the final stats are data
+        priority, behind every real-time sample queued for this recorder when it lags),
+        and it is handled on Zenoh's thread at once while a sample waits for the bus's
+        thread and for :meth:`poll` (a §3.2 run of 2026-12-02 had the final stats stamped
+        0.1 ms after the token went, for 2 of its 8 agents).  The stats' world time is on
+        the data path itself, behind any backlog like the final stats, so a lagging
+        recorder still tells a process that ran to the end from one killed mid-run."""
         with self._lock:
+            recent = math.inf if self.stop_t is None else self.stop_t - recent_s  # no stop yet: the tokens alone
             return [
                 (r, i)
                 for r, i in procs
-                if keys.stats(self.run, r, i) not in self.finals
-                and (self.alive.get(k := keys.alive(self.run, r, i), False) or self.gone_at.get(k, since - 1) >= since)
+                if (k := keys.stats(self.run, r, i)) not in self.finals
+                and (self.alive.get(keys.alive(self.run, r, i), False) or self.stats_t.get(k, -math.inf) >= recent)
             ]
 
     def missing_finals(self, procs: list[tuple[str, int]]) -> list[tuple[str, int]]:
@@ -405,10 +419,6 @@ class Recorder:
         event = {"key": key, "alive": alive, "t_wall": time.time()}
         with self._lock:
             self.alive[key] = alive
-            if alive:
-                self.gone_at.pop(key, None)
-            else:
-                self.gone_at[key] = t
             self._buf.append((ALIVE_CHANNEL, event if self.out is not None else msgpack.packb(event), t))
 
     def poll(self) -> None:
@@ -424,6 +434,8 @@ class Recorder:
         if self._drain is not None:
             for key, payload, t in self._drain():
                 self._on_data(key, payload, t)
+        if self._queries is not None:
+            self._answer(self._queries())
         with self._lock:
             buf, self._buf = self._buf, []
             if self._closed:
@@ -441,14 +453,52 @@ class Recorder:
                 self.out.flush()
             self.count = self.out.count
 
+    def _answer(self, new: list[Any]) -> None:
+        """Reply to each process that asked whether its final stats are recorded and whose
+        final stats are in (taken by this poll or an earlier one); let go of a question
+        held HOLD_RECORDED_S (its sender stops asking first, procutil.FINAL_CONFIRM_S) or
+        foreign."""
+        now = time.monotonic()
+        for query in new:
+            who = keys.parse_recorded(self.run, str(query.key_expr))
+            if who is None:
+                _drop(query)
+                continue
+            self._held.append((query, keys.stats(self.run, *who), now + HOLD_RECORDED_S))
+        keep = []
+        for query, key, give_up in self._held:
+            if key in self.finals:
+                try:
+                    query.reply(query.key_expr, b"1")
+                    self.confirmed += 1
+                except Exception as exc:  # noqa: BLE001 - the asker may be gone: nothing to answer
+                    log.debug("could not confirm %s: %s", key, exc)
+                _drop(query)
+            elif now >= give_up or self._closed:
+                _drop(query)
+            else:
+                keep.append((query, key, give_up))
+        self._held = keep
+
     def close(self) -> None:
         self.flush()
+        for query, _key, _t in self._held:
+            _drop(query)
+        self._held = []
         with self._lock:
             if self._closed:
                 return
             self._closed = True
             if self.out is not None:
                 self.out.close()
+
+
+def _drop(query: Any) -> None:
+    """End a Zenoh query for its asker (it is finalized when every copy is dropped)."""
+    try:
+        query.drop()
+    except Exception as exc:  # noqa: BLE001 - dropped already, or the session is closing
+        log.debug("query drop: %s", exc)
 
 
 def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:

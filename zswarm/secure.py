@@ -166,7 +166,8 @@ def own_keys(run: str, role: str, ident: int) -> tuple[list[str], list[str]]:
 
 def acl(run: str, procs: Iterable[tuple[str, int]]) -> dict[str, Any]:
     """The router's ``access_control`` for a run of the processes ``procs`` ((role, id)):
-    deny by default; everyone may subscribe and receive; each may put only its own keys."""
+    deny by default; everyone may subscribe and receive; each may put only its own keys,
+    and ask only whether its own final stats are recorded, which the recorder answers."""
     prefix = f"{keys.ROOT}/{run}/**"
     rules: list[dict[str, Any]] = [
         {
@@ -177,14 +178,21 @@ def acl(run: str, procs: Iterable[tuple[str, int]]) -> dict[str, Any]:
             "key_exprs": [prefix],
         },
         {"id": "deliver", "permission": "allow", "flows": ["egress"], "messages": ["put", "liveliness_token"], "key_exprs": [prefix]},
+        # "Are my final stats recorded?" (keys.recorded): asked by each process of its own key
+        # (below), served and answered by the recorder only.
+        {"id": "recorded", "permission": "allow", "flows": ["egress"], "messages": ["query", "reply", "declare_queryable"], "key_exprs": [keys.recorded_all(run)]},
     ]
     subjects: list[dict[str, Any]] = [{"id": "anyone"}]
-    policies: list[dict[str, Any]] = [{"rules": ["read", "deliver"], "subjects": ["anyone"]}]
+    policies: list[dict[str, Any]] = [{"rules": ["read", "deliver", "recorded"], "subjects": ["anyone"]}]
     for role, ident in procs:
         name = name_of(role, ident)
         puts, tokens = own_keys(run, role, ident)
         own = [{"id": f"put {name}", "permission": "allow", "flows": ["ingress"], "messages": ["put"], "key_exprs": puts}] if puts else []
         own.append({"id": f"token {name}", "permission": "allow", "flows": ["ingress"], "messages": ["liveliness_token"], "key_exprs": tokens})
+        if role == "recorder":
+            own.append({"id": f"answer {name}", "permission": "allow", "flows": ["ingress"], "messages": ["declare_queryable", "reply"], "key_exprs": [keys.recorded_all(run)]})
+        else:
+            own.append({"id": f"ask {name}", "permission": "allow", "flows": ["ingress"], "messages": ["query"], "key_exprs": [keys.recorded(run, role, ident)]})
         rules += own
         subjects.append({"id": name, "cert_common_names": [name]})
         policies.append({"rules": [r["id"] for r in own], "subjects": [name]})

@@ -93,55 +93,41 @@ def test_the_raw_recording_transcodes_to_the_same_recording(tmp_path, fixed8):
 def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
     """After the run's stop the recorder waits for each process still up to send its final
     stats (a fixed second was not always enough on a loaded machine), and for one whose
-    token went less than GONE_GRACE_S before the stop arrived (its final stats, sent
-    before, can be seen after); one whose token went before that is not waited for."""
+    token is gone but which sent stats within RECENT_STATS_S of world time before the stop
+    (its final stats, sent before the token went, can be seen after); one killed earlier
+    is not waited for."""
     from zswarm import keys, wire
     from zswarm.bus import MemoryBus
-    from zswarm.record import GONE_GRACE_S, Recorder
+    from zswarm.record import RECENT_STATS_S, Recorder
 
     bus = MemoryBus()
-    clock = [0]  # the recorder's now_ns
-    rec = Recorder(bus, "r", None, now_ns=lambda: clock[0])
-    procs = [("world", 0), ("agent", 1), ("agent", 2), ("agent", 3), ("agent", 4)]
+
+    def stats(role, i, seq, t, final):
+        bus.publisher(keys.stats("r", role, i)).put(wire.encode("stats", i, seq, t, role=role, counters={"final": final}))
+
+    rec = Recorder(bus, "r", None, now_ns=lambda: 0)
+    procs = [("world", 0), ("agent", 1), ("agent", 2), ("agent", 3), ("agent", 4), ("agent", 5)]
     for role, i in procs[:3] + procs[4:]:  # agent 3 never came up
         bus.declare_token(keys.alive("r", role, i))
     assert rec.awaiting_finals(procs) == procs[:3] + procs[4:]
-    bus.undeclare_token(keys.alive("r", "agent", 4))  # killed mid-run, 10 s before the stop
-    clock[0] = 10_000_000_000
+    for role, i in procs:
+        if i != 3:
+            stats(role, i, 0, 1.0, False)
+    for i in (4, 5):  # killed mid-run (no final stats); 5 sent stats RECENT_STATS_S before the end
+        stats("agent", i, 1, 10.0 - (2 * RECENT_STATS_S if i == 4 else RECENT_STATS_S), False)
+        bus.undeclare_token(keys.alive("r", "agent", i))
+    assert rec.awaiting_finals(procs) == procs[:3]  # before the stop: the tokens alone
+    stats("world", 0, 1, 10.0, True)
     bus.publisher(keys.ctl("r", "stop")).put(wire.encode("stop", 0, 0, 10.0, reason="duration"))
-    assert rec.stopped.is_set() and rec.stop_t == clock[0]
-    clock[0] += int(5 * GONE_GRACE_S * 1e9)  # whenever the recorder looks, the stop's time is what counts
-    bus.publisher(keys.stats("r", "agent", 1)).put(wire.encode("stats", 1, 0, 1.0, role="agent", counters={"final": False}))
-    bus.publisher(keys.stats("r", "world", 0)).put(wire.encode("stats", 0, 1, 2.0, role="world", counters={"final": True}))
-    bus.publisher(keys.stats("r", "agent", 2)).put(wire.encode("stats", 2, 0, 1.0, role="agent", counters=5))  # malformed: still awaited
-    assert rec.awaiting_finals(procs) == [("agent", 1), ("agent", 2)]
-    bus.publisher(keys.stats("r", "agent", 1)).put(wire.encode("stats", 1, 1, 2.0, role="agent", counters={"final": True}))
-    bus.undeclare_token(keys.alive("r", "agent", 2))  # gone after the stop: its final stats may still come
-    assert rec.awaiting_finals(procs) == [("agent", 2)]
-    assert rec.missing_finals(procs) == [("agent", 2), ("agent", 4)]  # agent 3, never seen, is not counted
-    bus.publisher(keys.stats("r", "agent", 2)).put(wire.encode("stats", 2, 1, 3.0, role="agent", counters={"final": True}))
-    assert rec.awaiting_finals(procs) == [] and rec.missing_finals(procs) == [("agent", 4)]
-
-
-def test_a_token_gone_within_the_grace_before_the_stop_is_waited_for():
-    """The recorder may be behind: a process that stopped cleanly just before the world's
-    stop was seen (GONE_GRACE_S) is waited for; without a stop, now is the reference."""
-    from zswarm import keys, wire
-    from zswarm.bus import MemoryBus
-    from zswarm.record import GONE_GRACE_S, Recorder
-
-    bus = MemoryBus()
-    clock = [0]
-    rec = Recorder(bus, "r", None, now_ns=lambda: clock[0])
-    procs = [("agent", 1)]
-    bus.declare_token(keys.alive("r", "agent", 1))
-    clock[0] = 1_000_000_000
-    bus.undeclare_token(keys.alive("r", "agent", 1))
-    clock[0] += int(0.5 * GONE_GRACE_S * 1e9)
-    assert rec.awaiting_finals(procs) == procs  # no stop yet: gone half the grace ago
-    clock[0] += int(GONE_GRACE_S * 1e9)
-    assert rec.awaiting_finals(procs) == []  # 1.5 x the grace ago
-    bus.publisher(keys.ctl("r", "stop")).put(wire.encode("stop", 0, 0, 10.0, reason="duration"))
-    assert rec.awaiting_finals(procs) == []  # the stop came 1.5 x the grace after it went
-    bus.declare_token(keys.alive("r", "agent", 1))  # back (a restart): awaited as up
-    assert rec.awaiting_finals(procs) == procs
+    assert rec.stopped.is_set() and rec.stop_t == 10.0
+    bus.publisher(keys.stats("r", "agent", 2)).put(wire.encode("stats", 2, 1, 2.0, role="agent", counters=5))  # malformed: not a final
+    assert rec.awaiting_finals(procs) == [("agent", 1), ("agent", 2), ("agent", 5)]
+    stats("agent", 1, 1, 9.5, False)
+    bus.undeclare_token(keys.alive("r", "agent", 1))  # its token seen going before its final stats
+    assert rec.awaiting_finals(procs) == [("agent", 1), ("agent", 2), ("agent", 5)]
+    stats("agent", 1, 2, 10.0, True)
+    stats("agent", 2, 2, 10.0, True)
+    assert rec.awaiting_finals(procs) == [("agent", 5)]
+    assert rec.missing_finals(procs) == [("agent", 4), ("agent", 5)]  # agent 3, never seen, is not counted
+    bus.declare_token(keys.alive("r", "agent", 4))  # back (a restart): awaited as up
+    assert rec.awaiting_finals(procs, recent_s=0.0) == [("agent", 4)]

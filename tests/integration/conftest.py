@@ -193,6 +193,14 @@ def not_alive(out: Path, s: dict, expect_dead: tuple[str, ...] = ()) -> str:
     return "\n".join(lines)
 
 
+def unconfirmed(out: Path) -> list[str]:
+    """The processes of the run in ``out`` whose logs do not say the recorder confirmed
+    their final stats (procutil.confirm_final) before they closed their session."""
+    logs = [p for p in sorted((out / "logs").glob("*.log")) if p.stem == "world" or p.stem.startswith("agent-")]
+    assert logs, out
+    return [p.stem for p in logs if "final stats recorded (confirmed" not in p.read_text(errors="replace")]
+
+
 def zswarm(*args: str) -> list[str]:
     return [sys.executable, "-m", "zswarm", *args]
 

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, wait_for, zswarm
+from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, zswarm
 from zswarm.record import read
 from zswarm.report import load_recording
 from zswarm.scenario import load as load_scenario
@@ -36,6 +36,7 @@ def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
     sc = load_scenario(TOPO / f"{name}.toml")
     assert s["engine"] == "run" and s["completed"]
     assert not (why := not_alive(out, s)), why
+    assert not unconfirmed(out)  # every agent and the world had the recorder's word before closing
     for i, a in s["agents"].items():
         if not s["overload"]["overloaded"]:
             # A run that kept up (≤ 2 % missed ticks and skipped samples) publishes at the

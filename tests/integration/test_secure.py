@@ -15,7 +15,7 @@ import pytest
 import zenoh
 
 from tests.conftest import TOPO
-from tests.integration.conftest import wait_for, zswarm
+from tests.integration.conftest import unconfirmed, wait_for, zswarm
 from zswarm import keys, so3, wire
 from zswarm.bus import zenoh_config
 from zswarm.launch import free_port
@@ -67,6 +67,7 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
     assert s["links"]["3->4"].get("restarts", 0) == 0 and s["agents"]["4"]["malformed_received"] == 0
     assert OWN_INC in incs["edge/4/5"] and s["links"]["4->5"]["restarts"] >= 1  # its own key: delivered
     assert all(c == 0 for c in s["exit_codes"].values())
+    assert not unconfirmed(out)  # the access control lets each ask for its own final stats, the recorder answer
 
 
 def test_secure_router_started_by_hand(procs, tmp_path):

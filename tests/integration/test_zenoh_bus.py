@@ -50,3 +50,57 @@ def test_polled_samples_are_copied_and_stamped_on_arrival_and_bounded():
         wait_for(lambda: rest.extend(slow()) or len(rest) >= 400, 30, "the rest of t/slow")
         assert [int.from_bytes(p, "big") for _, p, _ in first + rest] == list(range(500))  # none lost
     wait_for(lambda: not _pumps(), 5, "the threads ended with the bus")
+
+
+def test_the_recorder_confirms_the_final_stats_it_has_and_only_those():
+    """A process asks (ZenohBus.confirm, a query on keys.recorded) before it closes its
+    session: the recorder answers once it has that process's final stats, holds the
+    question until then, and never answers for stats it does not have.  Without a
+    recorder the question ends at once."""
+    from zswarm import keys, wire
+    from zswarm.record import Recorder
+
+    def final(i: int) -> bytes:
+        return wire.encode("stats", i, 0, 1.0, role="agent", counters={"final": True})
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with ZenohBus(zenoh_config("peer", listen=[ep])) as rb, ZenohBus(zenoh_config("peer", connect=[ep])) as pb:
+        rec = Recorder(rb, "r", None)
+        polling = threading.Event()
+
+        def poll() -> None:  # the recorder's loop (zswarm record polls every 10 ms)
+            while not polling.wait(0.01):
+                rec.poll()
+
+        poller = threading.Thread(target=poll)
+        poller.start()
+        try:
+            probe = pb.publisher(keys.stats("r", "agent", 9), block=True)
+            wait_for(lambda: (probe.put(final(9)), pb.confirm(keys.recorded("r", "agent", 9), 1.0))[1], 30, "the peers connected")  # type: ignore[func-returns-value]
+            answer: dict[str, bool] = {}
+            asker = threading.Thread(target=lambda: answer.update(ok=pb.confirm(keys.recorded("r", "agent", 1), 20.0)))
+            asker.start()
+            asker.join(0.5)
+            assert asker.is_alive(), answer  # held: agent 1's final stats have not come
+            pb.publisher(keys.stats("r", "agent", 1), block=True).put(final(1))
+            asker.join(10.0)
+            assert answer == {"ok": True}
+            t0 = time.monotonic()
+            assert not pb.confirm(keys.recorded("r", "agent", 2), 1.0)  # never sent: not confirmed
+            assert time.monotonic() - t0 >= 0.9  # the asker's timeout ended it, not an answer
+            t0 = time.monotonic()
+            assert not pb.confirm("zswarm/r/recorded/someone/1", 5.0)  # not a process of a run: let go at once
+            assert time.monotonic() - t0 < 2.5  # at once: half the 5 s it would wait for an answer
+            assert rec.confirmed == 2
+        finally:
+            polling.set()
+            poller.join()
+            rec.close()
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with ZenohBus(zenoh_config("peer", listen=[ep])) as a, ZenohBus(zenoh_config("peer", connect=[ep])) as b:
+        got: list = []
+        a.subscribe("t/x", lambda k, p: got.append(p))
+        wait_for(lambda: (b.publisher("t/x").put(b"1"), got)[1], 30, "the peers connected")  # type: ignore[func-returns-value]
+        t0 = time.monotonic()
+        assert not b.confirm(keys.recorded("r", "agent", 1), 5.0)  # no recorder: nothing serves the key
+        assert time.monotonic() - t0 < 2.5  # at once: half the 5 s it would wait for an answer
