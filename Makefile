@@ -17,9 +17,10 @@ demo: $(STAMP)
 	$(VENV)/bin/zswarm run topologies/thesis-3.2-fixed8.toml --duration 40
 
 ## make test: unit and component tests on two workers (by file), then the integration tests alone
+## (each part lists its slowest tests: where the suite's time goes, on CI's machine too)
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile
-	$(PY) -m pytest -q -m integration
+	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile --durations=15
+	$(PY) -m pytest -q -m integration --durations=15
 
 ## make test-fast: everything but the integration tests
 test-fast: $(STAMP)
