@@ -1,0 +1,37 @@
+"""Key expressions of the final stats' confirmation, and who may use them under --secure."""
+
+from __future__ import annotations
+
+from zswarm import keys, secure
+from zswarm.bus import key_matches
+
+
+def test_recorded_keys_round_trip_and_refuse_anything_else():
+    for role, i in (("agent", 1), ("agent", 4096), ("world", 0)):
+        k = keys.recorded("r1", role, i)
+        assert key_matches(keys.recorded_all("r1"), k) and keys.parse_recorded("r1", k) == (role, i)
+    for k in (
+        keys.recorded("r2", "agent", 1),  # another run's
+        "zswarm/r1/recorded/recorder/0",  # the recorder sends no final stats to confirm
+        "zswarm/r1/recorded/agent/x",
+        "zswarm/r1/recorded/agent/1/more",
+        keys.stats("r1", "agent", 1),
+    ):
+        assert keys.parse_recorded("r1", k) is None, k
+
+
+def test_access_control_lets_each_process_ask_only_its_own_key_and_only_the_recorder_answer():
+    acl = secure.acl("r1", secure.processes([1, 2]))
+    rules = {r["id"]: r for r in acl["rules"]}
+    by_subject = {p["subjects"][0]: p["rules"] for p in acl["policies"]}
+
+    def allowed(name: str, message: str, flow: str) -> list[str]:
+        return [k for rid in by_subject["anyone"] + by_subject[name] for k in rules[rid]["key_exprs"] if message in rules[rid]["messages"] and flow in rules[rid]["flows"]]
+
+    assert allowed("agent-1", "query", "ingress") == [keys.recorded("r1", "agent", 1)]
+    assert allowed("world", "query", "ingress") == [keys.recorded("r1", "world", 0)]
+    assert allowed("recorder", "query", "ingress") == []
+    for name in ("agent-1", "agent-2", "world"):
+        assert allowed(name, "declare_queryable", "ingress") == [] and allowed(name, "reply", "ingress") == []
+    assert allowed("recorder", "declare_queryable", "ingress") == allowed("recorder", "reply", "ingress") == [keys.recorded_all("r1")]
+    assert allowed("agent-1", "reply", "egress") == [keys.recorded_all("r1")]  # the answer reaches the asker
