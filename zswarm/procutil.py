@@ -228,7 +228,7 @@ def confirm_final(bus: Any, key: str, log: logging.Logger, timeout: float = FINA
     :func:`zswarm.keys.recorded` key) before the session closes, at most ``timeout`` s.
     False at once when no recorder serves the run (then nothing was lost by closing)."""
     t0 = time.monotonic()
-    ok = bus.confirm(key, timeout)
+    ok = bool(bus.confirm(key, timeout))
     waited = time.monotonic() - t0
     if ok:
         log.info("final stats recorded (confirmed in %.3f s)", waited)
