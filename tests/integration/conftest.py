@@ -177,12 +177,12 @@ def wait_for(pred, timeout: float, what: str, step: float = 0.05):
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
-def not_alive(out: Path, s: dict, expect_dead: tuple[str, ...] = ()) -> str:
+def not_alive(out: Path, s: dict) -> str:
     """Why an agent of the run in ``out`` (summary ``s``) reads as not alive at the end, for
-    an assertion's message: "" when every agent but ``expect_dead`` is alive.  "Alive at the
+    an assertion's message: "" when every agent is alive.  "Alive at the
     end" is the final stats in the recording and exit code 0 (report.summarize); which of
     the two failed, and the logs' last lines, tell a crash from stats the recorder missed."""
-    bad = [i for i, a in s["agents"].items() if not a["alive_at_end"] and i not in expect_dead]
+    bad = [i for i, a in s["agents"].items() if not a["alive_at_end"]]
     if not bad:
         return ""
     lines = [f"not alive at the end: agents {bad}; exit codes {s.get('exit_codes')}"]
