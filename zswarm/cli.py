@@ -574,6 +574,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         log.info("recording run %r into %s", run, path)
         if args.live is not None:
             log.info("live view on ws://%s:%d (Foxglove or Lichtblick: open connection, Foxglove WebSocket)", args.live[0], rec.live_port)
+        procs = [("world", 0), *(("agent", i) for i in sc.ids)]
         try:
             next_flush = time.monotonic() + 0.5
             next_trim = time.monotonic() + TRIM_EVERY_S
@@ -591,7 +592,6 @@ def cmd_record(args: argparse.Namespace) -> int:
                 # second was not always enough on a loaded machine (an agent behind its
                 # schedule stops later), and a missed one reads as an agent that died.
                 # Bounded: `zswarm run` kills a process that has not stopped 6 s after the world.
-                procs = [("world", 0), *(("agent", i) for i in sc.ids)]
                 end = time.monotonic() + FINAL_STATS_WAIT_S
                 while not stop.is_set() and time.monotonic() < end and rec.awaiting_finals(procs):
                     stop.wait(0.01)
@@ -600,17 +600,16 @@ def cmd_record(args: argparse.Namespace) -> int:
                 while not stop.is_set() and time.monotonic() < end:
                     stop.wait(0.01)
                     rec.poll()
-                rec.poll()
-                missing = rec.missing_finals(procs)
-                if missing:  # the report will call them not alive at the end: say what was seen of them
-                    log.warning(
-                        "no final stats from %s (token up at the end: %s)",
-                        ", ".join(f"{r} {i}" for r, i in missing),
-                        ", ".join(f"{r} {i}: {rec.alive.get(keys.alive(run, r, i))}" for r, i in missing),
-                    )
         finally:
-            rec.close()
+            rec.close()  # takes what arrived since the last poll
             log.info("closed recording: %d messages", rec.count)
+        if rec.stopped.is_set() and not stop.is_set() and (missing := rec.missing_finals(procs)):
+            # The report will call them not alive at the end: say what was seen of them.
+            log.warning(
+                "no final stats from %s (token up at the end: %s)",
+                ", ".join(f"{r} {i}" for r, i in missing),
+                ", ".join(f"{r} {i}: {rec.alive.get(keys.alive(run, r, i))}" for r, i in missing),
+            )
     if not args.no_report and start:
         summary = report.make_report(out, sc, "run", float(start["duration"]), float(start["time_scale"]), int(start["seed"]))  # type: ignore[arg-type]
         print(report.table(summary))
