@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast bench bench-capacity soak sim clean
+.PHONY: demo test test-fast fuzz bench bench-capacity soak sim clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,13 @@ test: $(STAMP)
 ## make test-fast: everything but the integration tests
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile
+
+## make fuzz: the property tests (Hypothesis) with a random seed and 10x their examples; the seed is
+## printed first, and FUZZ_SEED=N make fuzz runs that draw again (make test runs the pinned examples)
+fuzz: $(STAMP)
+	@seed=$${FUZZ_SEED:-$$(od -An -N4 -tu4 /dev/urandom | tr -d ' ')}; \
+	echo "make fuzz: seed $$seed (FUZZ_SEED=$$seed make fuzz draws the same examples)"; \
+	HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q -m hypothesis -n 2 --dist loadfile --hypothesis-seed=$$seed tests/unit tests/component
 
 ## make bench: latency, step time, rate and CPU over real processes, beside raw zenoh pub/sub
 bench: $(STAMP)

@@ -20,7 +20,7 @@ from zswarm.clock import WallClock
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m agent", description=__doc__.splitlines()[0])
+    p = procutil.ArgumentParser(prog="python -m agent", description=__doc__.splitlines()[0])
     p.add_argument("--topology", required=True, help="scenario TOML file")
     p.add_argument("--id", type=int, required=True, help="agent id in the scenario")
     procutil.add_run_args(p)

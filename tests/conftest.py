@@ -1,9 +1,32 @@
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 ROOT = Path(__file__).resolve().parents[1]
 TOPO = ROOT / "topologies"
+
+# Hypothesis profiles (HYPOTHESIS_PROFILE; default "pinned").
+# - pinned: what `make test` and CI run. The examples are derived from each test's source
+#   (derandomize), no example database is read or written, and no per-example wall-clock
+#   deadline applies, so a fresh clone runs the same examples every time and a busy
+#   machine cannot turn a slow example into a failure. Every failure a random run finds
+#   goes into its test as an @example (or a named regression test where the test draws
+#   with st.data(), which @example cannot replay).
+# - fuzz: what `make fuzz` runs: random draws (the seed is printed by Hypothesis and by
+#   the Makefile), FUZZ_FACTOR (10) times each test's examples, failures printed as a
+#   blob to reproduce with @reproduce_failure.
+FUZZ_FACTOR = 10
+settings.register_profile("pinned", derandomize=True, database=None, deadline=None, print_blob=True)
+settings.register_profile("fuzz", max_examples=100 * FUZZ_FACTOR, derandomize=False, database=None, deadline=None, print_blob=True)
+PROFILE = os.environ.get("HYPOTHESIS_PROFILE", "pinned")
+settings.load_profile(PROFILE)
+
+
+def examples(n: int) -> int:
+    """A property test's number of examples: ``n`` in the pinned profile, FUZZ_FACTOR·n under ``make fuzz``."""
+    return n * FUZZ_FACTOR if PROFILE == "fuzz" else n
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ START_LEAD_S = 0.5  # wall seconds between the start announcement and the epoch
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m world", description=__doc__.splitlines()[0])
+    p = procutil.ArgumentParser(prog="python -m world", description=__doc__.splitlines()[0])
     p.add_argument("--topology", required=True, help="scenario TOML file")
     procutil.add_run_args(p)
     p.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds (default: the scenario's)")

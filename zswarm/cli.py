@@ -61,7 +61,7 @@ def _load(args: argparse.Namespace) -> Any:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="zswarm", description="Multi-agent distributed estimation over Zenoh: one process per agent.")
+    p = procutil.ArgumentParser(prog="zswarm", description="Multi-agent distributed estimation over Zenoh: one process per agent.")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     r = sub.add_parser("run", help="run a scenario over real processes (router, world, agents, recorder)")
@@ -339,8 +339,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         jobs = sweep.plan(args.topology, sc, sets, varies, args.repeats, seed)
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return procutil.EXIT_USAGE
+        procutil.fail_usage(str(exc))
     out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("sweeps"))
     out.mkdir(parents=True, exist_ok=True)
     spec = sweep.definition(

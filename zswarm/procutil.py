@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from typing import Any, NoReturn
 
 from zswarm.scenario import Override, Scenario, ScenarioError, load
+from zswarm.text import one_line
 
 EXIT_USAGE = 2
 
@@ -54,8 +55,17 @@ def add_run_args(p: argparse.ArgumentParser) -> None:
 
 
 def fail_usage(msg: str) -> NoReturn:
-    print(f"error: {msg}", file=sys.stderr)
+    """``error: msg`` on one line of stderr (user text in it escaped), exit 2."""
+    print(f"error: {one_line(msg)}", file=sys.stderr)
     sys.exit(EXIT_USAGE)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors stay on one line: argparse echoes what it did
+    not recognise as it was typed (``unrecognized arguments: a<newline>b``)."""
+
+    def error(self, message: str) -> NoReturn:
+        super().error(one_line(message))
 
 
 def load_or_exit(path: str, overrides: Sequence[Override] = ()) -> Scenario:
@@ -63,8 +73,7 @@ def load_or_exit(path: str, overrides: Sequence[Override] = ()) -> Scenario:
     try:
         return load(path, overrides)
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(EXIT_USAGE)
+        fail_usage(str(exc))
 
 
 def setup_logging(name: str, level: str = "INFO") -> logging.Logger:

@@ -54,6 +54,7 @@ from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, Stal
 from zswarm.expr import Expr, ExprError, parse
 from zswarm.graph import GraphError, check_leader_follower, check_tree
 from zswarm.links import JITTER_KINDS, LinkSpec
+from zswarm.text import shown, toml_key
 
 # The world's plants and command policy (world/plant.py); imported lazily there to keep
 # the loader free of the world package's numerics.
@@ -334,8 +335,8 @@ class _Ctx:
     """Carries the file name so every error names file and field."""
 
     def __init__(self, path: str, overridden: Mapping[str, str] | None = None) -> None:
-        self.path = path
-        self.overridden = overridden or {}  # field path -> the flag that set it
+        self.path = shown(path)
+        self.overridden = overridden or {}  # field path -> the flag that set it (Override.label)
 
     def where(self, fld: str) -> str:
         """The file, or the flag when ``fld`` (or a table holding it) was set on the command line."""
@@ -354,7 +355,7 @@ class _Ctx:
             raise self.err(fld, "must be a table", d)
         for k in d:
             if k not in allowed:
-                key = k if re.fullmatch(r"[A-Za-z0-9_]+", k) else f'"{k}"'
+                key = toml_key(k)
                 raise self.err(f"{fld}.{key}" if fld else key, f"unknown key (allowed: {', '.join(sorted(allowed))})")
         for k in sorted(required):
             if k not in d:
@@ -441,7 +442,7 @@ def load(path: str | Path, overrides: Sequence[Override] = ()) -> Scenario:
     try:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read file ({exc.strerror})") from None
+        raise ScenarioError(f"{shown(p)}: cannot read file ({exc.strerror})") from None
     return loads(text, p, overrides)
 
 
@@ -455,6 +456,12 @@ class Override:
     keys: tuple[str | int, ...]
     value: Any
 
+    @property
+    def label(self) -> str:
+        """``flag`` for a one-line message: the user's text escaped when it holds a newline, a tab, …"""
+        name, _, text = self.flag.partition(" ")
+        return f"{name} {shown(text)}"
+
 
 _SEGMENT = re.compile(r'"(?P<q>[^"]*)"|(?P<k>[A-Za-z0-9_>-]+)|\[(?P<i>\d+)\]')
 
@@ -465,7 +472,7 @@ def _field_name(keys: Sequence[str | int]) -> str:
         if isinstance(k, int):
             out += f"[{k}]"
         else:
-            part = k if re.fullmatch(r"[A-Za-z0-9_]+", k) else f'"{k}"'
+            part = toml_key(k)
             out += f".{part}" if out else part
     return out
 
@@ -477,11 +484,11 @@ def parse_field(text: str, flag: str = "--set") -> tuple[str | int, ...]:
     while pos < len(text):
         if keys and not text.startswith("[", pos):
             if not text.startswith(".", pos):
-                raise ScenarioError(f"{flag}: {text}: cannot parse the field name at {text[pos:]!r}")
+                raise ScenarioError(f"{flag}: {shown(text)}: cannot parse the field name at {text[pos:]!r}")
             pos += 1
         m = _SEGMENT.match(text, pos)
         if m is None or m.end() == pos:
-            raise ScenarioError(f"{flag}: {text}: cannot parse the field name at {text[pos:]!r}")
+            raise ScenarioError(f"{flag}: {shown(text)}: cannot parse the field name at {text[pos:]!r}")
         keys.append(int(m["i"]) if m["i"] is not None else (m["q"] if m["q"] is not None else m["k"]))
         pos = m.end()
     if not keys or isinstance(keys[0], int):
@@ -514,23 +521,23 @@ def _apply(doc: dict[str, Any], o: Override) -> None:
         nxt = o.keys[n + 1]
         if isinstance(k, int):
             if not isinstance(node, list):
-                raise ScenarioError(f"{o.flag}: {here}: not an array")
+                raise ScenarioError(f"{o.label}: {here}: not an array")
             if not 0 <= k < len(node):
-                raise ScenarioError(f"{o.flag}: {here}: no such element (the array has {len(node)})")
+                raise ScenarioError(f"{o.label}: {here}: no such element (the array has {len(node)})")
             node = node[k]
         else:
             if not isinstance(node, dict):
-                raise ScenarioError(f"{o.flag}: {here}: not a table")
+                raise ScenarioError(f"{o.label}: {here}: not a table")
             if k not in node:
                 node[k] = [] if isinstance(nxt, int) else {}
             node = node[k]
     last = o.keys[-1]
     if isinstance(last, int):
         if not isinstance(node, list) or not 0 <= last < len(node):
-            raise ScenarioError(f"{o.flag}: {o.field}: no such element")
+            raise ScenarioError(f"{o.label}: {o.field}: no such element")
         node[last] = o.value
     elif not isinstance(node, dict):
-        raise ScenarioError(f"{o.flag}: {_field_name(o.keys[:-1])}: not a table")
+        raise ScenarioError(f"{o.label}: {_field_name(o.keys[:-1])}: not a table")
     else:
         node[last] = o.value
 
@@ -539,7 +546,7 @@ def render(doc: dict[str, Any], source: str, overrides: Sequence[Override]) -> s
     """The TOML text of a scenario with overrides applied (comments are not kept)."""
     import tomli_w
 
-    head = f"# {source}, with " + ", ".join(o.flag for o in overrides) + "\n" if overrides else ""
+    head = f"# {shown(source)}, with " + ", ".join(o.label for o in overrides) + "\n" if overrides else ""
     return head + tomli_w.dumps(doc)
 
 
@@ -558,14 +565,14 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: TOML syntax: {exc}") from None
+        raise ScenarioError(f"{shown(path)}: TOML syntax: {exc}") from None
     if overrides:
         placed = []
         for o in overrides:
             if o.keys == APPEND_FAULT:  # --fault: one more [[faults]] entry, named by its index
                 faults = doc.setdefault("faults", [])
                 if not isinstance(faults, list):
-                    raise ScenarioError(f"{path}: faults: must be an array of tables ([[faults]])")
+                    raise ScenarioError(f"{shown(path)}: faults: must be an array of tables ([[faults]])")
                 o = replace(o, field=f"faults[{len(faults)}]", keys=("faults", len(faults)))
                 faults.append(o.value)
             else:
@@ -573,7 +580,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             placed.append(o)
         overrides = placed
         text = render(doc, path, overrides)
-    c = _Ctx(path, {o.field: o.flag for o in overrides})
+    c = _Ctx(path, {o.field: o.label for o in overrides})
 
     c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents", "faults"}, {"scenario", "algorithm", "agents"})
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
@@ -679,7 +686,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
                 later=_snapshots(agents, formation, duration),
             )
         except GraphError as exc:
-            raise ScenarioError(f"{path}: {exc}") from None
+            raise ScenarioError(f"{shown(path)}: {exc}") from None
     elif info.graph == "sensing":
         agents = _sensing(c, doc, algo, agents, seen)
     else:
@@ -803,12 +810,12 @@ def parse_fault(text: str, flag: str = "--fault") -> dict[str, Any]:
     table of a ``[[faults]]`` entry (checked with the rest of the scenario)."""
     kind, *rest = [p.strip() for p in text.split(",")]
     if not kind or "=" in kind:
-        raise ScenarioError(f"{flag} {text}: expected KIND,FIELD=VALUE,... (e.g. kill,agent=5,at=10,restart_at=15; kinds: {', '.join(FAULT_KINDS)})")
+        raise ScenarioError(f"{flag} {shown(text)}: expected KIND,FIELD=VALUE,... (e.g. kill,agent=5,at=10,restart_at=15; kinds: {', '.join(FAULT_KINDS)})")
     table: dict[str, Any] = {"kind": kind}
     for p in rest:
         k, eq, v = p.partition("=")
         if not eq or not k.strip():
-            raise ScenarioError(f"{flag} {text}: {p!r}: expected FIELD=VALUE")
+            raise ScenarioError(f"{flag} {shown(text)}: {p!r}: expected FIELD=VALUE")
         table[k.strip()] = parse_value(v.strip())
     return table
 
@@ -1156,7 +1163,7 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
             raise c.err(f"{f}.estimate.xi", "must be a table {edge index k = ξ_k(0)}", est["xi"])
         for k, v in est["xi"].items():
             if not k.isdigit() or int(k) < 1:
-                raise c.err(f"{f}.estimate.xi.{k}", "keys are edge indices k = 1..m")
+                raise c.err(f"{f}.estimate.xi.{toml_key(k)}", "keys are edge indices k = 1..m")
             xi[int(k)] = c.num(v, f"{f}.estimate.xi.{k}")
     estimate = Estimate(
         c.vec3(est.get("p", [0, 0, 0]), f"{f}.estimate.p"),

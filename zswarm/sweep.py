@@ -36,6 +36,7 @@ import numpy as np
 
 from zswarm import procutil, report
 from zswarm.scenario import Override, Scenario, ScenarioError, load, parse_field, parse_override
+from zswarm.text import shown
 
 COLUMNS_RESULT = (
     "status",
@@ -130,12 +131,12 @@ def _num(x: float) -> str:
 def parse_vary(text: str) -> Vary:
     name, eq, vals = text.partition("=")
     if not eq or not name.strip():
-        raise ScenarioError(f"--vary {text}: expected FIELD=v1,v2,... (e.g. links.delay_ms=0,50,100)")
-    parse_field(name.strip(), f"--vary {text}")
+        raise ScenarioError(f"--vary {shown(text)}: expected FIELD=v1,v2,... (e.g. links.delay_ms=0,50,100)")
+    parse_field(name.strip(), f"--vary {shown(text)}")
     try:
         values = tuple(split_values(vals))
     except ValueError as exc:
-        raise ScenarioError(f"--vary {text}: {exc}") from None
+        raise ScenarioError(f"--vary {shown(text)}: {exc}") from None
     # The canonical field name, as errors spell it.
     return Vary(parse_override(f"{name.strip()}={values[0]}", "--vary").field, values)
 

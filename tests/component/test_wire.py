@@ -1,8 +1,12 @@
 import msgpack
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from agent.algorithms import bearing_pose_fixed
+from tests.conftest import examples
 from zswarm import so3, wire
 
 R = np.eye(3)
@@ -235,29 +239,23 @@ def test_fast_decoder_is_decode_on_foreign_and_broken_payloads():
         _same_outcome("sense", p)
 
 
-def test_fast_decoder_property():
+_floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
+_vec = hnp.arrays(np.float64, st.sampled_from([(3,), (2,), (3, 3)]), elements=_floats)
+
+
+@settings(max_examples=examples(300), deadline=None)
+@given(_vec, st.dictionaries(st.integers(-3, 3), _vec, max_size=3), _floats, st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), max_size=3))
+def test_fast_decoder_property(g, bearings, t, flips):
     """Random messages and random byte mutations of valid ones: the fast decoder's outcome
     (the message, or the MessageError and its text) is decode's."""
-    from hypothesis import given, settings
-    from hypothesis import strategies as st
-    from hypothesis.extra import numpy as hnp
-
-    floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
-    vec = hnp.arrays(np.float64, st.sampled_from([(3,), (2,), (3, 3)]), elements=floats)
-
-    @settings(max_examples=300, deadline=None)
-    @given(vec, st.dictionaries(st.integers(-3, 3), vec, max_size=3), floats, st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), max_size=3))
-    def check(g, bearings, t, flips):
-        for mtype, fields in (("sense", dict(gyro=g, bearings=bearings)), ("edge", dict(t_local=t, R_hat=R, p_hat=g, b=v))):
-            try:
-                p = bytearray(wire.encode(mtype, 1, 2, 0.5, **fields))
-            except (ValueError, TypeError):
-                continue
-            for at, byte in flips:
-                p[at % len(p)] = byte
-            _same_outcome(mtype, bytes(p))
-
-    check()
+    for mtype, fields in (("sense", dict(gyro=g, bearings=bearings)), ("edge", dict(t_local=t, R_hat=R, p_hat=g, b=v))):
+        try:
+            p = bytearray(wire.encode(mtype, 1, 2, 0.5, **fields))
+        except (ValueError, TypeError):
+            continue
+        for at, byte in flips:
+            p[at % len(p)] = byte
+        _same_outcome(mtype, bytes(p))
 
 
 @pytest.mark.parametrize(

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from zswarm.expr import ExprError, parse
 
 
@@ -87,7 +88,7 @@ def test_nesting_up_to_the_limit_is_accepted():
 TOKENS = ["t", "pi", "1", "0", "2.5", "1e308", "-", "+", "*", "/", "**", "(", ")", "sin(", "sqrt(", "exp(", "abs(", "tan(", " ", "x", "."]
 
 
-@settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.sampled_from(TOKENS), max_size=60))
 def test_any_text_parses_or_is_an_expr_error(toks):
     """Whatever the text: an Expr finite at t = 0, or ExprError (the loader's one-line

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from zswarm import hybrid, so3
 
 A45 = np.diag([5.0, 8.57, 12.0])
@@ -78,7 +79,7 @@ def test_wrong_u_and_bad_A_are_rejected():
         hybrid.design(A45, [4.0])
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(
     lam=st.tuples(*[st.floats(0.5, 20.0)] * 3).filter(lambda t: len({round(x, 2) for x in t}) == 3),
     xi=st.floats(0.05, math.pi),

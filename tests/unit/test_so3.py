@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from tests.conftest import examples
 from zswarm import so3
 
 vec = st.lists(st.floats(-10, 10, allow_nan=False), min_size=3, max_size=3).map(np.array)
@@ -71,7 +72,7 @@ def test_psi_of_rotation_is_sin_theta_axis(w):
         assert np.allclose(so3.psi(R), math.sin(th) * w / th, atol=1e-12)
 
 
-@settings(max_examples=50)
+@settings(max_examples=examples(50))
 @given(vec, vec)
 def test_exp_batch_matches_exp(a, b):
     W = np.stack([a, b, np.zeros(3), 1e-6 * a])
@@ -97,7 +98,7 @@ def test_geodesic_interp_endpoints_and_midpoint():
 
 
 @given(angle, axis)
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_quaternion_matches_scipy_and_rebuilds_R(theta, v):
     """The (x, y, z, w), w ≥ 0 quaternion of Ra(θ, v) is scipy's up to sign and gives
     back R; near θ = π too (1e-12: Shepperd's method divides by the largest of
