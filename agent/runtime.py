@@ -139,6 +139,7 @@ class Inbox:
                 self._logged.add(key)
                 self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
             return
+        msg = dict(msg)  # the in-process bus shares one validated message among its receivers
         msg["rx_net"] = rx  # off the network, before any emulated delay
         if self._held:
             # Held messages due by now go first: a message released on arrival
@@ -745,7 +746,7 @@ class AgentNode:
         for i, fields in pub.edges.items():
             p = self.pub_edge.get(i)
             if p is not None:
-                p.put(wire.encode("edge", self.id, seq, t_stamp, inc=self.inc, t_local=t_local, **fields))
+                p.publish("edge", self.id, seq, t_stamp, inc=self.inc, t_local=t_local, **fields)
                 self.sent[i] += 1
         e = pub.estimate
         est: dict[str, Any] = {"t_local": t_local}
@@ -764,11 +765,10 @@ class AgentNode:
         if pub.command is not None and self.pub_cmd is not None:
             # To the world's plant (zero-order hold there), stamped with the time of the
             # measurements it was computed from.
-            payload = wire.encode("cmd", self.id, self.cmd_seq, t_stamp, inc=self.inc, t_local=t_local, **pub.command)
             self.send_delays.append(max(0.0, self.clock.local(self._now()) - t_local))
-            self.pub_cmd.put(payload)
+            self.pub_cmd.publish("cmd", self.id, self.cmd_seq, t_stamp, inc=self.inc, t_local=t_local, **pub.command)
             self.cmd_seq += 1
-        self.pub_est.put(wire.encode("est", self.id, seq, t_stamp, inc=self.inc, **est))
+        self.pub_est.publish("est", self.id, seq, t_stamp, inc=self.inc, **est)
 
     # ------------------------------------------------------------------ reporting
 
@@ -811,7 +811,7 @@ class AgentNode:
     def publish_stats(self, t_world: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", self.id, self.stats_seq, t_world, inc=self.inc, role="agent", counters=counters))
+        (self.pub_final if final else self.pub_stats).publish("stats", self.id, self.stats_seq, t_world, inc=self.inc, role="agent", counters=counters)
         self.stats_seq += 1
 
 

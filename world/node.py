@@ -123,11 +123,11 @@ class World:
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
         if isinstance(self.motion, RigidBodyPlant):
-            self.pub_truth.put(wire.encode("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W, tau=self.motion.tau))
+            self.pub_truth.publish("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W, tau=self.motion.tau)
         elif isinstance(self.motion, KinematicPlant):
-            self.pub_truth.put(wire.encode("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W, u=self.motion.u))
+            self.pub_truth.publish("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W, u=self.motion.u)
         else:
-            self.pub_truth.put(wire.encode("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W))
+            self.pub_truth.publish("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W)
         for i in self.ids:
             a = self.index[i]
             rng = self.rngs[i]
@@ -154,7 +154,7 @@ class World:
             if "rel_pos" in want:
                 # toward the robots i senses (Scenario.sensed): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
-            self.pub_sense[i].put(wire.encode("sense", 0, seq, t, inc=self.inc, **m))
+            self.pub_sense[i].publish("sense", 0, seq, t, inc=self.inc, **m)
         self.seq += 1
         self.samples += 1
         self.k += 1
@@ -177,5 +177,5 @@ class World:
     def publish_stats(self, t: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
-        (self.pub_final if final else self.pub_stats).put(wire.encode("stats", 0, self.stats_seq, t, inc=self.inc, role="world", counters=counters))
+        (self.pub_final if final else self.pub_stats).publish("stats", 0, self.stats_seq, t, inc=self.inc, role="world", counters=counters)
         self.stats_seq += 1

@@ -14,12 +14,19 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
-DataCallback = Callable[[str, bytes], None]
+from zswarm import wire
+
+DataCallback = Callable[[str, Any], None]  # (key, payload bytes, or a wire.Message on MemoryBus)
 AliveCallback = Callable[[str, bool], None]
 
 
 class Publisher(Protocol):
     def put(self, payload: bytes) -> None: ...
+
+    def publish(self, mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> None:
+        """Send a message (``wire.encode``'s arguments): over Zenoh its bytes, on a
+        MemoryBus the validated message itself (``wire.message``)."""
+        ...
 
 
 class Bus(Protocol):
@@ -61,22 +68,22 @@ class MemoryBus:
     integration tests.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, objects: bool = True) -> None:
+        """``objects``: :meth:`Publisher.publish` delivers the validated message (``wire.message``),
+        decoded and checked once for every subscriber, instead of bytes each decodes
+        (``objects=False``, what a Zenoh subscriber gets: the reference the tests compare
+        the two with, bit for bit)."""
+        self.objects = objects
         self._subs: list[tuple[str, DataCallback]] = []
         self._watchers: list[tuple[str, AliveCallback]] = []
         self._tokens: set[str] = set()
         self._cache: dict[str, list[DataCallback]] = {}
 
     def publisher(self, key: str, block: bool = False) -> Publisher:
-        bus = self
+        return _MemoryPub(self, key)
 
-        class _Pub:
-            def put(self, payload: bytes) -> None:
-                bus.put(key, payload)
-
-        return _Pub()
-
-    def put(self, key: str, payload: bytes) -> None:
+    def put(self, key: str, payload: Any) -> None:
+        """Deliver ``payload`` (bytes, or a ``wire.Message``) to every subscriber of ``key``."""
         cbs = self._cache.get(key)
         if cbs is None:
             cbs = [cb for ke, cb in self._subs if key_matches(ke, key)]
@@ -117,6 +124,34 @@ class MemoryBus:
         """A process's own view of the bus: closing it withdraws its subscriptions, watches
         and tokens, as a killed process's Zenoh session would (``zswarm sim``'s faults)."""
         return MemorySession(self)
+
+
+class _MemoryPub:
+    """A MemoryBus publisher: ``put`` delivers bytes, ``publish`` a validated message."""
+
+    __slots__ = ("bus", "key", "make")
+
+    def __init__(self, bus: MemoryBus, key: str) -> None:
+        self.bus, self.key = bus, key
+        self.make = wire.message if bus.objects else wire.encode
+
+    def put(self, payload: bytes) -> None:
+        self.bus.put(self.key, payload)
+
+    def publish(self, mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> None:
+        self.bus.put(self.key, self.make(mtype, src, seq, t, inc=inc, **fields))
+
+
+class _ZenohPub:
+    """A Zenoh publisher behind :class:`Publisher`: ``put`` is the publisher's own."""
+
+    __slots__ = ("put",)
+
+    def __init__(self, pub: Any) -> None:
+        self.put = pub.put
+
+    def publish(self, mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> None:
+        self.put(wire.encode(mtype, src, seq, t, inc=inc, **fields))
 
 
 class MemorySession:
@@ -253,7 +288,7 @@ class ZenohBus:
             express=False,
         )
         self._objs.append(pub)
-        return pub  # type: ignore[no-any-return]
+        return _ZenohPub(pub)
 
     def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
         """``direct``: run ``callback`` on Zenoh's receiving thread instead of handing each

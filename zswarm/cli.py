@@ -290,17 +290,25 @@ def cmd_sim(args: argparse.Namespace) -> int:
             print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
-    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording)
+    kept: list[tuple[str, bytes, int]] = []
+    times: dict[str, float] = {}
+    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times)
     wall = time.perf_counter() - t0
     if tty and not args.quiet:
         print(file=sys.stderr)
-    messages = recorded if isinstance(recorded, list) else None
+    messages = recorded if isinstance(recorded, list) else (kept or None)
     summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages, not_recorded=LEAN_SKIP if args.lean else ())
     summary["wall_time_s"] = wall
+    summary["wall_time_run_s"] = times["run_s"]
+    summary["wall_time_recording_s"] = times["record_s"]
+    summary["wall_time_report_s"] = time.perf_counter() - t0 - wall
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if not args.quiet:
         print(report.table(summary))
-        print(f"simulated {duration:g} s in {wall:.1f} s of wall time; results: {out}")
+        print(
+            f"simulated {duration:g} s in {times['run_s']:.1f} s of wall time ({duration / max(times['run_s'], 1e-9):.1f}x real time), "
+            f"then the recording in {times['record_s']:.1f} s and the report in {summary['wall_time_report_s']:.1f} s; results: {out}"
+        )
     return 0
 
 

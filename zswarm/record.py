@@ -237,6 +237,8 @@ class RawOut:
             import foxglove
 
             ch = self._channels[stream] = foxglove.Channel(stream, message_encoding="msgpack", schema=_raw_schema(), context=self.ctx)
+        if type(payload) is wire.Message:  # from the in-process bus
+            payload = wire.encode_message(payload)
         ch.log(payload if isinstance(payload, bytes) else msgpack.packb(payload), log_time=t)
         self.count += 1
 
@@ -313,14 +315,24 @@ class Recorder:
         scenario: Scenario | None = None,
         live: tuple[str, int] | None = None,
         raw: bool = False,
+        defer: int = 0,
     ) -> None:
         """``raw``: write ``path`` as :class:`RawOut` (payloads as they came; a run's
-        recorder, whose report transcodes it); otherwise JSON as it goes."""
+        recorder, whose report transcodes it); otherwise JSON as it goes.
+
+        ``defer`` (``zswarm sim``): keep up to that many messages in :attr:`messages` and
+        write them to ``path`` at :meth:`close`, not as they come: the viewer file's JSON
+        and derived channels are then made after the run, off its loop, and the report
+        reads the messages from memory instead of decoding the file back.  Past that many
+        (a long run) the held ones are written out and the recorder goes on writing as
+        they come (:attr:`complete` turns False: :attr:`messages` no longer holds them all)."""
         self.run = run
         # Keys of the stream prefixes not written (e.g. "sense/", "edge/" for a lean recording).
         self._skip_keys = tuple(keys.stream_key(run, s) for s in skip)
         self.path = None if path is None else Path(path)
-        self.messages: list[tuple[str, bytes, int]] = []
+        self.messages: list[tuple[str, Any, int]] = []  # (stream, payload bytes / Message / event, log time)
+        self._defer = defer if path is not None and live is None else 0
+        self.complete = True  # messages holds every message recorded (see defer)
         self.now_ns = now_ns or time.time_ns
         self._buf: list[tuple[str, bytes | dict[str, Any], int]] = []
         self._lock = threading.Lock()
@@ -440,10 +452,12 @@ class Recorder:
             buf, self._buf = self._buf, []
             if self._closed:
                 return
-            if self.out is None:
-                self.messages.extend(buf)  # type: ignore[arg-type]  # raw payloads only without an output
+            if self.out is None or self._defer:
+                self.messages.extend(buf)  # raw payloads (or events) as they came
                 self.count += len(buf)
-                return
+                if self.out is None or len(self.messages) <= self._defer:
+                    return
+                buf, self.messages, self._defer, self.complete = self.messages, [], 0, False  # a long run: write as they come from here
             for stream, payload, t in buf:
                 if stream == ALIVE_CHANNEL:
                     self.out.alive(payload, t)  # type: ignore[arg-type]  # an event dict
@@ -490,6 +504,13 @@ class Recorder:
                 return
             self._closed = True
             if self.out is not None:
+                if self._defer:
+                    for stream, payload, t in self.messages:
+                        if stream == ALIVE_CHANNEL:
+                            self.out.alive(payload if isinstance(payload, dict) else unpack(payload), t)
+                        else:
+                            self.out.message(stream, payload, t)
+                    self.count = self.out.count
                 self.out.close()
 
 
@@ -531,7 +552,9 @@ def _is_truncation(exc: Exception) -> bool:
 
 def decode(message: bytes | dict[str, Any], expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
     """A message as :func:`read` (or an in-memory recording) gives it, decoded and validated."""
-    return wire.decode(message, expect) if isinstance(message, bytes) else wire.from_json(message, expect)
+    if type(message) is wire.Message or isinstance(message, bytes):  # validated already (sim), or a payload
+        return wire.decode(message, expect)
+    return wire.from_json(message, expect)
 
 
 def unpack(payload: bytes | dict[str, Any]) -> Any:

@@ -26,6 +26,17 @@ class MessageError(ValueError):
     """A message that is not a valid zswarm message."""
 
 
+class Message(dict):  # type: ignore[type-arg]
+    """A message as :func:`decode` returns it: decoded and validated.
+
+    The in-process bus (``zswarm sim``) delivers these to every subscriber instead of
+    bytes each would decode and validate again (:func:`message`): :func:`decode` of a
+    Message only checks its type.  Receivers must not change it (it is shared): copy
+    it to add what they know of it (the arrival time, ...)."""
+
+    __slots__ = ()
+
+
 # Bounds on every field: a message that decodes but carries a value no experiment can
 # produce is malformed, not something for an agent's math to choke on (a gyro of 1e200
 # killed an agent in so3.exp).
@@ -70,9 +81,11 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "progress": {"duration": "float"},
 }
 _F8 = np.dtype("<f8")
+_OPTIONAL_OF: Mapping[str, frozenset[str]]  # set below, after OPTIONAL
 ENVELOPE = ("v", "type", "src", "seq", "inc", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
 OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
+_OPTIONAL_OF = {t: frozenset(OPTIONAL.get(t, ())) for t in SCHEMAS}
 # Types whose other keys are named values (a finite number or a float64 array), at most
 # MAX_OPEN of them: what an algorithm declares, which the receiver validates.
 OPEN = frozenset({"edge", "cmd"})
@@ -88,6 +101,178 @@ def _arr(a: np.ndarray) -> list[Any]:
 
 def encode(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> bytes:
     """Encode a message of type ``mtype`` from incarnation ``inc`` of ``src``; arrays may be numpy arrays."""
+    return msgpack.packb(_unpacked(mtype, src, seq, t, inc, fields), use_bin_type=True)  # type: ignore[no-any-return]
+
+
+def message(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> Message | bytes:
+    """What :func:`decode` makes of :func:`encode`'s payload for the same arguments, without
+    the bytes: the message the in-process bus delivers (validated once, at the sender).
+    A message :func:`decode` would refuse comes back as its payload, so that every receiver
+    counts and drops it as it would the bytes.
+
+    The usual messages take a short path (:func:`_build`: one copy of every array into
+    one read-only buffer, one finiteness check, the semantic checks); anything it is not
+    sure of takes the exact one, ``decode(encode(...))`` without the msgpack bytes.  The
+    two give equal messages (tests/component/test_wire.py)."""
+    if mtype in _BUILDABLE:
+        try:
+            return _build(mtype, src, seq, t, inc, fields)
+        except Exception:  # noqa: BLE001 - _Slow, a conversion's TypeError, ...: the exact path decides
+            pass
+    m = _unpacked(mtype, src, seq, t, inc, fields)
+    try:
+        return _validate(m, mtype)
+    except MessageError:
+        return msgpack.packb(m, use_bin_type=True)  # type: ignore[no-any-return]
+
+
+_BUILDABLE = frozenset({"sense", "edge", "est", "truth", "cmd"})
+_F8_DTYPE = np.dtype(np.float64)
+
+
+def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str, Any]) -> Message:
+    """:func:`message`'s short path; raises (_Slow or a conversion's error) where unsure."""
+    if not (type(src) is int and 0 <= src <= MAX_ID and type(seq) is int and 0 <= seq < MAX_SEQ and type(inc) is int and 0 <= inc < MAX_SEQ):
+        raise _Slow
+    t = float(t)
+    if not -MAX_ABS <= t <= MAX_ABS:  # False for NaN
+        raise _Slow
+    out = Message(type=mtype, src=src, seq=seq, inc=inc, t=t)
+    schema = SCHEMAS[mtype]
+    bufs: list[bytes] = []
+    places: list[tuple[dict[Any, Any], Any, int, tuple[int, ...]]] = []
+    f8 = _F8_DTYPE
+    is_open = mtype in OPEN
+    if is_open:
+        if "t_local" not in fields or len(fields) > MAX_OPEN + 1:
+            raise _Slow
+        names: Any = fields
+    else:
+        names = schema
+        if any(k not in schema for k in fields):
+            raise _Slow  # encode raises KeyError: so does the exact path
+    for k in names:
+        if k not in fields:
+            if k not in _OPTIONAL_OF[mtype]:
+                raise _Slow  # missing: the exact path names it
+            continue
+        v = fields[k]
+        kind = schema.get(k, "value")
+        if type(kind) is tuple:
+            if type(v) is not np.ndarray or v.dtype is not f8:
+                raise _Slow
+            shape = v.shape
+            if shape != kind and (len(shape) != len(kind) or any(w != -1 and w != g for w, g in zip(kind, shape, strict=True))):
+                raise _Slow
+            bufs.append(v.tobytes())
+            places.append((out, k, v.size, shape))
+            out[k] = None  # its place in the message's order; the array below
+        elif kind == "vecmap" or kind == "matmap":
+            if type(v) is not dict or len(v) > MAX_IDS:
+                raise _Slow
+            want = (3,) if kind == "vecmap" else (3, 3)
+            size = 3 if kind == "vecmap" else 9
+            m: dict[int, Any] = {}
+            for j, x in v.items():
+                if type(j) is not int or not 0 <= j <= MAX_ID or type(x) is not np.ndarray or x.dtype is not f8 or x.shape != want:
+                    raise _Slow
+                bufs.append(x.tobytes())
+                places.append((m, j, size, want))
+                m[j] = None
+            out[k] = m
+        elif kind == "float":
+            x = float(v)
+            if not -MAX_ABS <= x <= MAX_ABS:
+                raise _Slow
+            out[k] = x
+        elif kind == "value" or kind == "fields":
+            if kind == "value":
+                if type(k) is not str or len(k) > 64:
+                    raise _Slow
+                items: Any = ((k, v),)
+                d: dict[str, Any] = out
+            else:
+                if type(v) is not dict or len(v) > MAX_OPEN:
+                    raise _Slow
+                items = [(str(n), x) for n, x in v.items()]
+                if len({n for n, _ in items}) != len(items) or any(len(n) > 64 for n, _ in items):
+                    raise _Slow
+                d = out[k] = {}
+            for n, x in items:
+                if isinstance(x, (int, float, np.floating)) and not isinstance(x, bool):
+                    y = float(x)
+                    if not -MAX_ABS <= y <= MAX_ABS:
+                        raise _Slow
+                    d[n] = y
+                elif type(x) is np.ndarray and x.dtype is f8 and x.ndim <= 4 and x.size <= MAX_VALUE_LEN and max(x.shape, default=0) <= MAX_VALUE_LEN:
+                    bufs.append(x.tobytes())
+                    places.append((d, n, x.size, x.shape))
+                    d[n] = None
+                else:
+                    raise _Slow
+        elif kind == "floatmap":
+            if type(v) is not dict or len(v) > MAX_IDS:
+                raise _Slow
+            fm: dict[int, float] = {}
+            for j, x in v.items():
+                y = float(x)
+                if type(j) is not int or not 0 <= j <= MAX_ID or not -MAX_ABS <= y <= MAX_ABS:
+                    raise _Slow
+                fm[j] = y
+            out[k] = fm
+        elif kind == "jumps":
+            if type(v) is not list or len(v) > MAX_IDS or not all(len(e) == 4 for e in v):
+                raise _Slow
+            js = [(int(e[0]), float(e[1]), float(e[2]), float(e[3])) for e in v]
+            if not all(0 <= e[0] <= MAX_ID and -MAX_ABS <= e[1] <= MAX_ABS and -MAX_ABS <= e[2] <= MAX_ABS and -MAX_ABS <= e[3] <= MAX_ABS for e in js):
+                raise _Slow
+            out[k] = js
+        elif kind == "intlist":
+            if type(v) is not list or len(v) > MAX_IDS or not all(map(_id, v)):
+                raise _Slow
+            out[k] = list(v)
+        else:
+            raise _Slow
+    if bufs:
+        # One buffer for every array: read-only views of it, as decode's arrays are.
+        flat = np.frombuffer(b"".join(bufs), dtype=_F8)
+        xs = flat.tolist()
+        if not math.isfinite(math.fsum(xs)) or max(xs) > MAX_ABS or min(xs) < -MAX_ABS:
+            raise _Slow
+        o = 0
+        for d_, k_, n_, shape_ in places:
+            d_[k_] = flat[o : o + n_].reshape(shape_)
+            o += n_
+    check = _SEMANTIC.get(mtype)
+    if check is not None:
+        check(out)
+    return out
+
+
+def encode_message(m: Message) -> bytes:
+    """The payload of a decoded message (``decode(encode_message(m)) == m``): how a Message
+    that travelled in-process is written to a raw recording."""
+    schema = SCHEMAS[m["type"]]
+    out: dict[str, Any] = {"v": VERSION}
+    for k, v in m.items():
+        kind = schema.get(k, "value" if k not in ENVELOPE else None)
+        if kind == "value":
+            out[k] = _enc_value(v)
+        elif kind == "fields":
+            out[k] = {n: _enc_value(x) for n, x in v.items()}
+        elif isinstance(kind, tuple):
+            out[k] = _arr(v)
+        elif kind in ("vecmap", "matmap"):
+            out[k] = {j: _arr(x) for j, x in v.items()}
+        elif kind == "jumps":
+            out[k] = [list(e) for e in v]
+        else:
+            out[k] = v
+    return msgpack.packb(out, use_bin_type=True)  # type: ignore[no-any-return]
+
+
+def _unpacked(mtype: str, src: int, seq: int, t: float, inc: int, fields: Mapping[str, Any]) -> dict[str, Any]:
+    """The map :func:`encode` packs (what msgpack gives back of it: arrays as ``[shape, bytes]``)."""
     schema = SCHEMAS[mtype]
     m: dict[str, Any] = {"v": VERSION, "type": mtype, "src": src, "seq": seq, "inc": inc, "t": float(t)}
     for k, v in fields.items():
@@ -108,7 +293,7 @@ def encode(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: 
             m[k] = float(v)
         else:
             m[k] = v
-    return msgpack.packb(m, use_bin_type=True)
+    return m
 
 
 def _enc_value(v: Any) -> Any:
@@ -323,7 +508,7 @@ def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
     return m
 
 
-def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
+def decode(payload: bytes | Message, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
     """Decode and validate; arrays come back as read-only float64 numpy arrays.
 
     Raises
@@ -331,6 +516,11 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
     MessageError
         For anything that is not a well-formed message (of type ``expect``).
     """
+    if type(payload) is Message:  # decoded and validated already (the in-process bus)
+        mtype = payload["type"]
+        if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
+            raise MessageError(f"type {mtype!r} where {expect!r} was expected")
+        return payload
     try:
         # Lengths capped before anything is built: a 3 MB map of 100 000 entries took 0.3 s
         # to unpack before its first check (no message of a run has a list or map longer
@@ -343,7 +533,7 @@ def decode(payload: bytes, expect: str | tuple[str, ...] | None = None) -> dict[
     return _validate(m, expect)
 
 
-def _validate(m: Any, expect: str | tuple[str, ...] | None) -> dict[str, Any]:
+def _validate(m: Any, expect: str | tuple[str, ...] | None) -> Message:
     """:func:`decode` after unpacking: ``m`` as msgpack gives it (arrays as ``[shape, bytes]``)."""
     if type(m) is not dict:
         raise MessageError("not a map")
@@ -364,7 +554,7 @@ def _validate(m: Any, expect: str | tuple[str, ...] | None) -> dict[str, Any]:
         raise MessageError("inc: expected an integer in [0, 2**53)")
     if not _finite(t):
         raise MessageError(f"t: expected a finite number within ±{MAX_ABS:g}")
-    out: dict[str, Any] = {"type": mtype, "src": src, "seq": seq, "inc": inc, "t": float(t)}
+    out = Message(type=mtype, src=src, seq=seq, inc=inc, t=float(t))
     for k, handle, optional in fields:
         v = m.get(k, _MISSING)
         if v is _MISSING:
@@ -480,7 +670,7 @@ def _fast(mtype: str, plan: list[tuple[str, int, tuple[int, ...], bool]]) -> Cal
         t, src, seq, inc = m.t, m.src, m.seq, m.inc
         if not (-MAX_ABS <= t <= MAX_ABS and 0 <= src <= MAX_ID and 0 <= seq < MAX_SEQ and 0 <= inc < MAX_SEQ):
             raise _Slow
-        out: dict[str, Any] = {"type": mtype, "src": src, "seq": seq, "inc": inc, "t": t}
+        out: dict[str, Any] = Message(type=mtype, src=src, seq=seq, inc=inc, t=t)
         bufs: list[bytes] = []
         places: list[tuple[dict[Any, Any], Any, int, tuple[int, ...]]] = []
         for name, code, shp, nb, shape in steps:
@@ -555,10 +745,12 @@ def decoder(mtype: str, fields: Mapping[str, tuple[tuple[int, ...], bool]] | Non
                 break
     fast = _fast(mtype, plan) if plan else None
 
-    def dec(payload: bytes) -> dict[str, Any]:
+    def dec(payload: bytes | Message) -> dict[str, Any]:
+        if type(payload) is Message:
+            return decode(payload, mtype)
         if fast is not None:
             try:
-                return fast(payload)
+                return fast(payload)  # type: ignore[arg-type]  # bytes: a Message returned above
             except Exception:  # noqa: BLE001 - msgspec's errors, _Slow, ...: decode() decides
                 pass
         return decode(payload, mtype)
