@@ -20,6 +20,7 @@ The body-frame velocity of (4.30) is ``v_i^i = R_i^T v_i``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,6 +50,49 @@ class PrescribedMotion:
         self.velocity_exprs = None if velocity is None or all(v is None for v in velocity) else [None if v is None else list(v) for v in velocity]
         self.t = 0.0
         self._omega_at: tuple[float, NDArray[np.float64]] | None = None
+        # Planned intervals (see plan): (t_from, t_to) -> (ω at the step midpoints, ω at t_to,
+        # v at the midpoints or None, v at t_to or None).
+        self._planned: dict[tuple[float, float], tuple[Any, Any, Any, Any]] = {}
+        self._v_at: tuple[float, NDArray[np.float64]] | None = None
+        self._horizon = -np.inf
+
+    def plan(self, times: NDArray[np.float64]) -> None:
+        """Evaluate ω_i(t) (and v_i(t)) for the coming intervals, ``self.t`` to ``times[0]``,
+        ``times[0]`` to ``times[1]``, …, in one call per expression instead of one per
+        interval and expression (the world's sample times; 24 calls per sample for §3.2 were
+        a tenth of a ``sim`` run).  The same numbers as :meth:`advance_to` computes: the
+        same step midpoints by the same float operations, and numpy's elementwise
+        functions give each element the same value whatever the array's length (tested
+        against unplanned runs, bit for bit).  Only the leading intervals that have whole
+        steps and the same number of them are planned; the rest are computed as they come."""
+        ts = np.asarray(times, dtype=float)
+        if ts.size == 0:
+            return
+        self._horizon = float(ts[-1])  # not planned again before then, planned or not
+        prev = np.concatenate(([self.t], ts[:-1]))
+        n_full = np.floor((ts - prev) / self.step + 1e-9)
+        rest = ts - prev - n_full * self.step
+        ok = (n_full == n_full[0]) & (rest <= 1e-12) & (n_full >= 1) & (ts > prev)
+        m = int(np.argmin(ok)) if not ok.all() else ts.size
+        if m == 0:
+            self._planned = {}
+            return
+        n = int(n_full[0])
+        h = np.array([self.step] * n)
+        mids = prev[:m, None] + np.cumsum(h)[None, :] - (h / 2)[None, :]  # as advance_to: (t + Σh) − h/2
+        W = self.omega(np.concatenate((mids.ravel(), ts[:m])))
+        Wm, Wt = W[: m * n].reshape(m, n, *W.shape[1:]), W[m * n :]
+        Vm = Vt = None
+        if self.formation is None and self.velocity_exprs is not None:
+            V = self._v_expr(np.concatenate((mids.ravel(), ts[:m])))
+            Vm, Vt = V[: m * n].reshape(m, n, *V.shape[1:]), V[m * n :]
+        self._planned = {
+            (float(prev[k]), float(ts[k])): (Wm[k], Wt[k], None if Vm is None else Vm[k], None if Vt is None else Vt[k]) for k in range(m)
+        }
+
+    def planned_through(self) -> float:
+        """The last time the latest :meth:`plan` was asked for (−inf: none yet)."""
+        return self._horizon
 
     def omega_now(self) -> NDArray[np.float64]:
         """True ω of every agent at the current time ``self.t``, shape (n, 3)."""
@@ -79,6 +123,8 @@ class PrescribedMotion:
         if self.formation is not None:
             axis, rate = self.formation
             return -rate * np.cross(axis[None, :], self.p)
+        if self._v_at is not None and self._v_at[0] == self.t:
+            return self._v_at[1]
         return self._v_expr(np.array([self.t]))[0]
 
     def positions_at(self, t: float) -> NDArray[np.float64]:
@@ -98,11 +144,19 @@ class PrescribedMotion:
         if rest > 1e-12:
             hs.append(rest)
         h = np.array(hs)
-        mids = self.t + np.cumsum(h) - h / 2
-        # ω at the midpoints and at t itself (what the gyro reads there) in one call.
-        W_all = self.omega(np.append(mids, t))
-        W = W_all[:-1]
-        self._omega_at = (t, W_all[-1])
+        planned = self._planned.pop((self.t, t), None)
+        if planned is not None:
+            W, W_t, V_mid, V_t = planned
+            self._omega_at = (t, W_t)
+            self._v_at = None if V_t is None else (t, V_t)
+        else:
+            mids = self.t + np.cumsum(h) - h / 2
+            # ω at the midpoints and at t itself (what the gyro reads there) in one call.
+            W_all = self.omega(np.append(mids, t))
+            W = W_all[:-1]
+            self._omega_at = (t, W_all[-1])
+            V_mid = self._v_expr(mids) if self.formation is None and self.velocity_exprs is not None else None
+            self._v_at = None
         # One Rodrigues call for every step and agent (same numbers as step by step).
         n = W.shape[1]
         E = exp_batch((h[:, None, None] * W).reshape(-1, 3)).reshape(h.size, n, 3, 3)
@@ -111,5 +165,5 @@ class PrescribedMotion:
         if self.formation is not None:
             self.p = self.positions_at(t)
         elif self.velocity_exprs is not None:
-            self.p = self.p + np.einsum("k,kaj->aj", h, self._v_expr(mids))
+            self.p = self.p + np.einsum("k,kaj->aj", h, V_mid)
         self.t = t

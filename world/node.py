@@ -27,6 +27,9 @@ def _cmd_agent(key: str) -> int | None:
     return None
 
 
+PLAN_SAMPLES = 200  # sensor samples whose motion is evaluated at once (1 s at 200 Hz)
+
+
 class World:
     """Truth and sensors of a scenario, publishing on ``bus``.
 
@@ -115,6 +118,10 @@ class World:
     def sample(self) -> float:
         """Advance the truth to the next sample time, publish it, return that time."""
         t = self.next_time()
+        if isinstance(self.motion, PrescribedMotion) and t > self.motion.planned_through():
+            # ω_i(t), v_i(t) for the next samples at once (PrescribedMotion.plan): k·period as
+            # next_time computes it, element by element.
+            self.motion.plan(np.arange(self.k, self.k + PLAN_SAMPLES) * self.period)
         self.motion.advance_to(t)
         R, p = self.motion.R, self.motion.p
         W = self.motion.omega_now()
