@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast fuzz bench bench-capacity soak sim clean
+.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity soak sim clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,10 @@ fuzz: $(STAMP)
 ## make bench: latency, step time, rate and CPU over real processes, beside raw zenoh pub/sub
 bench: $(STAMP)
 	$(PY) bench/bench_runtime.py
+
+## make bench-sim: zswarm sim of §3.2 (40 s, default recording) against 631834b (before issue 28), alternately
+bench-sim: $(STAMP)
+	$(PY) bench/bench_sim.py
 
 ## make soak: one hour of zswarm run with every process's RSS sampled each minute (bench/soak.py)
 soak: $(STAMP)

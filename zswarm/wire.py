@@ -17,7 +17,7 @@ from typing import Any, Literal, TypeGuard
 import msgpack
 import numpy as np
 
-from zswarm.so3 import rotations_ok
+from zswarm.so3 import _rotation_ok, rotations_ok
 
 VERSION = 3  # 2: edge messages carry the fields their algorithm declares (open schema); 3: inc, bounds
 
@@ -143,13 +143,19 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
     places: list[tuple[dict[Any, Any], Any, int, tuple[int, ...]]] = []
     f8 = _F8_DTYPE
     is_open = mtype in OPEN
+    # decode's semantic checks (_SEMANTIC), made on the values gathered below: rotations
+    # and unit vectors as (offset of their first value, how many) in the buffer.
+    rot, unit = _ROTATION_FIELDS.get(mtype, ()), _UNIT_FIELDS.get(mtype, ())
+    rots: list[tuple[int, int]] = []
+    units: list[tuple[int, int]] = []
+    n_vals = 0
     if is_open:
         if "t_local" not in fields or len(fields) > MAX_OPEN + 1:
             raise _Slow
         names: Any = fields
     else:
         names = schema
-        if any(k not in schema for k in fields):
+        if not schema.keys() >= fields.keys():
             raise _Slow  # encode raises KeyError: so does the exact path
     for k in names:
         if k not in fields:
@@ -164,20 +170,27 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
             shape = v.shape
             if shape != kind and (len(shape) != len(kind) or any(w != -1 and w != g for w, g in zip(kind, shape, strict=True))):
                 raise _Slow
+            if k in rot:
+                rots.append((n_vals, v.size // 9))
             bufs.append(v.tobytes())
             places.append((out, k, v.size, shape))
+            n_vals += v.size
             out[k] = None  # its place in the message's order; the array below
         elif kind == "vecmap" or kind == "matmap":
             if type(v) is not dict or len(v) > MAX_IDS:
                 raise _Slow
             want = (3,) if kind == "vecmap" else (3, 3)
             size = 3 if kind == "vecmap" else 9
+            sem = rots if k in rot else units if k in unit else None
             m: dict[int, Any] = {}
             for j, x in v.items():
                 if type(j) is not int or not 0 <= j <= MAX_ID or type(x) is not np.ndarray or x.dtype is not f8 or x.shape != want:
                     raise _Slow
+                if sem is not None:
+                    sem.append((n_vals, 1))
                 bufs.append(x.tobytes())
                 places.append((m, j, size, want))
+                n_vals += size
                 m[j] = None
             out[k] = m
         elif kind == "float":
@@ -207,6 +220,7 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
                 elif type(x) is np.ndarray and x.dtype is f8 and x.ndim <= 4 and x.size <= MAX_VALUE_LEN and max(x.shape, default=0) <= MAX_VALUE_LEN:
                     bufs.append(x.tobytes())
                     places.append((d, n, x.size, x.shape))
+                    n_vals += x.size
                     d[n] = None
                 else:
                     raise _Slow
@@ -243,10 +257,28 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
         for d_, k_, n_, shape_ in places:
             d_[k_] = flat[o : o + n_].reshape(shape_)
             o += n_
-    check = _SEMANTIC.get(mtype)
-    if check is not None:
-        check(out)
+        # _rotations and _unit of decode, on the same values (rotations_ok takes one 3x3
+        # matrix, or up to 8 of a stack, through _rotation_ok; more as numpy: left to it).
+        for o, count in rots:
+            if count > 8:
+                if not rotations_ok(flat[o : o + 9 * count].reshape(count, 3, 3), ROT_TOL):
+                    raise _Slow
+            elif not all(_rotation_ok(xs[o + 9 * c : o + 9 * c + 9], ROT_TOL) for c in range(count)):
+                raise _Slow
+        for o, _ in units:
+            x, y, z = xs[o : o + 3]
+            if not abs(x * x + y * y + z * z - 1.0) <= 2 * UNIT_TOL:
+                raise _Slow
+    if mtype == "truth":
+        ids = out["ids"]
+        if len(set(ids)) != len(ids) or any(out[k].shape[0] != len(ids) for k in ("R", "p", "w", "tau", "u") if k in out):
+            raise _Slow
     return out
+
+
+# What _SEMANTIC checks, by field (for _build): rotations and unit bearings.
+_ROTATION_FIELDS = {"sense": frozenset({"R", "rel_att"}), "est": frozenset({"R_hat"}), "truth": frozenset({"R"})}
+_UNIT_FIELDS = {"sense": frozenset({"bearings"})}
 
 
 def encode_message(m: Message) -> bytes:
