@@ -56,7 +56,7 @@ class PrescribedMotion:
         self._v_at: tuple[float, NDArray[np.float64]] | None = None
         self._horizon = -np.inf
 
-    def plan(self, times: NDArray[np.float64]) -> None:
+    def plan(self, times: NDArray[np.floating[Any]]) -> None:
         """Evaluate ω_i(t) (and v_i(t)) for the coming intervals, ``self.t`` to ``times[0]``,
         ``times[0]`` to ``times[1]``, …, in one call per expression instead of one per
         interval and expression (the world's sample times; 24 calls per sample for §3.2 were

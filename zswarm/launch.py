@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from zswarm import keys, procutil, report, wire
 from zswarm import secure as sec
@@ -57,6 +57,20 @@ class Child:
     exit_code: int | None = None
     cmd: list[str] = field(default_factory=list)
     replaced: bool = False  # killed by a fault (and perhaps restarted as a new child)
+    cpu_s: float = 0.0  # user + system CPU time, the last reading of /proc/<pid>/stat (see Launch.sample_cpu)
+
+
+_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
+def _proc_cpu(pid: int) -> float | None:
+    """User + system CPU seconds of ``pid`` from /proc (a zombie's too: its last value); None if gone."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / _TICKS  # utime, stime: fields 14 and 15 of stat
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 @dataclass
@@ -72,6 +86,16 @@ class Launch:
     fault_log: list[dict[str, object]] = field(default_factory=list)  # what the launcher did for [[faults]], when
     endpoint: str = ""
     run_id: str = ""
+    cpu: dict[str, Any] = field(default_factory=dict)  # what processes.json says of the CPU (set at the end)
+
+    def sample_cpu(self) -> None:
+        """Read each running child's CPU time (the launcher's loop does, every 0.1 s; and
+        before each child is reaped, when a zombie's /proc entry still holds its total)."""
+        for c in self.children:
+            if c.exit_code is None:
+                v = _proc_cpu(c.proc.pid)
+                if v is not None:
+                    c.cpu_s = v
 
     def write_processes(self, endpoint: str, run_id: str) -> None:
         """results/processes.json: every child ever started (restarts too), by PID."""
@@ -81,8 +105,11 @@ class Launch:
                 {
                     "router": {"pid": os.getpid(), "endpoint": endpoint},
                     "run_id": run_id,
-                    "children": [{"name": c.name, "role": c.role, "id": c.ident, "pid": c.proc.pid} for c in self.children],
-                },
+                    "children": [
+                        {"name": c.name, "role": c.role, "id": c.ident, "pid": c.proc.pid} | ({"cpu_s": round(c.cpu_s, 2)} if self.cpu else {}) for c in self.children
+                    ],
+                }
+                | ({"cpu": self.cpu} if self.cpu else {}),
                 indent=2,
             )
         )
@@ -116,12 +143,20 @@ class Launch:
         for c in self.children:
             if c.role not in roles:
                 continue
-            left = deadline - time.monotonic()
-            try:
-                c.proc.wait(max(0.0, left))
-            except subprocess.TimeoutExpired:
-                return False
+            while c.proc.returncode is None and not _exited(c.proc.pid):
+                if time.monotonic() >= deadline:
+                    return False
+                time.sleep(0.01)
+            self._reaped(c)
         return True
+
+    def _reaped(self, c: Child) -> None:
+        """Reap an exited child, reading its final CPU time first (a zombie keeps it)."""
+        if c.proc.returncode is None:
+            v = _proc_cpu(c.proc.pid)
+            if v is not None:
+                c.cpu_s = v
+        c.proc.wait()
 
     def stop_all(self, graceful: bool) -> None:
         """Stop every child in order (world+agents, then recorder), escalating to SIGKILL."""
@@ -139,10 +174,21 @@ class Launch:
 
     def reap(self) -> None:
         for c in self.children:
-            if c.proc.poll() is None:
+            if c.proc.returncode is None and not _exited(c.proc.pid):
                 c.proc.kill()
-            c.exit_code = c.proc.wait()
+                _exited(c.proc.pid, block=True)
+            self._reaped(c)
+            c.exit_code = c.proc.returncode
             c.log.close()
+
+
+def _exited(pid: int, block: bool = False) -> bool:
+    """Whether child ``pid`` has exited, without reaping it (its /proc entry stays readable)."""
+    try:
+        info = os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT | (0 if block else os.WNOHANG))
+    except ChildProcessError:
+        return True  # reaped already
+    return info is not None
 
 
 class _Router:
@@ -341,9 +387,15 @@ def run(
         faults = FaultRunner(la, router, sc.faults, say)
         last_print = 0.0
         tty = sys.stderr.isatty()
+        import resource
+
+        la.sample_cpu()
+        t_run, cpu0 = time.monotonic(), {id(c): c.cpu_s for c in la.children}
+        own0 = resource.getrusage(resource.RUSAGE_SELF)
         while world.proc.poll() is None and not interrupted.is_set():
             time.sleep(faults.wait(0.1))
             faults.poll()
+            la.sample_cpu()
             now = time.monotonic()
             if not quiet and (tty or now - last_print > 5.0):
                 n_alive = sum(1 for r, _ in alive if r == "agent")
@@ -355,6 +407,11 @@ def run(
         if interrupted.is_set():
             say("zswarm run: interrupted, stopping every process")
         faults.finish()
+        run_wall = time.monotonic() - t_run
+        la.sample_cpu()
+        own1 = resource.getrusage(resource.RUSAGE_SELF)
+        run_cpu = {c.name: c.cpu_s - cpu0.get(id(c), 0.0) for c in la.children}
+        run_cpu["launcher+router"] = (own1.ru_utime + own1.ru_stime) - (own0.ru_utime + own0.ru_stime)
         la.stop_all(graceful=not interrupted.is_set())
     finally:
         la.reap()
@@ -362,6 +419,24 @@ def run(
         on_signals.close()
     if not ok_start:
         return 1
+    # The CPU of the run: each process's CPU time over the run proper (from every process
+    # alive to the world's end: /proc readings 0.1 s apart, this process's own rusage), and
+    # over the whole command (the kernel's total of the reaped children: start-up, the
+    # final stats and their confirmation too).
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cores = os.cpu_count() or 1
+    in_run = sum(run_cpu.values())
+    la.cpu = {
+        "run_wall_s": round(run_wall, 2),
+        "run_cpu_s": {k: round(v, 2) for k, v in run_cpu.items()},
+        "run_cpu_total_s": round(in_run, 2),
+        "cores": cores,
+        "run_share_of_cores": round(in_run / (run_wall * cores), 4) if run_wall > 0 else 0.0,
+        "command_children_cpu_s": round(kids.ru_utime + kids.ru_stime, 2),
+        "command_launcher_cpu_s": round(own.ru_utime + own.ru_stime, 2),
+    }
+    la.write_processes(la.endpoint, la.run_id)
     codes: dict[str, int | None] = {c.name: c.exit_code for c in la.children}
     try:
         summary = report.make_report(out, sc, "run", duration, time_scale, seed, exit_codes=codes)
@@ -376,6 +451,7 @@ def run(
         return 1
     summary["exit_codes"] = codes
     summary["interrupted"] = interrupted.is_set()
+    summary["cpu"] = la.cpu
     if la.fault_log:
         summary["fault_actions"] = la.fault_log
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -787,9 +787,16 @@ def table(summary: dict[str, Any]) -> str:
 
 def _overload_lines(summary: dict[str, Any]) -> list[str]:
     ov = summary.get("overload") or {}
+    cpu = summary.get("cpu") or {}
+    lines = []
+    if cpu.get("run_wall_s"):
+        lines.append(
+            f"cpu: every process together {100 * cpu['run_share_of_cores']:.0f} % of the {cpu['cores']} cores over the run "
+            f"({cpu['run_cpu_total_s']:.1f} s in {cpu['run_wall_s']:.1f} s; per process in processes.json)"
+        )
     if not ov.get("overloaded"):
-        return []
-    return [
+        return lines
+    return lines + [
         f"OVERLOADED: {'; '.join(ov['reasons'])}: this machine did not keep up, so the "
         "agents stepped on older data than configured and these errors may not be the algorithm's alone; compare with "
         "zswarm sim, or run with --time-scale 0.5 or fewer processes per core"

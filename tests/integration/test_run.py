@@ -53,6 +53,12 @@ def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
     # Every child exited cleanly and none is left.
     assert all(v == 0 for v in s["exit_codes"].values()), s["exit_codes"]
     assert not [c for c in procs.adopt(out) if pid_alive(c["pid"])]
+    # The CPU of the run (processes.json, issue 28): every process read, none more than the
+    # machine has, and the readings over the run within the kernel's totals for the command.
+    cpu = json.loads((out / "processes.json").read_text())["cpu"]
+    assert set(cpu["run_cpu_s"]) == {c["name"] for c in procs.adopt(out)} | {"launcher+router"}
+    assert all(v > 0 for v in cpu["run_cpu_s"].values()), cpu
+    assert 0 < cpu["run_share_of_cores"] <= 1.0 and cpu["run_cpu_total_s"] - cpu["run_cpu_s"]["launcher+router"] <= cpu["command_children_cpu_s"] + 0.01, cpu
     # Results folder.
     for f in ("scenario.toml", "summary.json", "errors.csv", "recording.mcap", "plots/attitude_error.png", "plots/position_error.png", "logs/world.log", "logs/agent-8.log", "logs/recorder.log"):
         assert (out / f).exists(), f
