@@ -74,7 +74,7 @@ class MemoryBus:
         (``objects=False``, what a Zenoh subscriber gets: the reference the tests compare
         the two with, bit for bit)."""
         self.objects = objects
-        self._subs: list[tuple[str, DataCallback]] = []
+        self._subs: list[tuple[str, DataCallback, tuple[str, ...]]] = []
         self._watchers: list[tuple[str, AliveCallback]] = []
         self._tokens: set[str] = set()
         self._cache: dict[str, list[DataCallback]] = {}
@@ -86,13 +86,16 @@ class MemoryBus:
         """Deliver ``payload`` (bytes, or a ``wire.Message``) to every subscriber of ``key``."""
         cbs = self._cache.get(key)
         if cbs is None:
-            cbs = [cb for ke, cb in self._subs if key_matches(ke, key)]
+            cbs = [cb for ke, cb, ex in self._subs if key_matches(ke, key) and not (ex and key.startswith(ex))]
             self._cache[key] = cbs
         for cb in cbs:
             cb(key, payload)
 
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
-        self._subs.append((key_expr, callback))
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, exclude: tuple[str, ...] = ()) -> None:
+        """``exclude``: keys starting with one of these are not delivered to ``callback`` (a
+        lean recording's sensor and edge streams: one call less per message, decided once
+        per key)."""
+        self._subs.append((key_expr, callback, exclude))
         self._cache.clear()
 
     def declare_token(self, key: str) -> None:
@@ -169,9 +172,9 @@ class MemorySession:
     def put(self, key: str, payload: bytes) -> None:
         self.bus.put(key, payload)
 
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, exclude: tuple[str, ...] = ()) -> None:
         self._cbs.append(callback)
-        self.bus.subscribe(key_expr, callback, direct)
+        self.bus.subscribe(key_expr, callback, direct, exclude)
 
     def declare_token(self, key: str) -> None:
         self._tokens.add(key)
@@ -190,7 +193,7 @@ class MemorySession:
             return
         self.closed = True
         mine = {id(cb) for cb in self._cbs}
-        self.bus._subs = [(k, cb) for k, cb in self.bus._subs if id(cb) not in mine]
+        self.bus._subs = [(k, cb, ex) for k, cb, ex in self.bus._subs if id(cb) not in mine]
         self.bus._watchers = [(k, cb) for k, cb in self.bus._watchers if id(cb) not in mine]
         self.bus._cache.clear()
         for key in sorted(self._tokens):
