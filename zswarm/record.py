@@ -24,6 +24,9 @@ writes the payloads as they came (msgpack, one channel per stream) into
 writing JSON for every message took a quarter of a core at 8 agents; under
 load the recorder then fell behind and the router dropped what it could not
 take.  With ``--live`` the recorder writes JSON as it goes (the viewer needs it).
+``zswarm sim`` holds the validated messages its in-process bus delivers and
+writes the viewer file after the run (``defer``), and its report reads them
+from memory.
 
 Read it back with :func:`read` (or any MCAP reader with a protobuf decoder and
 a JSON parser).  Earlier recordings (msgpack payloads, topics without the
