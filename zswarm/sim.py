@@ -103,57 +103,64 @@ def simulate(
     stopped: dict[int, float] = {}  # agent -> world time of its SIGCONT
     next_flush = 1.0
     next_stats = {i: 1.0 for i in agents}
-    while queue:
-        t, prio, who, g = heapq.heappop(queue)
-        if t > duration + 1e-9:
-            break
-        while events and events[0][0] <= t:
-            te, _, action, i = events.pop(0)
-            t_now[0] = te
-            if action in ("kill", "legacy_kill") and i in agents:
-                sessions[i].close()
-                if action == "legacy_kill":
-                    agents[i].publish_stats(te)  # kill=: a last word (a fault's SIGKILL has none)
-                del agents[i]
-                stopped.pop(i, None)
-            elif action == "restart":
-                gen[i] += 1
-                sessions[i] = bus.session()
-                a = agents[i] = AgentNode(scenario, i, sessions[i], run, seed, now=lambda: t_now[0], inc=gen[i])
-                sessions[i].declare_token(keys.alive(run, "agent", i))
-                heapq.heappush(queue, (a.clock.first_tick(te), 1, i, gen[i]))
-                next_stats[i] = te + 1.0
-            elif action == "stop":
-                stopped[i] = te
-            elif action == "cont":
-                stopped.pop(i, None)
-        t_now[0] = t
-        if prio == 0:
-            world.sample()
-            if world.k % max(1, round(scenario.sensor_rate)) == 0:
-                world.publish_stats(t)
-            heapq.heappush(queue, (world.next_time(), 0, 0, 0))
-        elif who in agents and g == gen[who]:
-            a = agents[who]
-            if who in stopped:
-                # SIGSTOPped: nothing runs; arrivals wait in its inbox.  The tick is taken at
-                # the SIGCONT, late, and catches up as a late tick of a real process does.
-                cont = next(te for te, _, act, j in events if act == "cont" and j == who)
-                a.missed += max(0, int((cont - t) * a.spec.clock.rate))
-                heapq.heappush(queue, (cont, 1, who, g))
-                continue
-            a.tick(t)
-            if t >= next_stats[who]:
-                a.publish_stats(t)
-                next_stats[who] += 1.0
-            tn, missed = a.clock.next_tick(t)
-            a.missed += missed
-            heapq.heappush(queue, (tn, 1, who, g))
-        if t >= next_flush:
-            recorder.flush()
-            next_flush += 1.0
-            if progress:
-                progress(t)
+    try:
+        while queue:
+            t, prio, who, g = heapq.heappop(queue)
+            if t > duration + 1e-9:
+                break
+            while events and events[0][0] <= t:
+                te, _, action, i = events.pop(0)
+                t_now[0] = te
+                if action in ("kill", "legacy_kill") and i in agents:
+                    sessions[i].close()
+                    if action == "legacy_kill":
+                        agents[i].publish_stats(te)  # kill=: a last word (a fault's SIGKILL has none)
+                    del agents[i]
+                    stopped.pop(i, None)
+                elif action == "restart":
+                    gen[i] += 1
+                    sessions[i] = bus.session()
+                    a = agents[i] = AgentNode(scenario, i, sessions[i], run, seed, now=lambda: t_now[0], inc=gen[i])
+                    sessions[i].declare_token(keys.alive(run, "agent", i))
+                    heapq.heappush(queue, (a.clock.first_tick(te), 1, i, gen[i]))
+                    next_stats[i] = te + 1.0
+                elif action == "stop":
+                    stopped[i] = te
+                elif action == "cont":
+                    stopped.pop(i, None)
+            t_now[0] = t
+            if prio == 0:
+                world.sample()
+                if world.k % max(1, round(scenario.sensor_rate)) == 0:
+                    world.publish_stats(t)
+                heapq.heappush(queue, (world.next_time(), 0, 0, 0))
+            elif who in agents and g == gen[who]:
+                a = agents[who]
+                if who in stopped:
+                    # SIGSTOPped: nothing runs; arrivals wait in its inbox.  The tick is taken at
+                    # the SIGCONT, late, and catches up as a late tick of a real process does.
+                    cont = next(te for te, _, act, j in events if act == "cont" and j == who)
+                    a.missed += max(0, int((cont - t) * a.spec.clock.rate))
+                    heapq.heappush(queue, (cont, 1, who, g))
+                    continue
+                a.tick(t)
+                if t >= next_stats[who]:
+                    a.publish_stats(t)
+                    next_stats[who] += 1.0
+                tn, missed = a.clock.next_tick(t)
+                a.missed += missed
+                heapq.heappush(queue, (tn, 1, who, g))
+            if t >= next_flush:
+                recorder.flush()
+                next_flush += 1.0
+                if progress:
+                    progress(t)
+    except BaseException:
+        # Ctrl-C (KeyboardInterrupt) or a failure: what was simulated up to here is written
+        # (the recorder holds it until close), then the exception goes on.
+        recorder.close()
+        raise
+
     t_now[0] = duration
     ctl_stop.put(wire.encode("stop", 0, 0, duration, reason="duration"))
     world.publish_stats(duration, final=True)
