@@ -31,7 +31,7 @@ class Publisher(Protocol):
 
 class Bus(Protocol):
     def publisher(self, key: str, block: bool = False) -> Publisher: ...
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None: ...
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, exclude: tuple[str, ...] = ()) -> None: ...
     def declare_token(self, key: str) -> None: ...
     def watch_alive(self, key_expr: str, callback: AliveCallback) -> None: ...
     def close(self) -> None: ...
@@ -169,7 +169,7 @@ class MemorySession:
     def publisher(self, key: str, block: bool = False) -> Publisher:
         return self.bus.publisher(key, block)
 
-    def put(self, key: str, payload: bytes) -> None:
+    def put(self, key: str, payload: Any) -> None:
         self.bus.put(key, payload)
 
     def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, exclude: tuple[str, ...] = ()) -> None:
@@ -293,15 +293,18 @@ class ZenohBus:
         self._objs.append(pub)
         return _ZenohPub(pub)
 
-    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False) -> None:
-        """``direct``: run ``callback`` on Zenoh's receiving thread instead of handing each
+    def subscribe(self, key_expr: str, callback: DataCallback, direct: bool = False, exclude: tuple[str, ...] = ()) -> None:
+        """``exclude``: keys starting with one of these are not passed to ``callback``.
+        ``direct``: run ``callback`` on Zenoh's receiving thread instead of handing each
         sample to a Python thread of its own (zenoh-python's default).  Cheaper (no thread
         wake-up per sample) but the receiving thread then waits for the GIL for every
         sample, holding up the link: on an overloaded machine long enough to miss the
         lease (see ``agent.runtime.Inbox.handler``)."""
 
         def _cb(sample: Any) -> None:
-            callback(str(sample.key_expr), sample.payload.to_bytes())
+            key = str(sample.key_expr)
+            if not (exclude and key.startswith(exclude)):
+                callback(key, sample.payload.to_bytes())
 
         handler = self._z.handlers.Callback(_cb, indirect=False) if direct else _cb
         self._objs.append(self.session.declare_subscriber(key_expr, handler))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import signal
 import socket
 import subprocess
@@ -59,6 +60,14 @@ class Child:
     replaced: bool = False  # killed by a fault (and perhaps restarted as a new child)
     cpu_s: float = 0.0  # user + system CPU time, the last reading of /proc/<pid>/stat (see Launch.sample_cpu)
 
+    def read_cpu(self) -> None:
+        """Take ``cpu_s`` from /proc while the process is not reaped (its PID is still its
+        own; a zombie's entry holds its total)."""
+        if self.proc.returncode is None:
+            v = _proc_cpu(self.proc.pid)
+            if v is not None:
+                self.cpu_s = v
+
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -92,10 +101,7 @@ class Launch:
         """Read each running child's CPU time (the launcher's loop does, every 0.1 s; and
         before each child is reaped, when a zombie's /proc entry still holds its total)."""
         for c in self.children:
-            if c.exit_code is None:
-                v = _proc_cpu(c.proc.pid)
-                if v is not None:
-                    c.cpu_s = v
+            c.read_cpu()
 
     def write_processes(self, endpoint: str, run_id: str) -> None:
         """results/processes.json: every child ever started (restarts too), by PID."""
@@ -152,10 +158,7 @@ class Launch:
 
     def _reaped(self, c: Child) -> None:
         """Reap an exited child, reading its final CPU time first (a zombie keeps it)."""
-        if c.proc.returncode is None:
-            v = _proc_cpu(c.proc.pid)
-            if v is not None:
-                c.cpu_s = v
+        c.read_cpu()
         c.proc.wait()
 
     def stop_all(self, graceful: bool) -> None:
@@ -387,8 +390,6 @@ def run(
         faults = FaultRunner(la, router, sc.faults, say)
         last_print = 0.0
         tty = sys.stderr.isatty()
-        import resource
-
         la.sample_cpu()
         t_run, cpu0 = time.monotonic(), {id(c): c.cpu_s for c in la.children}
         own0 = resource.getrusage(resource.RUSAGE_SELF)

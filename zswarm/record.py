@@ -359,7 +359,7 @@ class Recorder:
         self._drain = bus.subscribe_polled(keys.everything(run), self.now_ns) if hasattr(bus, "subscribe_polled") else None
         if self._drain is None:
             # In-process: the skipped streams are not even delivered (MemoryBus's exclude).
-            bus.subscribe(keys.everything(run), self._on_data, **({"exclude": self._skip_keys} if self._skip_keys else {}))
+            bus.subscribe(keys.everything(run), self._on_data, exclude=self._skip_keys)
         # Processes asking whether their final stats are recorded (keys.recorded): answered
         # once they are, from poll(); held at most HOLD_RECORDED_S.
         self._queries = bus.queryable_polled(keys.recorded_all(run)) if hasattr(bus, "queryable_polled") else None

@@ -747,7 +747,7 @@ def table(summary: dict[str, Any]) -> str:
     if "synchronization" in summary:
         lines = [f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {summary['duration_s']:g} s, seed {summary['seed']})"]
         lines += report_sync.table_lines(summary)
-        return "\n".join(lines + _overload_lines(summary))
+        return "\n".join(lines + _footer_lines(summary))
     lines = [
         f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {summary['duration_s']:g} s, seed {summary['seed']})",
         f"{'agent':>5} {'role':<8} {'alive':<5} {'att.err':>10} {'pos.err':>10} {'steps':>6} {'rate Hz':>8} {'missed':>6}",
@@ -782,10 +782,11 @@ def table(summary: dict[str, Any]) -> str:
         f"mean over {who} (last 1 s): attitude {_e(summary['mean_attitude_error_final'])}, "
         f"position {_e(summary['mean_position_error_final'])}; links: {len(summary['links'])}, dropped messages: {drops}"
     )
-    return "\n".join(lines + _overload_lines(summary))
+    return "\n".join(lines + _footer_lines(summary))
 
 
-def _overload_lines(summary: dict[str, Any]) -> list[str]:
+def _footer_lines(summary: dict[str, Any]) -> list[str]:
+    """What the table says under its rows: the run's CPU, and whether it kept up."""
     ov = summary.get("overload") or {}
     cpu = summary.get("cpu") or {}
     lines = []

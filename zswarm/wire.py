@@ -81,11 +81,10 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "progress": {"duration": "float"},
 }
 _F8 = np.dtype("<f8")
-_OPTIONAL_OF: Mapping[str, frozenset[str]]  # set below, after OPTIONAL
 ENVELOPE = ("v", "type", "src", "seq", "inc", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
 OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
-_OPTIONAL_OF = {t: frozenset(OPTIONAL.get(t, ())) for t in SCHEMAS}
+_OPTIONAL_OF: Mapping[str, frozenset[str]] = {t: frozenset(OPTIONAL.get(t, ())) for t in SCHEMAS}
 # Types whose other keys are named values (a finite number or a float64 array), at most
 # MAX_OPEN of them: what an algorithm declares, which the receiver validates.
 OPEN = frozenset({"edge", "cmd"})
@@ -270,15 +269,8 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
             if not abs(x * x + y * y + z * z - 1.0) <= 2 * UNIT_TOL:
                 raise _Slow
     if mtype == "truth":
-        ids = out["ids"]
-        if len(set(ids)) != len(ids) or any(out[k].shape[0] != len(ids) for k in ("R", "p", "w", "tau", "u") if k in out):
-            raise _Slow
+        _truth_rows(out)  # MessageError: the exact path decides
     return out
-
-
-# What _SEMANTIC checks, by field (for _build): rotations and unit bearings.
-_ROTATION_FIELDS = {"sense": frozenset({"R", "rel_att"}), "est": frozenset({"R_hat"}), "truth": frozenset({"R"})}
-_UNIT_FIELDS = {"sense": frozenset({"bearings"})}
 
 
 def encode_message(m: Message) -> bytes:
@@ -549,9 +541,7 @@ def decode(payload: bytes | Message, expect: str | tuple[str, ...] | None = None
         For anything that is not a well-formed message (of type ``expect``).
     """
     if type(payload) is Message:  # decoded and validated already (the in-process bus)
-        mtype = payload["type"]
-        if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
-            raise MessageError(f"type {mtype!r} where {expect!r} was expected")
+        _check_expect(payload["type"], expect)
         return payload
     try:
         # Lengths capped before anything is built: a 3 MB map of 100 000 entries took 0.3 s
@@ -565,6 +555,12 @@ def decode(payload: bytes | Message, expect: str | tuple[str, ...] | None = None
     return _validate(m, expect)
 
 
+def _check_expect(mtype: str, expect: str | tuple[str, ...] | None) -> None:
+    """A message of type ``mtype`` where ``expect`` (a type, or any of several) was expected."""
+    if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
+        raise MessageError(f"type {mtype!r} where {expect!r} was expected")
+
+
 def _validate(m: Any, expect: str | tuple[str, ...] | None) -> Message:
     """:func:`decode` after unpacking: ``m`` as msgpack gives it (arrays as ``[shape, bytes]``)."""
     if type(m) is not dict:
@@ -575,8 +571,7 @@ def _validate(m: Any, expect: str | tuple[str, ...] | None) -> Message:
     fields = _FIELDS.get(mtype) if type(mtype) is str else None
     if fields is None:
         raise MessageError(f"unknown type {mtype!r}")
-    if expect is not None and mtype != expect and (isinstance(expect, str) or mtype not in expect):
-        raise MessageError(f"type {mtype!r} where {expect!r} was expected")
+    _check_expect(str(mtype), expect)  # a str: a known type by now
     src, seq, inc, t = m.get("src"), m.get("seq"), m.get("inc"), m.get("t")
     if not _id(src):
         raise MessageError(f"src: expected an integer in [0, {MAX_ID}]")
@@ -625,30 +620,35 @@ def _unit(vecs: dict[int, np.ndarray], k: str) -> None:
             raise MessageError(f"{k}: not a unit vector (|b| = 1 within {UNIT_TOL:g})")
 
 
-def _check_sense(m: dict[str, Any]) -> None:
-    for k in ("R", "rel_att"):
-        if k in m:
-            _rotations(m[k], k)
-    if "bearings" in m:
-        _unit(m["bearings"], "bearings")
+# The fields that hold rotations and unit bearings, per type, in the order they are checked
+# (by _semantic here, and on the values it gathers by message()'s _build).
+_ROTATION_FIELDS: Mapping[str, tuple[str, ...]] = {"sense": ("R", "rel_att"), "est": ("R_hat",), "truth": ("R",)}
+_UNIT_FIELDS: Mapping[str, tuple[str, ...]] = {"sense": ("bearings",)}
 
 
-def _check_est(m: dict[str, Any]) -> None:
-    if "R_hat" in m:
-        _rotations(m["R_hat"], "R_hat")
-
-
-def _check_truth(m: dict[str, Any]) -> None:
+def _truth_rows(m: dict[str, Any]) -> None:
+    """A truth's ids are distinct and each of its arrays has a row per id."""
     ids = m["ids"]
     if len(set(ids)) != len(ids):
         raise MessageError("ids: repeated")
     for k in ("R", "p", "w", "tau", "u"):
         if k in m and m[k].shape[0] != len(ids):
             raise MessageError(f"{k}: {m[k].shape[0]} rows for {len(ids)} ids")
-    _rotations(m["R"], "R")
 
 
-_SEMANTIC: Mapping[str, Callable[[dict[str, Any]], None]] = {"sense": _check_sense, "est": _check_est, "truth": _check_truth}
+def _semantic(m: dict[str, Any]) -> None:
+    mtype = m["type"]
+    if mtype == "truth":
+        _truth_rows(m)
+    for k in _ROTATION_FIELDS.get(mtype, ()):
+        if k in m:
+            _rotations(m[k], k)
+    for k in _UNIT_FIELDS.get(mtype, ()):
+        if k in m:
+            _unit(m[k], k)
+
+
+_SEMANTIC: Mapping[str, Callable[[dict[str, Any]], None]] = dict.fromkeys(("sense", "est", "truth"), _semantic)
 
 
 # ---------------------------------------------------------------- the receivers' fast path

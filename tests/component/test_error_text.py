@@ -110,7 +110,7 @@ def test_the_scenario_as_run_stays_valid_toml_with_an_odd_override():
     in one would have ended the comment and put the rest of the flag in the document."""
     o = parse_override('scenario.description="line one\nline two"')  # a raw newline, as a shell passes it
     sc = load(FIXED8, [o])
-    assert sc.text.startswith("# ") and len(sc.text.splitlines()[0]) > 10
+    assert sc.text.splitlines()[0] == f"# {FIXED8}, with {o.label}"  # the whole flag on the comment's line, escaped
     back = loads(sc.text, "scenario.toml")
     assert back.description == sc.description == '"line one\nline two"'  # not TOML, so taken as the string typed
 

@@ -58,7 +58,12 @@ def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
     cpu = json.loads((out / "processes.json").read_text())["cpu"]
     assert set(cpu["run_cpu_s"]) == {c["name"] for c in procs.adopt(out)} | {"launcher+router"}
     assert all(v > 0 for v in cpu["run_cpu_s"].values()), cpu
-    assert 0 < cpu["run_share_of_cores"] <= 1.0 and cpu["run_cpu_total_s"] - cpu["run_cpu_s"]["launcher+router"] <= cpu["command_children_cpu_s"] + 0.01, cpu
+    # A span's CPU is at most the machine's cores times the span.  The children's CPU over
+    # the run is part of their CPU over the whole command (the kernel's total); each figure
+    # is rounded to 0.01 s, so their sums may differ by half of that per figure summed.
+    assert 0 < cpu["run_share_of_cores"] <= 1.0, cpu
+    children = [v for k, v in cpu["run_cpu_s"].items() if k != "launcher+router"]
+    assert sum(children) <= cpu["command_children_cpu_s"] + 0.005 * (len(children) + 1), cpu
     # Results folder.
     for f in ("scenario.toml", "summary.json", "errors.csv", "recording.mcap", "plots/attitude_error.png", "plots/position_error.png", "logs/world.log", "logs/agent-8.log", "logs/recorder.log"):
         assert (out / f).exists(), f
