@@ -49,12 +49,15 @@ def _bad_commands(run: str) -> list[tuple[str, bytes]]:
 def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_path):
     sc = load(TOPO / f"{NAME}.toml")
     out = tmp_path / "run"
-    # At time scale 0.5 (150 world s in 300 s of wall time): seven agents at 100 Hz and the
-    # rigid-body world at 1 kHz use 1.7-1.9 of this machine's two cores at time scale 1
-    # (measured per process: agents 14-21 %, world 34-39 %, router 17 %, recorder 13 %), so with
-    # another process keeping a core busy the agents stepped at 55-60 Hz, and this lightly
-    # damped loop does not settle then (below).
-    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--time-scale", "0.5", "--quiet"), log=tmp_path / "launcher.log")
+    # At time scale 1 (150 world s in 150 s of wall time): seven agents at 100 Hz and the
+    # rigid-body world at 1 kHz use 0.8-1.0 of this machine's two cores (2026-12-03, summary
+    # "cpu": agents 6-8 % of a core each, world 16 %, router 10 %, recorder 8 %).  Beside
+    # `stress-ng --cpu 1` the agents missed 0.01-0.04 % of their ticks and the world 0.3 % of
+    # its samples: not overloaded, so the equations' checks below ran (8 jumps, settled below
+    # 0.1 at 58.5 s and 0.01 at 98.9 s).  Before issue 28 the same needed 1.7-1.9 cores, and at
+    # time scale 0.5 with a core busy the agents stepped at 55-60 Hz; an overloaded run is
+    # still judged only by what it must report (below).
+    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--time-scale", "1", "--quiet"), log=tmp_path / "launcher.log")
     meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
     run_id, ep = meta["run_id"], meta["router"]["endpoint"]
     procs.adopt(out)
@@ -67,7 +70,7 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
         for key, payload in _bad_commands(run_id):
             pubs.setdefault(key, bus.publisher(key)).put(payload)
         time.sleep(0.5)
-    code = p.wait(sc.duration * 2 * 2 + 120)  # 300 s of wall time, ×2 for a loaded machine, + start-up
+    code = p.wait(sc.duration * 2 + 120)  # 150 s of wall time, ×2 for a loaded machine, + start-up
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
