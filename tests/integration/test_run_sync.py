@@ -133,14 +133,15 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     jumps 0 -> 0.9π at the start (§5.6: Q̃_i(0) = Ra(π, e3) too), the filter (Q_i, ζ_i) then
     tracks R_i (|Q̃_i|_I < 0.1 after 5 s; READING-NOTES: ≈ 0.05), and torques reach the world.
 
-    At time scale 0.5: seven agents and the rigid-body world at 100/200 Hz came close to
-    two cores' capacity (a slower machine missed ticks, and the jumps' timing with them);
-    the test is about the law over real processes, not about capacity (test_scale)."""
+    At time scale 1: seven agents and the rigid-body world at 100/200 Hz once came close to
+    two cores' capacity and this ran at 0.5; since issue 28 the law's sibling above keeps up
+    at 1 beside a busy core (its comment).  The test is about the law over real processes,
+    not about capacity (test_scale): an overloaded run is flagged, not judged on its jumps."""
     name = "thesis-5.6-velocity-free7"
     out = tmp_path / "run"
-    args = ("--out", str(out), "--duration", "15", "--time-scale", "0.5", "--quiet")
+    args = ("--out", str(out), "--duration", "15", "--time-scale", "1", "--quiet")
     p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), *args), log=tmp_path / "launcher.log")
-    code = p.wait(15 * 2 * 3 + 120)  # 15 world s at time scale 0.5: 30 s of wall time, ×3 for a loaded machine, + start-up
+    code = p.wait(15 * 3 + 120)  # 15 world s at time scale 1: 15 s of wall time, ×3 for a loaded machine, + start-up
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
