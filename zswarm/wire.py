@@ -129,6 +129,44 @@ _BUILDABLE = frozenset({"sense", "edge", "est", "truth", "cmd"})
 _F8_DTYPE = np.dtype(np.float64)
 
 
+# _build's plan of a message: per field present, in decode's order (the schema's fields,
+# then an open type's others as given), what to check: (name, code, shape, semantic).
+_K_ARRAY, _K_MAP, _K_FLOAT, _K_VALUE, _K_FIELDS, _K_FLOATMAP, _K_JUMPS, _K_INTLIST = range(8)
+_KIND_CODE = {"vecmap": _K_MAP, "matmap": _K_MAP, "float": _K_FLOAT, "value": _K_VALUE, "fields": _K_FIELDS, "floatmap": _K_FLOATMAP, "jumps": _K_JUMPS, "intlist": _K_INTLIST}
+_Plan = tuple[tuple[str, int, tuple[int, ...], int], ...]
+_PLANS: dict[tuple[str, tuple[str, ...]], _Plan | None] = {}
+_MAX_PLANS = 4096  # distinct (type, field names) seen; past it plans are made per message
+
+
+def _plan(mtype: str, names: tuple[str, ...]) -> _Plan | None:
+    """The plan of a ``mtype`` message with fields ``names`` (None: the exact path decides)."""
+    schema = SCHEMAS[mtype]
+    given = set(names)
+    if len(given) != len(names):
+        return None
+    if mtype in OPEN:
+        if "t_local" not in given or len(names) > MAX_OPEN + 1 or any(len(k) > 64 for k in names):
+            return None
+    elif not schema.keys() >= given:
+        return None  # encode raises KeyError: so does the exact path
+    if any(k not in given and k not in _OPTIONAL_OF[mtype] for k in schema):
+        return None  # missing: the exact path names it
+    order = [k for k in schema if k in given] + [k for k in names if k not in schema]
+    rot, unit = _ROTATION_FIELDS.get(mtype, ()), _UNIT_FIELDS.get(mtype, ())
+    plan = []
+    for k in order:
+        kind = schema.get(k, "value")
+        sem = 1 if k in rot else 2 if k in unit else 0
+        if type(kind) is tuple:
+            plan.append((k, _K_ARRAY, kind, sem))
+        elif kind in _KIND_CODE:
+            code = _KIND_CODE[kind]
+            plan.append((k, code, ((3,) if kind == "vecmap" else (3, 3)) if code == _K_MAP else (), sem))
+        else:
+            return None
+    return tuple(plan)
+
+
 def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str, Any]) -> Message:
     """:func:`message`'s short path; raises (_Slow or a conversion's error) where unsure."""
     if not (type(src) is int and 0 <= src <= MAX_ID and type(seq) is int and 0 <= seq < MAX_SEQ and type(inc) is int and 0 <= inc < MAX_SEQ):
@@ -136,71 +174,61 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
     t = float(t)
     if not -MAX_ABS <= t <= MAX_ABS:  # False for NaN
         raise _Slow
+    key = (mtype, tuple(fields))
+    if key in _PLANS:
+        plan = _PLANS[key]
+    else:
+        plan = _plan(*key)
+        if len(_PLANS) < _MAX_PLANS:
+            _PLANS[key] = plan
+    if plan is None:
+        raise _Slow
     out = Message(type=mtype, src=src, seq=seq, inc=inc, t=t)
-    schema = SCHEMAS[mtype]
     bufs: list[bytes] = []
     places: list[tuple[dict[Any, Any], Any, int, tuple[int, ...]]] = []
     f8 = _F8_DTYPE
-    is_open = mtype in OPEN
     # decode's semantic checks (_SEMANTIC), made on the values gathered below: rotations
     # and unit vectors as (offset of their first value, how many) in the buffer.
-    rot, unit = _ROTATION_FIELDS.get(mtype, ()), _UNIT_FIELDS.get(mtype, ())
     rots: list[tuple[int, int]] = []
     units: list[tuple[int, int]] = []
     n_vals = 0
-    if is_open:
-        if "t_local" not in fields or len(fields) > MAX_OPEN + 1:
-            raise _Slow
-        names: Any = fields
-    else:
-        names = schema
-        if not schema.keys() >= fields.keys():
-            raise _Slow  # encode raises KeyError: so does the exact path
-    for k in names:
-        if k not in fields:
-            if k not in _OPTIONAL_OF[mtype]:
-                raise _Slow  # missing: the exact path names it
-            continue
+    for k, code, want, sem in plan:
         v = fields[k]
-        kind = schema.get(k, "value")
-        if type(kind) is tuple:
+        if code == _K_ARRAY:
             if type(v) is not np.ndarray or v.dtype is not f8:
                 raise _Slow
             shape = v.shape
-            if shape != kind and (len(shape) != len(kind) or any(w != -1 and w != g for w, g in zip(kind, shape, strict=True))):
+            if shape != want and (len(shape) != len(want) or any(w != -1 and w != g for w, g in zip(want, shape, strict=True))):
                 raise _Slow
-            if k in rot:
+            if sem:
                 rots.append((n_vals, v.size // 9))
             bufs.append(v.tobytes())
             places.append((out, k, v.size, shape))
             n_vals += v.size
             out[k] = None  # its place in the message's order; the array below
-        elif kind == "vecmap" or kind == "matmap":
+        elif code == _K_MAP:
             if type(v) is not dict or len(v) > MAX_IDS:
                 raise _Slow
-            want = (3,) if kind == "vecmap" else (3, 3)
-            size = 3 if kind == "vecmap" else 9
-            sem = rots if k in rot else units if k in unit else None
+            size = 3 if want == (3,) else 9
+            sem_list = rots if sem == 1 else units if sem == 2 else None
             m: dict[int, Any] = {}
             for j, x in v.items():
                 if type(j) is not int or not 0 <= j <= MAX_ID or type(x) is not np.ndarray or x.dtype is not f8 or x.shape != want:
                     raise _Slow
-                if sem is not None:
-                    sem.append((n_vals, 1))
+                if sem_list is not None:
+                    sem_list.append((n_vals, 1))
                 bufs.append(x.tobytes())
                 places.append((m, j, size, want))
                 n_vals += size
                 m[j] = None
             out[k] = m
-        elif kind == "float":
+        elif code == _K_FLOAT:
             x = float(v)
             if not -MAX_ABS <= x <= MAX_ABS:
                 raise _Slow
             out[k] = x
-        elif kind == "value" or kind == "fields":
-            if kind == "value":
-                if type(k) is not str or len(k) > 64:
-                    raise _Slow
+        elif code == _K_VALUE or code == _K_FIELDS:
+            if code == _K_VALUE:
                 items: Any = ((k, v),)
                 d: dict[str, Any] = out
             else:
@@ -211,19 +239,21 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
                     raise _Slow
                 d = out[k] = {}
             for n, x in items:
-                if isinstance(x, (int, float, np.floating)) and not isinstance(x, bool):
-                    y = float(x)
-                    if not -MAX_ABS <= y <= MAX_ABS:
+                if type(x) is np.ndarray:
+                    if x.dtype is not f8 or x.ndim > 4 or x.size > MAX_VALUE_LEN or max(x.shape, default=0) > MAX_VALUE_LEN:
                         raise _Slow
-                    d[n] = y
-                elif type(x) is np.ndarray and x.dtype is f8 and x.ndim <= 4 and x.size <= MAX_VALUE_LEN and max(x.shape, default=0) <= MAX_VALUE_LEN:
                     bufs.append(x.tobytes())
                     places.append((d, n, x.size, x.shape))
                     n_vals += x.size
                     d[n] = None
+                elif isinstance(x, (int, float, np.floating)) and not isinstance(x, bool):
+                    y = float(x)
+                    if not -MAX_ABS <= y <= MAX_ABS:
+                        raise _Slow
+                    d[n] = y
                 else:
                     raise _Slow
-        elif kind == "floatmap":
+        elif code == _K_FLOATMAP:
             if type(v) is not dict or len(v) > MAX_IDS:
                 raise _Slow
             fm: dict[int, float] = {}
@@ -233,28 +263,28 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
                     raise _Slow
                 fm[j] = y
             out[k] = fm
-        elif kind == "jumps":
+        elif code == _K_JUMPS:
             if type(v) is not list or len(v) > MAX_IDS or not all(len(e) == 4 for e in v):
                 raise _Slow
             js = [(int(e[0]), float(e[1]), float(e[2]), float(e[3])) for e in v]
             if not all(0 <= e[0] <= MAX_ID and -MAX_ABS <= e[1] <= MAX_ABS and -MAX_ABS <= e[2] <= MAX_ABS and -MAX_ABS <= e[3] <= MAX_ABS for e in js):
                 raise _Slow
             out[k] = js
-        elif kind == "intlist":
+        else:  # _K_INTLIST
             if type(v) is not list or len(v) > MAX_IDS or not all(map(_id, v)):
                 raise _Slow
             out[k] = list(v)
-        else:
-            raise _Slow
     if bufs:
         # One buffer for every array: read-only views of it, as decode's arrays are.
         flat = np.frombuffer(b"".join(bufs), dtype=_F8)
         xs = flat.tolist()
-        if not math.isfinite(math.fsum(xs)) or max(xs) > MAX_ABS or min(xs) < -MAX_ABS:
+        # A NaN or an infinity makes the sum non-finite; finite values within ±MAX_ABS, at
+        # most MAX_IDS·9 or MAX_OPEN·MAX_VALUE_LEN of them, cannot overflow it.
+        if not math.isfinite(sum(xs)) or max(xs) > MAX_ABS or min(xs) < -MAX_ABS:
             raise _Slow
         o = 0
         for d_, k_, n_, shape_ in places:
-            d_[k_] = flat[o : o + n_].reshape(shape_)
+            d_[k_] = flat[o : o + n_] if len(shape_) == 1 else flat[o : o + n_].reshape(shape_)
             o += n_
         # _rotations and _unit of decode, on the same values (rotations_ok takes one 3x3
         # matrix, or up to 8 of a stack, through _rotation_ok; more as numpy: left to it).
@@ -662,7 +692,7 @@ _SEMANTIC: Mapping[str, Callable[[dict[str, Any]], None]] = dict.fromkeys(("sens
 # array of another shape, a huge value) goes to decode(), which decides and names
 # the problem: the result is decode()'s whichever path it took (tested).
 
-_ARR, _MAP, _NUM = 0, 1, 2
+_D_ARR, _D_MAP, _D_NUM = 0, 1, 2
 
 
 class _Slow(Exception):
@@ -673,7 +703,7 @@ def _fast_type(code: int, optional: bool) -> Any:
     import msgspec
 
     arr = tuple[list[int], bytes]
-    t: Any = arr if code == _ARR else (dict[int, arr] if code == _MAP else float)
+    t: Any = arr if code == _D_ARR else (dict[int, arr] if code == _D_MAP else float)
     return (t | msgspec.UnsetType) if optional else t
 
 
@@ -709,13 +739,13 @@ def _fast(mtype: str, plan: list[tuple[str, int, tuple[int, ...], bool]]) -> Cal
             x = getattr(m, name)
             if x is unset:
                 continue
-            if code == _ARR:
+            if code == _D_ARR:
                 if x[0] != shp or len(x[1]) != nb:
                     raise _Slow
                 bufs.append(x[1])
                 places.append((out, name, nb >> 3, shape))
                 out[name] = None  # its place in decode's order; the array below
-            elif code == _MAP:
+            elif code == _D_MAP:
                 d: dict[int, Any] = {}
                 if len(x) > MAX_IDS:
                     raise _Slow
@@ -761,17 +791,17 @@ def decoder(mtype: str, fields: Mapping[str, tuple[tuple[int, ...], bool]] | Non
     """
     plan: list[tuple[str, int, tuple[int, ...], bool]] = []
     if mtype in OPEN:
-        plan.append(("t_local", _NUM, (), False))
+        plan.append(("t_local", _D_NUM, (), False))
         for n, (shape, optional) in (fields or {}).items():
-            plan.append((n, _ARR if shape else _NUM, tuple(shape), optional))
+            plan.append((n, _D_ARR if shape else _D_NUM, tuple(shape), optional))
     else:
         for n, kind in SCHEMAS[mtype].items():
             if isinstance(kind, tuple) and -1 not in kind:
-                plan.append((n, _ARR, kind, n in OPTIONAL.get(mtype, ())))
+                plan.append((n, _D_ARR, kind, n in OPTIONAL.get(mtype, ())))
             elif kind in ("vecmap", "matmap"):
-                plan.append((n, _MAP, (3,) if kind == "vecmap" else (3, 3), n in OPTIONAL.get(mtype, ())))
+                plan.append((n, _D_MAP, (3,) if kind == "vecmap" else (3, 3), n in OPTIONAL.get(mtype, ())))
             elif kind == "float":
-                plan.append((n, _NUM, (), n in OPTIONAL.get(mtype, ())))
+                plan.append((n, _D_NUM, (), n in OPTIONAL.get(mtype, ())))
             else:
                 plan = []
                 break

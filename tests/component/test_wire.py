@@ -258,6 +258,104 @@ def test_fast_decoder_property(g, bearings, t, flips):
         _same_outcome(mtype, bytes(p))
 
 
+# ---------------------------------------------------------------- the in-process bus's messages
+
+
+def _message_is_decode_of_encode(mtype, fields, src=3, seq=42, t=1.25, inc=0):
+    """``wire.message`` is what ``decode(encode(...))`` gives (types, key order, dtypes,
+    shapes, bytes, read-only arrays), or, where decode refuses, the payload itself; an
+    argument encode refuses is refused alike."""
+    try:
+        payload = wire.encode(mtype, src, seq, t, inc=inc, **fields)
+    except Exception as exc:  # noqa: BLE001 - whatever encode raises, message raises too
+        with pytest.raises(type(exc)):
+            wire.message(mtype, src, seq, t, inc=inc, **fields)
+        return
+    got = wire.message(mtype, src, seq, t, inc=inc, **fields)
+    try:
+        want = wire.decode(payload, mtype)
+    except wire.MessageError:
+        assert got == payload, got
+        return
+    assert type(got) is wire.Message and _identical(dict(got), dict(want)), (got, want)
+
+
+T3 = np.stack([R, R2, R2.T])
+
+
+@pytest.mark.parametrize(
+    "mtype, fields",
+    [
+        *CASES.items(),
+        ("sense", dict(gyro=v, bearings={})),
+        ("sense", dict(bearings={1: u, 2: -u, 3: u}, gyro=v)),  # another order than the schema's
+        ("sense", dict(gyro=v, bearings={1: v})),  # not a unit bearing
+        ("sense", dict(gyro=v, rel_att={2: 1.01 * R})),  # not a rotation
+        ("sense", dict(gyro=v, R=np.eye(3)[:, [1, 0, 2]])),  # det −1
+        ("sense", dict(gyro=np.array([1.0, 2.0]))),  # wrong shape
+        ("sense", dict(gyro=np.array([1, 2, 3]))),  # integers: converted as encode does
+        ("sense", dict(gyro=v, bearings={-1: u})),  # a negative id
+        ("sense", dict(gyro=v, unknown=v)),  # not a field of sense
+        ("sense", dict(gyro=np.array([1e13, 0.0, 0.0]))),  # over MAX_ABS
+        ("edge", dict(b=v, p_hat=v, t_local=1, R_hat=R, vel=-v, s=2)),
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=np.array([np.nan, 0.0, 0.0]), b=v)),
+        ("edge", dict(t_local=1.5, R_hat=R, p_hat=np.array([1e308, 1e308, 0.0]), b=v)),
+        ("edge", dict(t_local=1.5, big=np.zeros((2, 2, 2, 2, 2)))),  # 5 dimensions
+        ("edge", dict(t_local=1.5, flag=True)),  # a bool is not a number here
+        ("edge", dict(R_hat=R)),  # no t_local
+        ("est", dict(t_local=1.5, R_hat=R2, p_hat=v)),
+        ("est", dict(t_local=1.5, R_hat=2 * R, p_hat=v)),  # not a rotation
+        ("est", dict(t_local=1.5, extra={"a": 1, "b": np.ones((2, 3))}, xi={}, jumps=[], agent_jumps=[])),
+        ("cmd", dict(t_local=0.0, tau=np.array([np.inf, 0.0, 0.0]))),
+        ("truth", dict(ids=[1, 2, 3], R=T3, p=np.ones((3, 3)), w=np.zeros((3, 3)))),
+        ("truth", dict(ids=list(range(1, 11)), R=np.stack([R2] * 10), p=np.ones((10, 3)), w=np.zeros((10, 3)), u=np.zeros((10, 4)))),
+        ("truth", dict(ids=[1, 2], R=T3, p=np.ones((3, 3)), w=np.zeros((3, 3)))),  # rows do not match ids
+        ("truth", dict(ids=[1, 2, 3], R=np.stack([R, R2, 3 * R]), p=np.ones((3, 3)), w=np.zeros((3, 3)))),
+    ],
+)
+def test_message_is_decode_of_encode(mtype, fields):
+    _message_is_decode_of_encode(mtype, fields)
+
+
+def test_the_usual_messages_take_the_short_path():
+    """What the engines send every tick is built by ``_build``, not by the exact path (a
+    field it no longer recognised would cost every message a second, slower validation
+    without changing a result: test_message_is_decode_of_encode would not notice)."""
+    for mtype in ("sense", "edge", "est", "cmd", "truth"):
+        got = wire._build(mtype, 3, 42, 1.25, 0, CASES[mtype])
+        assert _identical(dict(got), dict(wire.decode(wire.encode(mtype, 3, 42, 1.25, **CASES[mtype]), mtype))), mtype
+    got = wire._build("edge", 3, 42, 1.25, 0, dict(b=v, t_local=1.0))
+    assert list(got) == [*wire.ENVELOPE[1:], "t_local", "b"]  # decode's order: the schema's fields first
+
+
+def test_message_envelope_edges():
+    for src, seq, t, inc in ((0, 0, 0.0, 0), (wire.MAX_ID, wire.MAX_SEQ - 1, -1e12, 5), (-1, 0, 0.0, 0), (1, wire.MAX_SEQ, 0.0, 0), (True, 0, 0.0, 0), (1, 0, float("nan"), 0), (1, 0, 2e12, 0), (1, 0, 1, 0)):
+        _message_is_decode_of_encode("sense", dict(gyro=v), src, seq, t, inc)
+
+
+_rot_stacks = st.integers(1, 12).flatmap(lambda n: st.tuples(st.just(n), hnp.arrays(np.float64, (n, 3), elements=st.floats(-4, 4))))
+
+
+@settings(max_examples=examples(200), deadline=None)
+@given(_vec, st.dictionaries(st.integers(-3, 3), _vec, max_size=3), _floats, _rot_stacks, st.floats(0.0, 2e-6))
+def test_message_property(g, bearings, t, rots, wobble):
+    """Random sense, edge, est and truth fields: ``wire.message`` is decode(encode(...)),
+    including rotations off by up to twice ROT_TOL and bearings off unit length."""
+    n, axes = rots
+    Rs = np.stack([so3.exp(a) for a in axes]) * (1.0 + wobble)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge draws: their norm overflows, and they stay as drawn
+        unit = {j: b / nb * (1.0 + wobble) if b.shape == (3,) and np.isfinite(nb := np.linalg.norm(b)) and nb > 0 else b for j, b in bearings.items()}
+    cases = [
+        ("sense", dict(gyro=g, bearings=unit)),
+        ("sense", dict(gyro=g, rel_att={j + 10: Rs[j % n] for j in range(3)}, R=Rs[0])),
+        ("edge", dict(t_local=t, R_hat=Rs[0], p_hat=g, b=v)),
+        ("est", dict(t_local=t, R_hat=Rs[-1], p_hat=g, extra={"x": g})),
+        ("truth", dict(ids=list(range(1, n + 1)), R=Rs, p=np.zeros((n, 3)), w=np.zeros((n, 3)))),
+    ]
+    for mtype, fields in cases:
+        _message_is_decode_of_encode(mtype, fields)
+
+
 @pytest.mark.parametrize(
     "counters, match",
     [
