@@ -52,11 +52,12 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
     # At time scale 1 (150 world s in 150 s of wall time): seven agents at 100 Hz and the
     # rigid-body world at 1 kHz use 0.8-1.0 of this machine's two cores (2026-12-03, summary
     # "cpu": agents 6-8 % of a core each, world 16 %, router 10 %, recorder 8 %).  Beside
-    # `stress-ng --cpu 1` the agents missed 0.01-0.04 % of their ticks and the world 0.3 % of
-    # its samples: not overloaded, so the equations' checks below ran (8 jumps, settled below
-    # 0.1 at 58.5 s and 0.01 at 98.9 s).  Before issue 28 the same needed 1.7-1.9 cores, and at
-    # time scale 0.5 with a core busy the agents stepped at 55-60 Hz; an overloaded run is
-    # still judged only by what it must report (below).
+    # `stress-ng --cpu 1` the agents missed ≤ 0.04 % of their ticks and the world skipped
+    # 0.3-0.7 % of its samples in three runs: not overloaded, so the equations' checks below
+    # ran (8 jumps, settled below 0.1 at 58.5 s and 0.01 at 98.9 s in the first).  Before
+    # issue 28 the same needed 1.7-1.9 cores, and at time scale 0.5 with a core busy the
+    # agents stepped at 55-60 Hz; an overloaded run is still judged only by what it must
+    # report (below).
     p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--time-scale", "1", "--quiet"), log=tmp_path / "launcher.log")
     meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
     run_id, ep = meta["run_id"], meta["router"]["endpoint"]
@@ -133,15 +134,15 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     jumps 0 -> 0.9π at the start (§5.6: Q̃_i(0) = Ra(π, e3) too), the filter (Q_i, ζ_i) then
     tracks R_i (|Q̃_i|_I < 0.1 after 5 s; READING-NOTES: ≈ 0.05), and torques reach the world.
 
-    At time scale 1: seven agents and the rigid-body world at 100/200 Hz once came close to
-    two cores' capacity and this ran at 0.5; since issue 28 the law's sibling above keeps up
-    at 1 beside a busy core (its comment).  The test is about the law over real processes,
-    not about capacity (test_scale): an overloaded run is flagged, not judged on its jumps."""
+    At time scale 0.5: at 1 beside `stress-ng --cpu 1` (2026-12-03) the agents kept up but
+    the world skipped 0.2-2.0 % of its samples over three runs, and an overloaded run is only
+    flagged, not judged on its jumps.  The test is about the law over real processes, not
+    about capacity (test_scale)."""
     name = "thesis-5.6-velocity-free7"
     out = tmp_path / "run"
-    args = ("--out", str(out), "--duration", "15", "--time-scale", "1", "--quiet")
+    args = ("--out", str(out), "--duration", "15", "--time-scale", "0.5", "--quiet")
     p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), *args), log=tmp_path / "launcher.log")
-    code = p.wait(15 * 3 + 120)  # 15 world s at time scale 1: 15 s of wall time, ×3 for a loaded machine, + start-up
+    code = p.wait(15 * 2 * 3 + 120)  # 15 world s at time scale 0.5: 30 s of wall time, ×3 for a loaded machine, + start-up
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
