@@ -278,8 +278,8 @@ def _build(mtype: str, src: Any, seq: Any, t: Any, inc: Any, fields: Mapping[str
         # One buffer for every array: read-only views of it, as decode's arrays are.
         flat = np.frombuffer(b"".join(bufs), dtype=_F8)
         xs = flat.tolist()
-        # A NaN or an infinity makes the sum non-finite; finite values within ±MAX_ABS, at
-        # most MAX_IDS·9 or MAX_OPEN·MAX_VALUE_LEN of them, cannot overflow it.
+        # A NaN or an infinity makes the sum non-finite; values within ±MAX_ABS (1e12) cannot
+        # overflow it (that would take ~1e296 of them; a message holds at most ~3e5).
         if not math.isfinite(sum(xs)) or max(xs) > MAX_ABS or min(xs) < -MAX_ABS:
             raise _Slow
         o = 0
