@@ -302,14 +302,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
     summary["wall_time_run_s"] = times["run_s"]
     summary["wall_time_recording_s"] = times["record_s"]
     summary["wall_time_report_s"] = time.perf_counter() - t0 - wall
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    report.write_summary(out / "summary.json", summary)
     if not args.quiet:
         print(report.table(summary))
         print(
             f"simulated {duration:g} s in {times['run_s']:.1f} s of wall time ({duration / max(times['run_s'], 1e-9):.1f}x real time), "
             f"then the recording in {times['record_s']:.1f} s and the report in {summary['wall_time_report_s']:.1f} s; results: {out}"
         )
-    return 0
+    return 0 if summary["completed"] else 1
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

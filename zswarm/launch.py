@@ -447,15 +447,17 @@ def run(
     except Exception as exc:  # noqa: BLE001 - the run is over: keep what it left (recording, logs, exit codes)
         # Counters that pass the wire's bounds may still be what the report did not expect.
         say(f"zswarm run: the report failed ({type(exc).__name__}: {exc}); the recording and logs are in {out}")
-        summary = {"report_error": f"{type(exc).__name__}: {exc}", "exit_codes": codes, "interrupted": interrupted.is_set()}
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        summary = {"report_error": f"{type(exc).__name__}: {exc}", "exit_codes": codes, "interrupted": interrupted.is_set(), "completed": False}
+        report.write_summary(out / "summary.json", summary)
         return 1
     summary["exit_codes"] = codes
     summary["interrupted"] = interrupted.is_set()
     summary["cpu"] = la.cpu
     if la.fault_log:
         summary["fault_actions"] = la.fault_log
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    report.write_summary(out / "summary.json", summary)
     print(report.table(summary))
     print(f"results: {out}")
-    return 130 if interrupted.is_set() else 0
+    if interrupted.is_set():
+        return 130
+    return 0 if summary["completed"] else 1

@@ -160,13 +160,18 @@ class LinkCounter:
 
     Loss is inferred from sequence-number gaps within each incarnation of the
     sender (``inc``: a restarted process numbers from 0 again under a new one,
-    and is followed at once, counted in ``restarts``).  Also keeps the last 2000
+    and is followed at once, counted in ``restarts``).  Incarnations are start
+    times (procutil.incarnation), so a message of an older incarnation than the
+    one followed is a dead process's straggler or a second sender on the key:
+    counted in ``old_incarnation`` and never stored, so two senders on one key
+    cannot make the link flap between them (a forger alternating two
+    incarnations made a link read 302 restarts and 1,587,820 dropped).  Also keeps the last 2000
     latencies (receiver's clock at arrival minus the sender's send stamp):
     meaningful when the clocks share a base, as they do for processes on one
     host with no configured offset or drift.
     """
 
-    __slots__ = ("delivered", "dropped", "max_seq", "reordered", "latency", "inc", "restarts", "resyncs", "_behind", "_before")
+    __slots__ = ("delivered", "dropped", "max_seq", "reordered", "latency", "inc", "restarts", "resyncs", "old_incarnation", "_behind", "_before")
 
     def __init__(self) -> None:
         self.delivered = 0
@@ -177,19 +182,26 @@ class LinkCounter:
         self.inc: int | None = None
         self.restarts = 0
         self.resyncs = 0
+        self.old_incarnation = 0  # messages of an incarnation older than the one followed
         self._behind = 0  # messages in a row behind max_seq
         self._before = (-1, 0)  # (max_seq, dropped) before the newest message
 
     def see(self, seq: int, inc: int, latency: float) -> bool:
         """Count one message; True when it is the newest of its link (store it)."""
+        if self.inc is not None and inc < self.inc:
+            self.old_incarnation += 1
+            return False
         self.delivered += 1
         self.latency.append(latency)
         if inc != self.inc:
             # The sender restarted: messages 0..seq-1 of its new incarnation were lost.  The
             # first message a receiver sees starts its count (a receiver that started, or
             # restarted, late did not lose what was sent before it listened).
+            # A new incarnation whose first message is RESYNC_GAP or more into its count is
+            # counted from there too: a restarted process's first messages are not a
+            # thousand lost ones, but a second sender on the key may be (1e6 "dropped").
             self.restarts += self.inc is not None
-            self.max_seq = -1 if self.inc is not None else seq - 1
+            self.max_seq = -1 if self.inc is not None and seq < RESYNC_GAP else seq - 1
             self.inc = inc
         elif seq <= self.max_seq:
             self._behind += 1
@@ -219,6 +231,8 @@ class LinkCounter:
             d["restarts"] = self.restarts
         if self.resyncs:
             d["resyncs"] = self.resyncs
+        if self.old_incarnation:
+            d["old_incarnation"] = self.old_incarnation
         if self.latency:
             q = np.percentile(np.array(self.latency), [50, 99])
             d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])

@@ -153,6 +153,7 @@ class ViewerOut:
                 # A channel per key would be made for it: 20 000 junk keys, 20 000 channels.
                 raise wire.MessageError("not a stream of this run's scenario")
             m = decode(payload, expect)
+            wire.check_stream(stream, m)  # filed under its key's process, or not at all
         except wire.MessageError as exc:
             self.malformed += 1
             if self.malformed <= 10 or self.malformed % 1000 == 0:
@@ -260,8 +261,12 @@ class RawOut:
 
 def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
     """Write the viewer recording ``out`` (JSON with schemas, viewer channels) of the
-    raw recording ``raw`` (:class:`RawOut`), then delete ``raw``; returns the number of
-    malformed messages (described on ``/events/malformed`` in ``out``)."""
+    raw recording ``raw`` (:class:`RawOut`), then delete ``raw`` if ``out`` holds an
+    entry for each of its messages (a malformed one as its description); returns the
+    number of malformed messages (described on ``/events/malformed`` in ``out``).
+
+    A raw file with no message is kept and nothing is written (:class:`EmptyRecording`):
+    an empty viewer file in its place would lose what a better reader could still get."""
     from mcap.reader import make_reader
 
     with open(raw, "rb") as f:
@@ -272,17 +277,39 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
     meta["transcoded_from"] = raw.name
     tmp = out.with_name(out.name + ".part")
     vo = ViewerOut(tmp, None, scenario, meta)
+    n_raw = 0
     try:
         for stream, payload, t in read(raw):
+            n_raw += 1
             if stream == ALIVE_CHANNEL:
-                vo.alive(unpack(payload), t)
+                try:
+                    event = unpack(payload)
+                except Exception as exc:  # noqa: BLE001 - a cut or foreign entry: described, not fatal
+                    vo.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream, "reason": f"not an event: {exc}"[:256], "size": len(payload)}, t)
+                    vo.malformed += 1
+                    vo.count += 1
+                    continue
+                vo.alive(event, t)
             else:
                 vo.message(stream, payload, t)
     finally:
         vo.close()
+    if n_raw == 0:
+        tmp.unlink(missing_ok=True)
+        raise EmptyRecording(f"{raw}: no complete message in the file ({raw.stat().st_size} bytes); kept as it is")
+    if vo.count < n_raw:  # cannot happen unless a write was lost: keep the source
+        raise RecordingError(f"{raw}: transcoded {vo.count} of its {n_raw} messages into {tmp}; both kept")
     tmp.replace(out)
     raw.unlink()
     return vo.malformed
+
+
+class RecordingError(Exception):
+    """A recording that cannot be read or written as a whole (message names the file)."""
+
+
+class EmptyRecording(RecordingError):
+    """A recording file that holds no complete message."""
 
 
 def ensure_recording(results: Path, scenario: Scenario | None) -> Path:
@@ -534,11 +561,16 @@ def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:
     derived viewer channels are left out.  Uses the streaming reader, so a
     file cut short (no summary section) is read up to its last complete chunk
     instead of failing.
+
+    File order, not log-time order: a recorder writes in arrival order (log times
+    out of order by at most the bus thread's hand-over, ~ms), and the streaming
+    reader's log-time order sorts the whole file in memory first, so a file cut
+    short by a SIGKILL yielded nothing at all (the truncation ended the sort).
     """
     with open(path, "rb") as f:
         reader = NonSeekingReader(f)
         try:
-            for _schema, channel, message in reader.iter_messages():
+            for _schema, channel, message in reader.iter_messages(log_time_order=False):
                 topic = channel.topic
                 if channel.message_encoding == "msgpack":
                     yield topic, message.data, message.log_time

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import csv
 import json
+import math
+import os
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -36,7 +38,7 @@ import msgpack
 import numpy as np
 
 from zswarm import report_faults, report_formation, report_sync, so3, wire
-from zswarm.record import ALIVE_CHANNEL, decode, ensure_recording, read, unpack
+from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, decode, ensure_recording, read, unpack
 from zswarm.scenario import Scenario
 
 
@@ -64,11 +66,32 @@ class Recording:
     truth_tau: np.ndarray | None = None  # (T, n, 3): the torques the plant applied (rigid bodies)
     stats_by_inc: dict[tuple[str, int, int], dict[str, Any]] = field(default_factory=dict)  # (role, src, incarnation): its last stats
     envelopes: dict[str, list[tuple[float, int, int]]] = field(default_factory=dict)  # stream -> (t, inc, seq) per message, when asked
+    outside_run: dict[str, int] = field(default_factory=dict)  # stream kind -> messages stamped outside the run (ignored)
 
 
-def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool = False) -> Recording:
+# A message stamped more than this outside [0, duration] of world time is not the run's: it
+# is counted (summary.json "recording.outside_run") and ignored.  Every process stamps world
+# time, and the last ones come at most a tick after the world's stop (an agent's step at
+# 100 Hz, stats within a second); one estimate stamped t = 1e12 made the report build a
+# 10 ms grid to that time (MemoryError: 728 TiB) or became the "final" error.
+OUTSIDE_RUN_MARGIN_S = 1.0
+# No error is computed where the truth has a gap longer than this many of its median
+# sample periods (20 ms at 200 Hz): the attitude there would be the sample before
+# propagated with its ω over the gap, error ½|ω̇|τ² (0.2 rad over 0.3 s at the §3.2
+# |ω̇| ≤ 5 rad/s²), and a recorder stopped for 3 s made errors.csv read 0.91 where the real
+# error was 0.01.  Estimates in a gap (or after the last sample by more than it) get NaN;
+# the gaps are in summary.json "recording.truth_gaps".  Four periods: a world that takes a
+# sample up to two periods late (world.CATCH_UP_PERIODS) leaves gaps of at most three.
+TRUTH_GAP_PERIODS = 4.0
+
+
+def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool = False, duration: float | None = None) -> Recording:
     """Decode a recording file, or the messages of an in-memory recording; with ``envelopes``,
-    also every message's ``(t, inc, seq)`` per stream (the loss a fault caused)."""
+    also every message's ``(t, inc, seq)`` per stream (the loss a fault caused).
+
+    A message is filed under the process of its key (wire.check_stream); with ``duration``
+    (else the run's ``ctl/start``, if it comes first), truth, estimates and stats stamped
+    more than OUTSIDE_RUN_MARGIN_S outside ``[0, duration]`` are counted and ignored."""
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
     xi: dict[int, list[tuple[float, float]]] = defaultdict(list)
@@ -84,11 +107,16 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
     malformed = 0
     env: dict[str, list[tuple[float, int, int]]] = defaultdict(list)
     by_inc: dict[tuple[str, int, int], dict[str, Any]] = {}
+    outside: dict[str, int] = defaultdict(int)
+    t_lo, t_hi = -OUTSIDE_RUN_MARGIN_S, (math.inf if duration is None else duration + OUTSIDE_RUN_MARGIN_S)
     for topic, payload, _t in read(path) if isinstance(path, (str, Path)) else path:
         counts[topic.split("/")[0]] += 1
         streams[topic] += 1
         if topic == ALIVE_CHANNEL:
             alive.append({**unpack(payload), "log_t": _t})
+            continue
+        if topic == MALFORMED_CHANNEL:  # what the recorder (or the transcode) dropped as malformed
+            malformed += 1
             continue
         kind = topic.split("/")[0]
         if envelopes and kind != "events":
@@ -101,8 +129,14 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
             continue
         try:
             m = decode(payload)
+            wire.check_stream(topic, m)  # est/i is agent i's, whatever src it claims (counted malformed)
         except wire.MessageError:
             malformed += 1
+            counts[kind] -= 1  # not a message of this stream: not counted as recorded on it
+            streams[topic] -= 1
+            continue
+        if kind != "ctl" and not t_lo <= m["t"] <= t_hi:
+            outside[kind] += 1
             continue
         if m["type"] == "truth" and kind == "truth":
             truth.append(m)
@@ -126,6 +160,8 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
                 by_inc[(role, m["src"], m["inc"])] = {**m["counters"], "t": m["t"], "seq": m["seq"]}
         elif m["type"] == "start":
             start = m
+            if duration is None:
+                t_hi = m["duration"] + OUTSIDE_RUN_MARGIN_S
         elif m["type"] == "stop":
             stop_seen = True
     if not truth:
@@ -153,6 +189,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         truth_tau=np.array([m["tau"] for m in truth]) if all("tau" in m for m in truth) else None,
         stats_by_inc=by_inc,
         envelopes=dict(env),
+        outside_run=dict(outside),
     )
 
 
@@ -191,7 +228,37 @@ def _estimates_with_truth(
     span = T[k1] - T[k]
     frac = np.where(k1 > k, tau / np.where(span > 0, span, 1.0), 0.0)
     p = (1 - frac)[:, None] * rec.truth_p[k, a] + frac[:, None] * rec.truth_p[k1, a]
+    # In a truth gap, or past the last sample by more than the bound: no truth to compare with.
+    bound = truth_gap_bound(T)
+    blind = np.where(k1 > k, (span > bound) & (tau > 0), tau > bound)
+    if np.any(blind):
+        R, p = R.copy(), p.copy()
+        R[blind], p[blind] = np.nan, np.nan
     return t, R_hat, p_hat, R, p
+
+
+def truth_gap_bound(T: np.ndarray) -> float:
+    """The longest interval between truth samples (s) across which errors are computed."""
+    if len(T) < 2:
+        return math.inf
+    return TRUTH_GAP_PERIODS * float(np.median(np.diff(T)))
+
+
+def truth_gaps(rec: Recording, duration: float, most: int = 50) -> dict[str, Any]:
+    """The truth's gaps longer than :func:`truth_gap_bound` within the run, where no error is
+    computed (summary.json ``recording.truth_gaps``); the recording's end counts when it
+    stops short of the run's end (a recorder that died, a run stopped early)."""
+    T = rec.truth_t
+    bound = truth_gap_bound(T)
+    spans = [(float(a), float(b)) for a, b in zip(T[:-1], T[1:], strict=True) if b - a > bound]
+    if len(T) and duration - T[-1] > bound:
+        spans.append((float(T[-1]), float(duration)))
+    return {
+        "bound_s": round(bound, 6) if math.isfinite(bound) else None,
+        "count": len(spans),
+        "total_s": round(sum(b - a for a, b in spans), 6),
+        "spans": [[round(a, 6), round(b, 6)] for a, b in spans[:most]],
+    }
 
 
 @dataclass
@@ -243,8 +310,11 @@ def _nearest_rotation(M: np.ndarray) -> np.ndarray:
 
 
 def _final(t: np.ndarray, v: np.ndarray, t_end: float, window: float = 1.0) -> float:
-    sel = t >= t_end - window
-    return float(np.mean(v[sel])) if np.any(sel) else float("nan")
+    """Mean of ``v`` over the last ``window`` of the run, of the values with a truth (NaN
+    if none: a recording cut before the end has no final error)."""
+    w = v[t >= t_end - window]
+    w = w[np.isfinite(w)]
+    return float(np.mean(w)) if len(w) else float("nan")
 
 
 def _first_below(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
@@ -411,6 +481,7 @@ def summarize(
             "catch_up_steps": int(st.get("catch_up_steps", 0)),
             "compute_mean_us": float(st.get("compute_mean_us", 0.0)),
             "malformed_received": int(st.get("malformed", 0)),
+            "step_failures": int(st.get("step_failures", 0)),
             "stale_terms": int(sum(st.get("stale_terms", {}).values())),
         }
         if "parts" in st:  # each part's achieved rate on the agent's clock
@@ -436,6 +507,8 @@ def summarize(
     elif sc.info.graph == "tree":
         tm = tree_metrics(sc, rec) if tm is None else tm
         extra = _tree_summary(sc, rec, agents, t_end, tm)
+    recording = recording_section(sc, rec, duration, not_recorded)
+    problems = run_problems(sc, rec, agents, recording, duration, exit_codes)
     return extra | {
         "scenario": sc.name,
         "algorithm": sc.algorithm,
@@ -443,7 +516,8 @@ def summarize(
         "duration_s": duration,
         "time_scale": time_scale,
         "seed": seed,
-        "completed": rec.stop_seen,
+        "completed": not problems,
+        "problems": problems,
         "agents": agents,
         "links": dict(sorted(links.items())),
         "mean_attitude_error_final": _nanmean([f["attitude_error_final"] for f in followers]) if conv is None or "formation" in extra else extra["mean_relative_attitude_error_final"],
@@ -455,9 +529,56 @@ def summarize(
         "world": world,
         "overload": overload(agents, world),
         "recorded_messages": rec.counts,
-        "recording": completeness(sc, rec, not_recorded),
+        "recording": recording,
         "malformed_in_recording": rec.malformed,
     } | ({"warnings": list(sc.warnings) + extra.get("warnings", [])} if sc.warnings or extra.get("warnings") else {})
+
+
+# An agent that failed more than this share of its steps did not run the algorithm: the run
+# is not completed (gains of 1e12 failed 271 of 301 steps and the run read as completed).
+MAX_FAILED_STEPS_SHARE = 0.5
+
+
+def run_problems(
+    sc: Scenario, rec: Recording, agents: Mapping[str, Mapping[str, Any]], recording: Mapping[str, Any], duration: float, exit_codes: Mapping[str, int | None] | None
+) -> list[str]:
+    """Why the run is not ``completed`` (summary.json ``problems``; empty: completed): the
+    world's stop missing from the recording, a recording that ends short of the run, the
+    world or the recorder not exiting cleanly, an agent that failed most of its steps."""
+    out = []
+    if not rec.stop_seen:
+        out.append("the world's stop is not in the recording (the run was stopped early, or its recording was cut)")
+    if recording.get("cut_short"):
+        out.append(f"the recording ends at t = {recording['ends_at_s']:.2f} s of {duration:g}")
+    for name in ("world", "recorder"):
+        code = (exit_codes or {}).get(name, 0)
+        if code != 0:
+            out.append(f"the {name} exited with {code}" if code is not None else f"the {name} did not exit")
+    for i, a in agents.items():
+        tried = a["steps"] + a["step_failures"]  # "steps" counts the ones that succeeded
+        if a["step_failures"] > MAX_FAILED_STEPS_SHARE * tried:
+            out.append(f"agent {i} failed {a['step_failures']} of its {tried} steps")
+    return out
+
+
+def recording_section(sc: Scenario, rec: Recording, duration: float, not_recorded: Sequence[str] = ()) -> dict[str, Any]:
+    """summary.json ``recording``: :func:`completeness`, where the truth has gaps (no error
+    computed there), where the recording ends, and what was stamped outside the run."""
+    out = completeness(sc, rec, not_recorded)
+    gaps = truth_gaps(rec, duration)
+    end = float(rec.truth_t[-1]) if len(rec.truth_t) else None
+    out["truth_gaps"] = gaps
+    out["ends_at_s"] = end
+    # Cut short: the last truth sample is more than the gap bound before the run's end.
+    # The processes' counts then stop where the recording stopped too: not exact.
+    out["cut_short"] = bool(end is not None and gaps["bound_s"] is not None and duration - end > gaps["bound_s"])
+    if out["cut_short"]:
+        # Counted against the processes' last recorded stats (once a second), so "missing" and
+        # "surplus" cover the time before the end only: past it, everything is missing.
+        out["exact"] = False
+        out["missing_after_s"] = end
+    out["outside_run"] = dict(rec.outside_run)
+    return out
 
 
 def completeness(sc: Scenario, rec: Recording, not_recorded: Sequence[str] = ()) -> dict[str, Any]:
@@ -622,7 +743,7 @@ def make_report(
     """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
     write errors.csv, summary.json and plots; return the summary.  ``not_recorded``:
     channel prefixes the recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean)."""
-    rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults))
+    rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
     errs = errors(rec)
     sync = report_sync.is_sync(sc)
     sm = report_sync.sync_metrics(sc, rec) if sync else None
@@ -640,7 +761,7 @@ def make_report(
     if sm is not None:
         report_sync.write_edges_csv(out_dir / "edges.csv", sc, sm, rec)
         report_sync.write_agents_csv(out_dir / "agents.csv", sc, sm)
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_summary(out_dir / "summary.json", summary)
     if plots:
         if sm is not None:
             report_sync.plot(out_dir / "plots", sc, sm, rec)
@@ -652,6 +773,36 @@ def make_report(
         else:
             plot_tree(out_dir / "plots", sc, tm, rec)
     return summary
+
+
+def strict_json(obj: Any) -> Any:
+    """``obj`` with every non-finite float as None: summary.json is strict JSON (a literal
+    NaN, which Python's json writes by default, is not JSON and other readers reject it)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return strict_json(obj.item())
+    return obj
+
+
+def write_summary(path: Path, summary: Mapping[str, Any]) -> None:
+    """Write ``summary`` to ``path`` as strict JSON, whole or not at all: into a temporary file
+    beside it, then renamed over it (a full disk left a 0-byte summary.json).  OSError
+    (disk full, read-only folder) is the caller's to report."""
+    tmp = path.with_name(path.name + ".part")
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(json.dumps(strict_json(summary), indent=2, allow_nan=False) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_edges_csv(path: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
@@ -795,6 +946,8 @@ def _footer_lines(summary: dict[str, Any]) -> list[str]:
             f"cpu: every process together {100 * cpu['run_share_of_cores']:.0f} % of the {cpu['cores']} cores over the run "
             f"({cpu['run_cpu_total_s']:.1f} s in {cpu['run_wall_s']:.1f} s; per process in processes.json)"
         )
+    if summary.get("problems"):
+        lines.append("NOT COMPLETED: " + "; ".join(summary["problems"]))
     if not ov.get("overloaded"):
         return lines
     return lines + [

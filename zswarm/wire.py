@@ -562,6 +562,38 @@ def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
     return m
 
 
+def check_stream(stream: str, m: Mapping[str, Any]) -> None:
+    """A message belongs to the key it came on: ``est/i``, ``cmd/i`` carry ``src = i``,
+    ``edge/j/i`` its tail ``src = j``, ``stats/<role>/<i>`` that role and ``src = i``, and
+    ``truth``, ``sense/i`` and ``ctl/...`` the world's ``src = 0``.
+
+    ``stream`` is the key without the run's prefix.  Raises :class:`MessageError` otherwise:
+    the identity inside a message is the sender's word, the key is what the access control
+    (``--secure``) checks, so a message is filed under its key's process or not at all (a
+    peer holding agent 4's certificate put ``src = 3`` in ``est/4`` and the report filed it
+    as agent 3's estimate).
+    """
+    parts = stream.split("/")
+    kind = parts[0]
+    try:
+        if kind in ("est", "cmd") and len(parts) == 2:
+            want_src, want_role = int(parts[1]), None
+        elif kind == "edge" and len(parts) == 3:
+            want_src, want_role = int(parts[1]), None
+        elif kind == "stats" and len(parts) == 3:
+            want_src, want_role = int(parts[2]), parts[1]
+        elif kind in ("truth", "sense", "ctl"):
+            want_src, want_role = 0, None
+        else:
+            raise MessageError(f"{stream!r} is not a zswarm stream")
+    except ValueError:
+        raise MessageError(f"{stream!r}: not a process id in the key") from None
+    if m.get("src") != want_src:
+        raise MessageError(f"src {m.get('src')!r} on {stream}, whose sender is {want_src}")
+    if want_role is not None and m.get("role") != want_role:
+        raise MessageError(f"role {m.get('role')!r} on {stream}")
+
+
 def decode(payload: bytes | Message, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
     """Decode and validate; arrays come back as read-only float64 numpy arrays.
 

@@ -131,3 +131,61 @@ def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
     assert rec.missing_finals(procs) == [("agent", 4), ("agent", 5)]  # agent 3, never seen, is not counted
     bus.declare_token(keys.alive("r", "agent", 4))  # back (a restart): awaited as up
     assert rec.awaiting_finals(procs, recent_s=0.0) == [("agent", 4)]
+
+
+def _raw_file(path: Path, msgs, every: int) -> list[int]:
+    """Write ``msgs`` as the run recorder does, a chunk ended every ``every`` messages;
+    return the file's size after each flush (what a SIGKILL at that moment leaves)."""
+    raw = RawOut(path, {"engine": "test"})
+    sizes = []
+    for k, (stream, payload, t) in enumerate(msgs, start=1):
+        raw.message(stream, payload, t)
+        if k % every == 0:
+            raw.flush()
+            sizes.append(path.stat().st_size)
+    raw.close()
+    return sizes
+
+
+def test_a_raw_file_cut_short_reads_back_to_its_last_complete_chunk(tmp_path, fixed8):
+    """A SIGKILLed recorder leaves a raw file without its summary and with a chunk cut
+    anywhere: everything up to the last complete chunk reads back, in file order (the
+    reader's log-time order sorted the whole file first and yielded nothing at all)."""
+    sc, msgs = fixed8
+    path = tmp_path / "recording.raw.mcap"
+    every = 700
+    sizes = _raw_file(path, msgs, every)
+    data = path.read_bytes()
+    for k in (2, len(sizes) // 2, len(sizes) - 1):
+        for extra in (0, 1, 37, 5000):  # cut at a chunk's end, in the next record's header, inside the next chunk
+            cut = tmp_path / "cut.raw.mcap"
+            cut.write_bytes(data[: sizes[k - 1] + extra])
+            got = list(read(cut))
+            # Every message of the k complete chunks, and nothing made up (the cut chunk is incomplete).
+            assert len(got) == k * every, (k, extra, len(got))
+            assert [t for _, _, t in got] == [t for _, _, t in msgs[: k * every]]
+
+
+def test_transcoding_a_cut_raw_file_keeps_what_it_holds(tmp_path, fixed8):
+    """The launcher's report of a run whose recorder was SIGKILLed: the cut raw file becomes
+    a viewer recording with every message it held and a report; a raw file with no complete
+    message is kept, not replaced by an empty recording."""
+    from zswarm.record import EmptyRecording
+
+    sc, msgs = fixed8
+    path = tmp_path / "recording.raw.mcap"
+    sizes = _raw_file(path, msgs, 500)
+    whole = path.read_bytes()
+    path.write_bytes(whole[: sizes[5] + 100])  # 6 chunks on disk, the 7th cut
+    assert transcode(path, tmp_path / "recording.mcap", sc) == 0
+    assert not path.exists()
+    assert sum(1 for _ in read(tmp_path / "recording.mcap")) == 3000
+    rec = load_recording(tmp_path / "recording.mcap")
+    assert rec.streams == load_recording(msgs[:3000]).streams
+    # Nothing complete: the raw file is kept as it is and no recording is written.
+    (tmp_path / "recording.mcap").unlink()
+    path.write_bytes(whole[:200])
+    with pytest.raises(EmptyRecording, match="no complete message"):
+        transcode(path, tmp_path / "recording.mcap", sc)
+    assert path.read_bytes() == whole[:200] and not (tmp_path / "recording.mcap").exists()
+    assert not list(tmp_path.glob("*.part"))

@@ -50,14 +50,32 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
             zenoh.open(conf).close()
 
     # An insider with agent 4's certificate: as agent 3 on 3->4, and as itself on 4->5.
+    # On its own keys (the access control lets it) it also claims to be agent 3 and the
+    # world inside the message: an estimate of agent 3 far off, agent 3's stats with
+    # 424242 steps and links "all dropped", the world's stats "late 999999".
+    forged = [
+        (keys.est(run, 4), wire.encode("est", 3, 10**6, 9.0, inc=SPOOF_INC, t_local=9.0, R_hat=so3.exp(np.array([2.0, 0.0, 0.0])), p_hat=np.full(3, 50.0))),
+        (keys.stats(run, "agent", 4), wire.encode("stats", 3, 10**6, 9.0, inc=SPOOF_INC, role="agent", counters={"steps": 424242, "final": True, "links": {"1->3": {"delivered": 0, "dropped": 10**6, "reordered": 0}}})),
+        (keys.stats(run, "agent", 4), wire.encode("stats", 0, 10**6, 9.0, inc=SPOOF_INC, role="world", counters={"late": 999999, "final": True})),
+    ]
     with zenoh.open(zenoh_config("client", connect=[ep], secure=(str(certs), "agent-4"))) as s:
         spoof, own = s.declare_publisher(keys.edge(run, 3, 4)), s.declare_publisher(keys.edge(run, 4, 5))
         for k in range(200):
             spoof.put(_edge(3, 10**6 + k, SPOOF_INC))
             own.put(_edge(4, 10**6 + k, OWN_INC))
+            if k % 50 == 0:
+                for key, payload in forged:
+                    s.put(key, payload)
             time.sleep(0.005)
     assert p.wait(120) == 0, (tmp_path / "launcher.log").read_text()[-2000:]
     s = json.loads((out / "summary.json").read_text())
+    # None of it was filed under agent 3 or the world: each is counted malformed (12 sent).
+    a3, world = s["agents"]["3"], s["world"]
+    assert a3["steps"] < 424242 and a3["alive_at_end"] and world.get("late", 0) < 999999, (a3, world)
+    assert a3["position_error_final"] < 1.0 and s["links"]["1->3"]["dropped"] < 10**6, (a3, s["links"]["1->3"])
+    # Counted, at most once each (a put may be dropped by Zenoh's congestion control when the
+    # recorder lags, so not exactly 12 on a busy machine).
+    assert 0 < s["malformed_in_recording"] <= 12, s["malformed_in_recording"]
     incs: dict[str, set[int]] = {}
     for stream, m, _ in read(ensure_recording(out, None)):
         if stream in ("edge/3/4", "edge/4/5"):
