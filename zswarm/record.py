@@ -198,6 +198,16 @@ class ViewerOut:
 RAW_SUFFIX = ".raw.mcap"
 
 
+def max_payload(n_agents: int) -> int:
+    """The largest payload the run recorder writes as it came (bytes) for a run of
+    ``n_agents``: 256 KiB plus 512 bytes per agent.  A message of the shipped schemes is far
+    smaller (an estimate or an edge message under 2 KB, truth and the sensor maps under 300
+    bytes per agent, stats counters under 200 bytes per link); a bigger payload is described
+    on ``/events/malformed`` (its size) and not written: 300 junk payloads of 1 MB on est/3
+    had grown the raw file by 300 MB in a second."""
+    return (256 << 10) + 512 * max(n_agents, 1)
+
+
 @functools.cache
 def _raw_schema() -> Any:
     """msgpack is self-describing: the schema of a raw channel only names the wire format."""
@@ -211,7 +221,7 @@ class RawOut:
     file (the format :func:`read` reads as "earlier recordings"); :func:`transcode`
     makes the viewer recording of it."""
 
-    def __init__(self, path: Path, metadata: dict[str, str] | None = None) -> None:
+    def __init__(self, path: Path, metadata: dict[str, str] | None = None, max_bytes: int | None = None) -> None:
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
@@ -232,10 +242,17 @@ class RawOut:
             self.writer.write_metadata("zswarm", metadata)
         self._channels: dict[str, Any] = {}
         self.count = 0
-        self.malformed = 0  # counted when transcoded
+        self.malformed = 0  # oversized ones here; the others are counted when transcoded
+        self.max_bytes = max_bytes
         self.live_port = None
 
     def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
+        if self.max_bytes is not None and isinstance(payload, bytes) and len(payload) > self.max_bytes:
+            self.malformed += 1
+            if self.malformed <= 10 or self.malformed % 1000 == 0:
+                log.warning("dropped an oversized payload on %s (%d bytes; %d malformed so far)", stream, len(payload), self.malformed)
+            desc = {"stream": stream[:256], "reason": f"payload of {len(payload)} bytes, over the {self.max_bytes} a message of this run can be", "size": len(payload)}
+            payload, stream = msgpack.packb(desc), MALFORMED_CHANNEL
         ch = self._channels.get(stream)
         if ch is None:
             import foxglove
@@ -281,6 +298,15 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
     try:
         for stream, payload, t in read(raw):
             n_raw += 1
+            if stream == MALFORMED_CHANNEL:  # described by the recorder (RawOut: oversized), as it is
+                try:
+                    desc = unpack(payload)
+                except Exception:  # noqa: BLE001 - a foreign entry: described below as such
+                    desc = {"stream": stream, "reason": "not a description", "size": len(payload)}
+                vo.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, desc, t)
+                vo.malformed += 1
+                vo.count += 1
+                continue
             if stream == ALIVE_CHANNEL:
                 try:
                     event = unpack(payload)
@@ -377,7 +403,7 @@ class Recorder:
         meta = dict(metadata or {})
         meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
         if raw and self.path is not None and live is None:
-            self.out = RawOut(self.path, meta)
+            self.out = RawOut(self.path, meta, None if scenario is None else max_payload(len(scenario.ids)))
         elif self.path is not None or live is not None:
             self.out = ViewerOut(self.path, live, scenario, meta, server_name=f"zswarm {run}")
         # A real bus: samples copied and stamped on arrival by the bus's thread, taken by

@@ -454,10 +454,17 @@ def summarize(
     t_end = duration
     agents: dict[str, Any] = {}
     links: dict[str, dict[str, Any]] = {}
+    # What each link's sender sent, over every incarnation of it (a process restarted counts
+    # from 0 again; its receivers' counts span both): the sum, and per incarnation when more
+    # than one sent on the link.  From the newest stats alone, a restarted agent's link read
+    # "sent 2228, delivered 3312".
     sent: dict[str, int] = {}
-    for (_role, _src), st in rec.stats.items():
+    by_inc: dict[str, dict[int, int]] = defaultdict(dict)
+    for (_role, _src, inc), st in (rec.stats_by_inc or {(r, i, 0): st for (r, i), st in rec.stats.items()}).items():
         for link, n in st.get("sent", {}).items():
-            sent[link] = n
+            by_inc[link][inc] = int(n)
+    for link, incs in by_inc.items():
+        sent[link] = sum(incs.values())
     for a in sc.agents:
         st = rec.stats.get(("agent", a.id), {})
         rows = errs.get(a.id, np.zeros((0, 4)))
@@ -482,6 +489,7 @@ def summarize(
             "compute_mean_us": float(st.get("compute_mean_us", 0.0)),
             "malformed_received": int(st.get("malformed", 0)),
             "step_failures": int(st.get("step_failures", 0)),
+            "inbox_overflow": int(st.get("inbox_overflow", 0)),
             "stale_terms": int(sum(st.get("stale_terms", {}).values())),
         }
         if "parts" in st:  # each part's achieved rate on the agent's clock
@@ -493,6 +501,8 @@ def summarize(
         links[link] = {"sent": sent.get(link, 0), **c}
     for link, n in sent.items():
         links.setdefault(link, {"sent": n, "delivered": 0, "dropped": n, "reordered": 0})
+        if len(by_inc[link]) > 1:
+            links[link]["sent_by_incarnation"] = {str(i): k for i, k in sorted(by_inc[link].items())}
     followers = [agents[str(a.id)] for a in sc.agents if a.role == "follower"]
     extra: dict[str, Any] = {}
     conv: dict[str, Any] | None = None

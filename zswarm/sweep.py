@@ -384,6 +384,12 @@ def run_sweep(
                 try:
                     if timed_out:
                         raise RuntimeError(f"timed out after {timeout:g} s")
+                    problems = _not_completed(folder) if rc == 1 else None
+                    if problems is not None:
+                        # It ran to its end and wrote its summary, which says why it is not
+                        # completed (an agent failing most of its steps): its figures are kept.
+                        row.update(summarize_run(folder, sc, duration, thresholds))
+                        raise RuntimeError("not completed: " + "; ".join(problems))
                     if rc != 0:
                         raise RuntimeError(f"exit code {rc}: {_last_error(folder / 'log.txt')}")
                     row.update(summarize_run(folder, sc, duration, thresholds))
@@ -407,6 +413,15 @@ def run_sweep(
         f.close()
         prog.close()
     return ok, failed, interrupted
+
+
+def _not_completed(folder: Path) -> list[str] | None:
+    """The ``problems`` of a run that wrote its summary and is not completed, else None."""
+    try:
+        s = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return [str(p) for p in s.get("problems", [])] or None if s.get("completed") is False else None
 
 
 def _repair_tail(path: Path) -> None:

@@ -87,6 +87,11 @@ def test_a_killed_agent_is_flagged_restarted_and_the_team_reconverges(killed):
     assert a5["alive_at_end"] and a5["steps"] == 1501
     link = s["links"]["5->6"]
     assert link["restarts"] == 1 and link["dropped"] == 0
+    # Sent over both incarnations, as "delivered" counts them (sent was the new one's alone,
+    # 1501, beside 2502 delivered).  The killed one's count is from its last stats, sent at
+    # t = 10 s the moment it died or a second before: at most one second (100) short.
+    incs = link["sent_by_incarnation"]
+    assert len(incs) == 2 and link["sent"] == sum(incs.values()) and 0 <= link["delivered"] - link["sent"] <= 100, link
     assert s["recording"]["missing_total"] == 0
     # The axes of this figure alone make a 15.6 kB PNG; with the curves and the shading 73-76 kB.
     assert (out / "plots" / "attitude_error.png").stat().st_size > 30_000

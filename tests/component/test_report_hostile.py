@@ -144,3 +144,31 @@ def test_most_steps_failed_is_not_a_completed_run(tmp_path):
     json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
     # 101 ticks in 1 s at 100 Hz: those that failed and those that stepped make them up.
     assert all(a["step_failures"] + a["steps"] == 101 for a in s["agents"].values())
+
+
+def test_junk_payloads_do_not_reach_the_disk(tmp_path, fixed8):
+    """300 payloads of 1 MB on est/3 grew the run recorder's raw file by 300 MB in a second.
+    The recorder writes a payload as it came only up to what a message of the run can be
+    (record.max_payload); a bigger one is described (stream, size) and counted malformed,
+    in the viewer recording and in summary.json."""
+    from zswarm import keys
+    from zswarm.bus import MemoryBus
+    from zswarm.record import Recorder, max_payload, read, transcode
+
+    sc, msgs = fixed8
+    bus = MemoryBus()
+    path = tmp_path / "recording.raw.mcap"
+    rec = Recorder(bus, "r", path, now_ns=lambda: 0, scenario=sc, raw=True)
+    junk = np.random.default_rng(1).bytes(1 << 20)
+    for _ in range(300):
+        bus.put(keys.est("r", 3), junk)
+    edge = wire.encode("edge", 1, 0, 0.5, t_local=0.5, R_hat=np.eye(3), p_hat=np.zeros(3), b=np.array([0.0, 0.0, 1.0]))
+    bus.put(keys.edge("r", 1, 3), edge)  # a real message beside them is written
+    rec.close()
+    assert path.stat().st_size < 100_000 and rec.malformed == 300
+    assert max_payload(8) < len(junk)
+    assert transcode(path, tmp_path / "recording.mcap", sc) == 300
+    got = list(read(tmp_path / "recording.mcap"))
+    bad = [m for s, m, _ in got if s == "events/malformed"]
+    assert len(bad) == 300 and all(m["stream"] == "est/3" and m["size"] == 1 << 20 for m in bad)
+    assert [s for s, _, _ in got if not s.startswith("events/")] == ["edge/1/3"]

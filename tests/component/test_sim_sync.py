@@ -212,3 +212,50 @@ def test_hybrid_at_100hz_follows_1khz_agents_over_the_transient(tmp_path):
         wd = sum(md.omega[i][k] ** 2 for i in md.omega)
         wf = sum(mf.omega[i][k] ** 2 for i in mf.omega)
         assert wd == pytest.approx(wf, rel=0.05), (t, wd, wf)
+
+
+# --------------------------------------------------------------------------- jumps at t = 0
+
+
+def _deep_in_the_jump_sets(text: str, x0: float) -> str:
+    """§5.6's velocity-free file with every R_i = Q_i = I (so R̄_k(0) = Q̃_i(0) = I) and
+    every ξ_k(0) = ζ_i(0) = x0."""
+    import re
+
+    text = re.sub(r'R = \{ angle = "-?pi/2", axis = \[0, 0, 1\] \}', 'R = { angle = "0", axis = [0, 0, 1] }', text)
+    text = re.sub(r'Q = \{ angle = "-?pi/2", axis = \[0, 0, 1\] \}', 'Q = { angle = "0", axis = [0, 0, 1] }', text)
+    text = re.sub(r"zeta = 0\.0", f"zeta = {x0}", text)
+    return re.sub(r"(\d) = 0\.0", rf"\1 = {x0}", text)  # xi = { k = 0.0, ... }
+
+
+def test_every_hybrid_variable_in_its_jump_set_at_the_start_jumps_at_t_0(tmp_path, vf_text):
+    """Issue 29: the jump sets are tested on the initial state, before any flow.
+
+    Hand-derived count.  With R̄ = I, U(I, x) = tr(A(I − Ra(x, u))) + γx²/2
+    = (tr A − uᵀAu)(1 − cos x) + γx²/2 (Rodrigues: tr(A[u]ˣ) = 0, tr(A[u]ˣ²) = uᵀAu − tr A),
+    the same for ξ_k (R̄_k = I) and ζ_i (Q̃_i = I).  Ξ = Π = {0.9π} and δ = δ_Q̃ = 0.3848,
+    so x0 = 7 is in the jump set when U(I, 7) − U(I, 0.9π) ≥ 0.3848: 50.9 − 37.0 = 13.9.
+    Each of the 6 ξ_k and 7 ζ_i jumps to 0.9π at t = 0: 13 jumps.  After them every gap is
+    0 < δ, so none jumps again at t = 0.
+
+    The first step's flow alone (10 ms, k_ξ = k_ζ = 20, ξ̇ ≈ −20·(γ·7 + 15·sin 7) ≈ −470 /s
+    at the start) carries every variable out of its jump set before the old code first
+    tested it: it counted no jump at all."""
+    sc = loads(_deep_in_the_jump_sets(vf_text, 7.0).replace("duration = 150.0", "duration = 0.3"), "deep.toml")
+    p = sc.params
+    A = np.array(p.A).reshape(3, 3)
+    u = np.array(p.u)
+    c = np.trace(A) - u @ A @ u
+
+    def U(x):
+        return c * (1 - math.cos(x)) + 0.5 * p.gamma * x * x
+
+    (to,) = p.Xi
+    assert p.Pi == (to,) and U(7.0) - U(to) >= max(p.delta, p.delta_Q) > U(to) - U(to)
+    msgs = simulate(sc, tmp_path, sc.duration, sc.seed, lean=True, record=False)
+    s = make_report(tmp_path, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs)
+    at0 = [j for e in s["edges"].values() for j in e["jump_log"] if j["t"] == 0.0]
+    zeta0 = [j for a in s["agents"].values() for j in a["zeta_jump_log"] if j["t"] == 0.0]
+    assert len(at0) == 6 and len(zeta0) == 7, (at0, zeta0)
+    assert all(j["xi_before"] == 7.0 and j["xi_after"] == pytest.approx(to) for j in at0)
+    assert all(j["zeta_before"] == 7.0 and j["zeta_after"] == pytest.approx(to) for j in zeta0)
