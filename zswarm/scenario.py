@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zswarm import hybrid, so3
+from zswarm.wire import MAX_ABS
 from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, StalePolicy, resolve
 from zswarm.expr import Expr, ExprError, parse
 from zswarm.graph import GraphError, check_leader_follower, check_tree
@@ -585,6 +586,10 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents", "faults"}, {"scenario", "algorithm", "agents"})
     sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
     name = c.string(sc["name"], "scenario.name")
+    # The results folder is runs/<name>-<stamp>: "тест ☃/../../x" wrote outside runs/ and a NUL
+    # was a traceback.  A file name of letters (any script), digits, '.', '_', '-'.
+    if not SAFE_NAME.fullmatch(name) or name.startswith("."):
+        raise c.err("scenario.name", f"must be a file name of at most {MAX_NAME} letters, digits, '.', '_' or '-', not starting with '.' (it names the results folder)", name)
     description = c.string(sc.get("description", ""), "scenario.description")
     # At most MAX_DURATION_S: 1e300 was accepted and the world ran until killed.
     duration = c.num(sc["duration"], "scenario.duration", positive=True, maxv=MAX_DURATION_S)
@@ -640,6 +645,11 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     rel_att_var = c.num(nz.get("rel_att_var", 0.0), "noise.rel_att_var", nonneg=True)
     attitude_var = c.num(nz.get("attitude_var", 0.0), "noise.attitude_var", nonneg=True)
     rel_pos_var = c.num(nz.get("rel_pos_var", 0.0), "noise.rel_pos_var", nonneg=True)
+    # Noise added to a measured value: 10 σ within the wire's ±MAX_ABS (a sample beyond it is
+    # dropped as malformed: gyro_var = 1e30 gave 0 steps and a run that read completed).
+    for fld_, v_ in (("gyro_var", gyro_var), ("velocity_var", velocity_var), ("rel_pos_var", rel_pos_var)):
+        if v_ > MAX_NOISE_VAR:
+            raise c.err(f"noise.{fld_}", f"must be <= {MAX_NOISE_VAR:g} (10 standard deviations within the wire's ±{MAX_ABS:g})", v_)
 
     default_clock = _clock(c, doc.get("clock", {}), "clock", ClockSpec())
 
@@ -669,7 +679,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             if a.velocity is not None:
                 raise c.err(f"{seen[a.id]}.v", "an agent of a rotating [world.formation] has its velocity set by the formation")
     for a in agents:
-        _check_finite_over_run(c, a, seen[a.id], duration)
+        _check_finite_over_run(c, a, seen[a.id], duration, step)
 
     oriented: tuple[tuple[int, int], ...] = ()
     oriented_from = ""
@@ -906,22 +916,42 @@ def _plant(c: _Ctx, w: dict[str, Any], info: AlgorithmSpec, algo: str, formation
 # expression finite at t = 0 may not be later, and 1/(1-t) used to turn the truth into NaN
 # at t = 1, after which the agents dropped every sensor packet as malformed.
 FINITE_CHECK_STEP = 1e-3
+# An agent's own clock reads (1 + drift)·t + offset and stamps its messages (t_local): past
+# ±1e10 s a double resolves it to no better than 2 µs, and 2e12 put every message beyond the
+# wire's ±MAX_ABS (all dropped, exit 0); 1e300 froze the clock (t + dt == t: sim hung).
+MAX_CLOCK_OFFSET_S = 1e10
+MAX_NOISE_VAR = (0.1 * MAX_ABS) ** 2
+SAFE_NAME = re.compile(r"[\w.\-]{1,100}")
+MAX_NAME = 100
 FINITE_CHECK_POINTS = 1_000_000
 
 
-def _check_finite_over_run(c: Any, a: AgentSpec, fld: str, duration: float) -> None:
+def _check_finite_over_run(c: Any, a: AgentSpec, fld: str, duration: float, step: float = 1e-3) -> None:
+    """Every motion finite and within what the truth and the wire can carry over the run.
+
+    ω: |ω_k|·world.step ≤ π/2, a quarter turn per integration step at most (past it the
+    world's exp(ω dt) steps alias; ω = 1e13 was a traceback, ω = exp(3t) turned the truth
+    wire-invalid at 9.2 s and it was dropped while the run read completed).  v: the position
+    stays within the wire's ±MAX_ABS over the run, |v_k|·duration ≤ MAX_ABS/10."""
     exprs = [("omega", k, e) for k, e in enumerate(a.omega)] + [("v", k, e) for k, e in enumerate(a.velocity or ())]
-    exprs = [x for x in exprs if not x[2].constant]
-    if not exprs:
-        return
-    n = max(1, min(FINITE_CHECK_POINTS, math.ceil(duration / FINITE_CHECK_STEP - 1e-9)))
-    ts = np.arange(n + 1) * (duration / n)  # k·1 ms exactly, when the run has at most 1e6 steps of it
     for name, k, e in exprs:
+        limit, why = (0.5 * math.pi / step, f"a quarter turn per world.step of {step:g} s") if name == "omega" else (0.1 * MAX_ABS / duration, f"the positions within ±{MAX_ABS:g} over the run's {duration:g} s")
+        if e.constant:
+            v0 = float(e(0.0))
+            if abs(v0) > limit:
+                raise c.err(f"{fld}.{name}[{k}]", f"must be within ±{limit:.4g} ({why})", e.source)
+            continue
+        n = max(1, min(FINITE_CHECK_POINTS, math.ceil(duration / FINITE_CHECK_STEP - 1e-9)))
+        ts = np.arange(n + 1) * (duration / n)  # k·1 ms exactly, when the run has at most 1e6 steps of it
         with np.errstate(all="ignore"):
-            v = np.asarray(e(ts), dtype=float)
+            v = np.broadcast_to(np.asarray(e(ts), dtype=float), ts.shape)
         bad = ~np.isfinite(v)
         if bad.any():
             raise c.err(f"{fld}.{name}[{k}]", f"is not finite at t = {ts[int(np.argmax(bad))]:g} s (checked every {duration / n:.3g} s over the run's {duration:g} s)", e.source)
+        over = np.abs(v) > limit
+        if over.any():
+            at = int(np.argmax(over))
+            raise c.err(f"{fld}.{name}[{k}]", f"reaches {v[at]:.4g} at t = {ts[at]:g} s, beyond ±{limit:.4g} ({why})", e.source)
 
 
 def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: float, n: int = 200) -> list[dict[int, tuple[float, ...]]]:
@@ -1058,6 +1088,8 @@ def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
     if abs(drift) >= 1e5:
         raise c.err(f"{f}.drift_ppm", "must be within ±100000 ppm", drift)
     offset = c.num(d.get("offset", base.offset), f"{f}.offset")
+    if abs(offset) > MAX_CLOCK_OFFSET_S:
+        raise c.err(f"{f}.offset", f"must be within ±{MAX_CLOCK_OFFSET_S:g} s (the own clock's resolution stays under 2 µs)", offset)
     return ClockSpec(rate, jitter, drift, offset)
 
 

@@ -152,3 +152,35 @@ def test_a_sensor_rate_under_1_hz_runs(tmp_path, fixed8_text):
     r = _zswarm("sim", str(f), "--duration", "6", "--out", str(tmp_path / "out"))
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "out" / "summary.json").exists()
+
+
+# Values the wire would reject later (issue 29): the loader says so first, file: field: problem.
+WIRE_BOUNDS = [
+    # An own clock past ±1e10 s: 2e12 put every message off the wire (all dropped, exit 0), 1e300 hung sim.
+    ('rate = 100.0        # Hz, every agent\'s step rate on its own clock', "rate = 100.0\noffset = 2e12", r"x\.toml: clock\.offset: must be within ±1e\+10 s"),
+    ('rate = 100.0        # Hz, every agent\'s step rate on its own clock', "rate = 100.0\noffset = 1e300", r"x\.toml: clock\.offset: must be within ±1e\+10 s"),
+    # ω = 1e13 was a traceback; exp(3t) made the truth wire-invalid at 9.2 s (dropped, run "completed").
+    ('omega = ["1", "-2", "1"]', 'omega = ["1e13", "-2", "1"]', r"x\.toml: agents\[0\]\.omega\[0\]: must be within ±1571 \(a quarter turn per world\.step of 0\.001 s\)"),
+    # exp(3t) = π/2 / 1 ms at t = ln(1570.8)/3 = 2.4530 s: the first millisecond past it.
+    ('omega = ["1", "-2", "1"]', 'omega = ["exp(3*t)", "-2", "1"]', r"x\.toml: agents\[0\]\.omega\[0\]: reaches 1575 at t = 2\.454 s, beyond ±1571"),
+    # gyro_var = 1e30: every packet beyond the wire's bound, 0 steps, exit 0.
+    ("seed = 1", "seed = 1\n[noise]\ngyro_var = 1e30\nbearing_var = 0.0", r"x\.toml: noise\.gyro_var: must be <= 1e\+22"),
+    # The name is the results folder's: one outside runs/, a NUL a traceback.
+    ('name = "thesis-3.2-fixed8"', 'name = "тест ☃/../../x"', r"x\.toml: scenario\.name: must be a file name"),
+    ('name = "thesis-3.2-fixed8"', 'name = "a\\u0000b"', r"x\.toml: scenario\.name: must be a file name"),
+    ('name = "thesis-3.2-fixed8"', 'name = ".."', r"x\.toml: scenario\.name: must be a file name"),
+]
+
+
+@pytest.mark.parametrize("old, new, match", WIRE_BOUNDS)
+def test_the_loader_knows_the_wires_bounds(fixed8_text, old, new, match):
+    assert old in fixed8_text
+    with pytest.raises(ScenarioError, match=match):
+        loads(fixed8_text.replace(old, new, 1), "x.toml")
+
+
+def test_names_and_bounds_that_stay_allowed(fixed8_text):
+    for name in ("тест-1", "run_2.b", "a" * 100):
+        assert loads(fixed8_text.replace('name = "thesis-3.2-fixed8"', f'name = "{name}"', 1), "x.toml").name == name
+    rate = 'rate = 100.0        # Hz, every agent\'s step rate on its own clock'
+    assert loads(fixed8_text.replace(rate, "rate = 100.0\noffset = 1.8e9", 1), "x.toml").agents[0].clock.offset == 1.8e9  # a Unix time
