@@ -259,7 +259,14 @@ def main(argv: list[str] | None = None) -> int:
     procutil.die_with_parent()  # as a sweep's child: ends with the sweep
     args = build_parser().parse_args(argv)
     cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid, "generate": cmd_generate, "certs": cmd_certs}
-    return cmds[args.cmd](args)
+    try:
+        return cmds[args.cmd](args)
+    except Exception as exc:
+        problem = procutil.write_problem(exc)
+        if problem is None:
+            raise
+        print(f"zswarm {args.cmd}: {procutil.one_line(problem)}", file=sys.stderr)
+        return 1
 
 
 def cmd_run(args: argparse.Namespace) -> int:

@@ -35,16 +35,24 @@ def free_port() -> int:
 
 
 def results_dir(out: Path | None, name: str, base: Path = Path("runs")) -> Path:
+    """The results folder (``out``, or ``runs/<name>-<stamp>``), made and checked writable
+    before anything runs: a read-only folder would otherwise show only at the first write
+    (OSError, the caller's one line: cli.main)."""
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        return out
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    d = base / f"{name}-{stamp}"
-    n = 1
-    while d.exists():
-        n += 1
-        d = base / f"{name}-{stamp}-{n}"
-    d.mkdir(parents=True)
+        d = out
+        d.mkdir(parents=True, exist_ok=True)
+    else:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        d = base / f"{name}-{stamp}"
+        n = 1
+        while d.exists():
+            n += 1
+            d = base / f"{name}-{stamp}-{n}"
+        d.mkdir(parents=True)
+    probe = d / ".zswarm-write-check"
+    with open(probe, "wb") as f:
+        f.write(b"1")
+    probe.unlink()
     return d
 
 
@@ -437,14 +445,18 @@ def run(
         "command_children_cpu_s": round(kids.ru_utime + kids.ru_stime, 2),
         "command_launcher_cpu_s": round(own.ru_utime + own.ru_stime, 2),
     }
-    la.write_processes(la.endpoint, la.run_id)
     codes: dict[str, int | None] = {c.name: c.exit_code for c in la.children}
     try:
+        la.write_processes(la.endpoint, la.run_id)
         summary = report.make_report(out, sc, "run", duration, time_scale, seed, exit_codes=codes)
     except ValueError as exc:
         say(f"zswarm run: no report: {exc}")
         return 1
     except Exception as exc:  # noqa: BLE001 - the run is over: keep what it left (recording, logs, exit codes)
+        problem = procutil.write_problem(exc)
+        if problem is not None:  # a full disk, a read-only folder: every process is stopped and reaped already
+            print(f"zswarm run: {procutil.one_line(problem)} (the run's processes stopped; what was written is in {out})", file=sys.stderr)
+            return 1
         # Counters that pass the wire's bounds may still be what the report did not expect.
         say(f"zswarm run: the report failed ({type(exc).__name__}: {exc}); the recording and logs are in {out}")
         summary = {"report_error": f"{type(exc).__name__}: {exc}", "exit_codes": codes, "interrupted": interrupted.is_set(), "completed": False}

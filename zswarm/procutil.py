@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import errno
 import functools
 import logging
 import math
@@ -58,6 +59,23 @@ def fail_usage(msg: str) -> NoReturn:
     """``error: msg`` on one line of stderr (user text in it escaped), exit 2."""
     print(f"error: {one_line(msg)}", file=sys.stderr)
     sys.exit(EXIT_USAGE)
+
+
+# Errors of the results folder (a full disk, a read-only or foreign folder): one line naming
+# the path and the problem, exit 1, never a traceback.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.ENOTDIR, errno.EISDIR, errno.ENAMETOOLONG})
+
+
+def write_problem(exc: BaseException) -> str | None:
+    """``path: problem`` for an error writing results (an OSError of WRITE_ERRNOS, or the
+    recording's RecordingError, which names its file), else None."""
+    from zswarm.record import RecordingError
+
+    if isinstance(exc, RecordingError):
+        return str(exc)
+    if isinstance(exc, OSError) and exc.errno in WRITE_ERRNOS:
+        return f"{exc.filename}: {exc.strerror}" if exc.filename else str(exc.strerror or exc)
+    return None
 
 
 class ArgumentParser(argparse.ArgumentParser):

@@ -89,6 +89,54 @@ MALFORMED_SCHEMA = object_schema(
 )
 
 
+class _WriteErrors(logging.Filter):
+    """The Foxglove SDK logs each message it could not write (``error logging message:
+    McapError(Io(Os { code: 28, ... }))`` on the ``foxglove.log_sink_set`` logger) and goes
+    on: a full disk printed 19 000 such lines before a traceback.  Counted and kept here
+    (the first), not printed; the writers check :attr:`count` and raise RecordingError."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.count = 0
+        self.first = ""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        msg = record.getMessage()
+        if not msg.startswith("error logging message"):
+            return True
+        if not self.count:
+            self.first = msg
+        self.count += 1
+        return False
+
+
+WRITE_ERRORS = _WriteErrors()
+logging.getLogger("foxglove.log_sink_set").addFilter(WRITE_ERRORS)
+
+
+def io_problem(text: str, path: Path | None = None) -> str:
+    """The OS's words for an I/O error in the SDK's text (``os error 28`` / ``code: 28``); a
+    text without the OS's number ("I/O error from writing", from a flush) is told by the
+    state of ``path``'s file system: full or read-only."""
+    import errno
+    import os
+    import re
+
+    m = re.search(r"(?:os error |code: )(\d+)", text)
+    if m:
+        return os.strerror(int(m.group(1)))
+    if path is not None:
+        try:
+            st = os.statvfs(Path(path).parent)
+        except OSError:
+            return text
+        if st.f_flag & os.ST_RDONLY:
+            return os.strerror(errno.EROFS)
+        if st.f_bavail * st.f_frsize < (1 << 20):
+            return f"{os.strerror(errno.ENOSPC)} ({st.f_bavail * st.f_frsize} bytes free)"
+    return text
+
+
 def run_streams(sc: Scenario) -> frozenset[str]:
     """Every stream a run of ``sc`` publishes (the recorder's channels)."""
     per_agent = [f"{kind}/{i}" for i in sc.ids for kind in ("sense", "est", "cmd", "stats/agent")]
@@ -127,11 +175,13 @@ class ViewerOut:
         self.count = 0
         self.malformed = 0
         self._channels: dict[str, Any] = {}
+        self.path = path
+        self._errors0 = WRITE_ERRORS.count
         if path is not None:
             opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, chunk_size=4 << 20, profile="")
-            self.writer = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
+            self.writer = _open_mcap(path, self.ctx, opts)
             if metadata:
-                self.writer.write_metadata("zswarm", metadata)
+                self._write_metadata(metadata)
         if live is not None:
             self.server = foxglove.start_server(name=server_name, host=live[0], port=live[1], context=self.ctx)
         self.views = Views(self.ctx, self.log_json, scenario)
@@ -181,18 +231,50 @@ class ViewerOut:
             js = wire.json_schema(schema) if isinstance(schema, str) else schema
             ch = self._channels[stream] = foxglove.Channel("/" + stream, schema=js, context=self.ctx)
         ch.log(_dumps(obj), log_time=t)
+        if WRITE_ERRORS.count != self._errors0:
+            self._failed(WRITE_ERRORS.first)
+
+    def _write_metadata(self, metadata: dict[str, str]) -> None:
+        try:
+            self.writer.write_metadata("zswarm", metadata)
+        except RuntimeError as exc:
+            self._failed(WRITE_ERRORS.first or str(exc))
+
+    def _failed(self, text: str) -> None:
+        """Stop writing (and serving) and raise RecordingError naming the file and the problem."""
+        writer, self.writer = self.writer, None
+        self._errors0 = WRITE_ERRORS.count
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        if writer is not None:
+            try:
+                writer.close()
+            except Exception:  # noqa: BLE001, S110 - it failed already: the first error is the one to tell
+                pass
+        if self.path is not None and Path(self.path).exists() and Path(self.path).stat().st_size == 0:
+            Path(self.path).unlink()  # nothing of it reached the disk: no 0-byte file is left
+        raise RecordingError(f"{self.path}: cannot write the recording: {io_problem(text, self.path)}")
 
     def flush(self) -> None:
         if self.writer is not None:
-            self.writer.flush()
+            try:
+                self.writer.flush()
+            except RuntimeError as exc:
+                self._failed(WRITE_ERRORS.first or str(exc))
 
     def close(self) -> None:
         if self.server is not None:
             self.server.stop()
             self.server = None
         if self.writer is not None:
-            self.writer.close()
-            self.writer = None
+            writer, self.writer = self.writer, None
+            try:
+                writer.close()
+            except RuntimeError as exc:
+                self._failed(WRITE_ERRORS.first or str(exc))
+            if WRITE_ERRORS.count != self._errors0:
+                self._failed(WRITE_ERRORS.first)
 
 
 RAW_SUFFIX = ".raw.mcap"
@@ -237,9 +319,11 @@ class RawOut:
         # recorder's poll, see ZenohBus.subscribe_polled, and the free memory glibc kept
         # after a catch-up, which cli.cmd_record gives back with procutil.trim_heap.)
         opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="", emit_chunk_indexes=False, emit_message_indexes=False)
-        self.writer: Any = foxglove.open_mcap(path, allow_overwrite=True, context=self.ctx, writer_options=opts)
+        self.path = path
+        self._errors0 = WRITE_ERRORS.count
+        self.writer: Any = _open_mcap(path, self.ctx, opts)
         if metadata:
-            self.writer.write_metadata("zswarm", metadata)
+            self._write_metadata(metadata)
         self._channels: dict[str, Any] = {}
         self.count = 0
         self.malformed = 0  # oversized ones here; the others are counted when transcoded
@@ -262,18 +346,33 @@ class RawOut:
             payload = wire.encode_message(payload)
         ch.log(payload if isinstance(payload, bytes) else msgpack.packb(payload), log_time=t)
         self.count += 1
+        if WRITE_ERRORS.count != self._errors0:
+            self._failed(WRITE_ERRORS.first)
 
     def alive(self, event: dict[str, Any], t: int) -> None:
         self.message(ALIVE_CHANNEL, msgpack.packb(event), t)
 
+    _failed = ViewerOut._failed
+    _write_metadata = ViewerOut._write_metadata
+    server = None
+
     def flush(self) -> None:
         if self.writer is not None:
-            self.writer.flush()
+            try:
+                self.writer.flush()
+            except RuntimeError as exc:
+                self._failed(WRITE_ERRORS.first or str(exc))
 
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-            self.writer = None
+    close = ViewerOut.close
+
+
+def _open_mcap(path: Path, ctx: Any, opts: Any) -> Any:
+    import foxglove
+
+    try:
+        return foxglove.open_mcap(path, allow_overwrite=True, context=ctx, writer_options=opts)
+    except OSError as exc:  # the SDK's OSError has no errno: its text has the OS's number
+        raise RecordingError(f"{path}: cannot write the recording: {io_problem(str(exc), path)}") from None
 
 
 def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
@@ -293,8 +392,13 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
             meta = {}
     meta["transcoded_from"] = raw.name
     tmp = out.with_name(out.name + ".part")
-    vo = ViewerOut(tmp, None, scenario, meta)
+    try:
+        vo = ViewerOut(tmp, None, scenario, meta)
+    except RecordingError:
+        tmp.unlink(missing_ok=True)
+        raise
     n_raw = 0
+    ok = False
     try:
         for stream, payload, t in read(raw):
             n_raw += 1
@@ -318,8 +422,15 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
                 vo.alive(event, t)
             else:
                 vo.message(stream, payload, t)
-    finally:
         vo.close()
+        ok = True
+    finally:
+        if not ok:  # a write failed (disk full): the raw file stays, the partial copy goes
+            try:
+                vo.close()
+            except RecordingError:
+                pass
+            tmp.unlink(missing_ok=True)
     if n_raw == 0:
         tmp.unlink(missing_ok=True)
         raise EmptyRecording(f"{raw}: no complete message in the file ({raw.stat().st_size} bytes); kept as it is")

@@ -27,7 +27,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -37,7 +36,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from zswarm import report_faults, report_formation, report_sync, so3, wire
+from zswarm import files, report_faults, report_formation, report_sync, so3, wire
 from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, decode, ensure_recording, read, unpack
 from zswarm.scenario import Scenario
 
@@ -696,7 +695,7 @@ def write_errors_csv(path: Path, errs: dict[int, np.ndarray]) -> None:
     ``position_error_direct`` (‖p_i − p̂_i‖)."""
     rows = [(t, i, ea, ep, ed) for i, e in errs.items() for t, ea, ep, ed in e]
     rows.sort()
-    with open(path, "w", newline="") as f:
+    with files.whole(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["t", "agent", "attitude_error", "position_error", "position_error_direct"])
         for t, i, ea, ep, ed in rows:
@@ -733,7 +732,7 @@ def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], rec: Recording | 
             ax.grid(True, alpha=0.3)
             report_faults.mark(ax, sc, rec)
         fig.tight_layout()
-        fig.savefig(out / f"{name}.png", dpi=110)
+        files.save_png(fig, out / f"{name}.png")
         plt.close(fig)
 
 
@@ -803,22 +802,13 @@ def write_summary(path: Path, summary: Mapping[str, Any]) -> None:
     """Write ``summary`` to ``path`` as strict JSON, whole or not at all: into a temporary file
     beside it, then renamed over it (a full disk left a 0-byte summary.json).  OSError
     (disk full, read-only folder) is the caller's to report."""
-    tmp = path.with_name(path.name + ".part")
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(json.dumps(strict_json(summary), indent=2, allow_nan=False) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    files.write_text(path, json.dumps(strict_json(summary), indent=2, allow_nan=False) + "\n")
 
 
 def write_edges_csv(path: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
     """Per edge on the 100 Hz grid: |R̄_k|_I, relative position error, ξ_k (newest from the head)."""
     pose = "bearings" in sc.info.sensors
-    with open(path, "w", newline="") as f:
+    with files.whole(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["t", "edge", "head", "tail", "relative_attitude_error", "relative_position_error", "xi"])
         for k, (h, tl) in enumerate(sc.oriented, start=1):
@@ -863,7 +853,7 @@ def plot_tree(out: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
         for ax in (ax1, ax2):
             ax.grid(True, alpha=0.3)
         fig.tight_layout()
-        fig.savefig(out / f"{name}.png", dpi=110)
+        files.save_png(fig, out / f"{name}.png")
         plt.close(fig)
 
     figure(tm.rel_att, r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude error per edge", True)
@@ -894,7 +884,7 @@ def plot_xi(out: Path, rec: Recording, title: str, ncol: int) -> None:
     ax.legend(fontsize=7, ncol=ncol)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out / "xi.png", dpi=110)
+    files.save_png(fig, out / "xi.png")
     plt.close(fig)
 
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from zswarm import files
 from zswarm.report_sync import _final, _held, settle_time
 from zswarm.scenario import Scenario
 
@@ -175,7 +176,7 @@ def convergence(m: FormationMetrics, duration: float) -> dict[str, Any]:
 def write_csv(path: Path, m: FormationMetrics) -> None:
     keys = [f"rel_yaw_{i}_{j}" for i, j in m.rel_yaw] + [f"{what}_{i}" for what in ("yaw", "position", "formation") for i in m.yaw]
     cols = list(m.rel_yaw.values()) + [d[i] for d in (m.yaw, m.position, m.formation) for i in m.yaw]
-    with path.open("w", newline="") as fh:
+    with files.whole(path) as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["t", "alpha", *keys])
         for k in range(0, len(m.t), 10):  # 10 Hz rows
@@ -206,7 +207,7 @@ def plot(out: Path, sc: Scenario, m: FormationMetrics) -> None:
         ax.set_xlabel("t (s)")
     fig.suptitle(f"{sc.name}: De Carli et al. Fig. 2", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out / "formation.png", dpi=110)
+    files.save_png(fig, out / "formation.png")
     plt.close(fig)
 
 

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from zswarm import files
 from zswarm.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -194,7 +195,7 @@ def convergence(m: SyncMetrics, duration: float, thresholds: tuple[float, float]
 
 def write_edges_csv(path: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
     """Per edge on the grid: |R̄_k|_I and ξ_k (columns as the observers' edges.csv)."""
-    with open(path, "w", newline="") as f:
+    with files.whole(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["t", "edge", "head", "tail", "relative_attitude_error", "relative_position_error", "xi"])
         for k, (h, tl) in enumerate(sc.oriented, start=1):
@@ -206,7 +207,7 @@ def write_edges_csv(path: Path, sc: Scenario, m: SyncMetrics, rec: Recording) ->
 
 def write_agents_csv(path: Path, sc: Scenario, m: SyncMetrics) -> None:
     """Per agent on the grid: ‖ω_i‖, ‖τ_i‖ applied and computed, |Q̃_i|_I and ζ_i (velocity-free)."""
-    with open(path, "w", newline="") as f:
+    with files.whole(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["t", "agent", "angular_velocity", "torque_applied", "torque_computed", "Q_tilde", "zeta"])
         for i in sc.ids:
@@ -241,7 +242,7 @@ def plot(out: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
         for ax in axes[:, 0]:
             ax.grid(True, alpha=0.3)
         fig.tight_layout()
-        fig.savefig(out / f"{name}.png", dpi=110)
+        files.save_png(fig, out / f"{name}.png")
         plt.close(fig)
 
     fig2({k: m.rel_att[k] for k in m.rel_att}, "edge {}", r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude per edge (Fig. 5.3)")

@@ -163,3 +163,59 @@ def test_a_sigkilled_recorder_leaves_a_report_of_what_was_on_disk(procs, tmp_pat
     assert rp.wait(120) == 0, (tmp_path / "report.log").read_text()[-2000:]
     s2 = json.loads((out / "summary.json").read_text())
     assert s2["recording"] == r and not s2["completed"] and "NOT COMPLETED" in (tmp_path / "report.log").read_text()
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 3 MiB tmpfs (a full disk a few seconds into a run) and a read-only one, unmounted
+    at the end whatever happens."""
+    import subprocess
+
+    full, ro = tmp_path / "full", tmp_path / "ro"
+    mounted = []
+    try:
+        for d, opts in ((full, "size=3m"), (ro, "ro,size=1m")):
+            d.mkdir()
+            subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(d)], check=True)
+            mounted.append(d)
+        yield full, ro
+    finally:
+        for d in mounted:
+            subprocess.run(["umount", "-l", str(d)], check=False)
+
+
+def test_a_full_disk_or_a_read_only_folder_is_one_line_and_nothing_half_written(procs, tmp_path, small_disk):
+    """Issue 29: the recorder on a full disk died with a traceback, the launcher crashed with a
+    traceback and a Rust panic and left a 0-byte summary.json; sim panicked the same way; a
+    read-only folder was a traceback.  Now: one line naming the path and the problem, exit 1,
+    every process stopped (and reaped), and no file in the folder that is empty or partial."""
+    import subprocess
+
+    from tests.integration.conftest import pid_alive
+
+    full, ro = small_disk
+    out = full / "out"
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
+    code = p.wait(120)
+    text = (tmp_path / "launcher.log").read_text()
+    assert code == 1, text[-3000:]
+    assert "Traceback" not in text and "panicked" not in text, text[-3000:]
+    (line,) = [x for x in text.splitlines() if x.startswith("zswarm run:")]
+    assert "No space left on device" in line and str(out) in line, line
+    rec_log = (out / "logs" / "recorder.log").read_text()
+    assert "Traceback" not in rec_log and "No space left on device" in rec_log, rec_log[-2000:]
+    assert not [c for c in kids if pid_alive(c["pid"])]  # every process stopped
+    left = {f.name: f.stat().st_size for f in out.iterdir() if f.is_file()}
+    assert all(n > 0 for n in left.values()) and not any(k.endswith(".part") for k in left), left
+    assert "summary.json" not in left and "recording.raw.mcap" in left  # the raw file kept: what did reach the disk
+
+    for folder, want in ((full / "sim", "No space left on device"), (ro / "sim", "Read-only file system")):
+        if folder.parent == full:
+            (out / "recording.raw.mcap").unlink()  # room for the sim to start, not to finish
+        r = subprocess.run(zswarm("sim", TOPOLOGY, "--duration", "10", "--out", str(folder), "--quiet"), capture_output=True, text=True, timeout=300)
+        assert r.returncode == 1, r.stderr[-3000:]
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("zswarm sim: ") and want in lines[0] and str(folder) in lines[0], r.stderr[-3000:]
+        if folder.exists():
+            assert all(f.stat().st_size > 0 and not f.name.endswith(".part") for f in folder.iterdir()), list(folder.iterdir())
