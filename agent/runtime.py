@@ -501,6 +501,9 @@ class AgentNode:
             est.zeta,
             seed,
             np.array(self.spec.p),
+            est.p_stated,
+            {a.id: a.estimate.yaw for a in scenario.agents if a.estimate.yaw is not None},
+            est.yaw_rate,
         )
         self.state = self.algo.initial_state(init, self.gains)
         self.parts = [_PartState(p, self.spec.clock.rate, scenario.part_rate_scale) for p in self.aspec.parts]

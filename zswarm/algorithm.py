@@ -168,6 +168,9 @@ class Initial:
     zeta: float = 0.0  # ζ_i(0)
     seed: int = 0  # the run's seed: for initial estimates drawn as a paper draws them (De Carli et al. §IV)
     p0: np.ndarray = field(default_factory=lambda: np.zeros(3))  # true p_i(0), for estimates drawn around it
+    p_stated: bool = False  # p_hat is the scenario's (else the algorithm may draw it, as a paper does)
+    yaw0: Mapping[int, float] = field(default_factory=dict)  # ψ̂_j(0) stated in the scenario, of every agent j that has one
+    yaw_knots: tuple[float, ...] | None = None  # this robot's yaw-rate spline knots, when stated
 
 
 @dataclass(frozen=True, slots=True)

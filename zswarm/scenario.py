@@ -127,6 +127,10 @@ class Estimate:
     xi: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of the edges k this agent heads
     Q: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # Q_i(0), row-major (velocity-free law)
     zeta: float = 0.0  # ζ_i(0) (velocity-free law)
+    # The formation scheme (De Carli et al.): stated instead of drawn from the seed.
+    p_stated: bool = False  # p_hat was given ([agents.estimate] p), not drawn around p_i(0)
+    yaw: float | None = None  # ψ̂_i(0), the angle of ẑ_i(0) (rad)
+    yaw_rate: tuple[float, ...] | None = None  # the robot's yaw-rate spline knots (rad/s at 0, yaw_knot, ...)
 
 
 @dataclass(frozen=True, slots=True)
@@ -1129,7 +1133,7 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
     d = c.table(
         d,
         f,
-        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()),
+        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()) | ({"yaw_rate"} if info.params == "formation" else set()),
         ({"id", "omega"} if rigid else {"id", "p"} if kin else {"id", "p", "omega"}) | ({"role"} if info.graph == "leader_follower" else set()),
     )
     if kin:
@@ -1184,7 +1188,10 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
     agent_gains = dict(gains)
     for k, v in own.items():
         agent_gains[k] = c.num(v, f"{f}.gains.{k}", positive=True)
-    est = c.table(d.get("estimate", {}), f"{f}.estimate", {"p", "R", "Omega", "xi"} | ({"Q", "zeta"} if info.params == "hybrid_vf" else set()))
+    formation = info.params == "formation"
+    est = c.table(
+        d.get("estimate", {}), f"{f}.estimate", {"p"} | ({"yaw"} if formation else {"R", "Omega", "xi"}) | ({"Q", "zeta"} if info.params == "hybrid_vf" else set())
+    )
     if role == "leader" and est:
         raise c.err(f"{f}.estimate", "a leader knows its pose and has no estimate")
     xi: dict[int, float] = {}
@@ -1204,9 +1211,28 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
         MappingProxyType(xi),
         c.rotation(est.get("Q", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.estimate.Q"),
         c.num(est.get("zeta", 0.0), f"{f}.estimate.zeta"),
+        "p" in est,
+        None if "yaw" not in est else _angle(c, est["yaw"], f"{f}.estimate.yaw"),
+        None if "yaw_rate" not in d else _knots(c, d["yaw_rate"], f"{f}.yaw_rate"),
     )
     clock = _clock(c, d.get("clock", {}), f"{f}.clock", default_clock)
     return AgentSpec(aid, role, p, R, omega, bias, neighbors, k_neighbors, estimate, clock, velocity, MappingProxyType(agent_gains), J)  # type: ignore[arg-type]
+
+
+def _angle(c: _Ctx, v: Any, fld: str) -> float:
+    """An angle (rad): a number or an expression like ``"0.3*pi"``."""
+    return float(c.expr(v, fld)(0.0)) if isinstance(v, str) else c.num(v, fld)
+
+
+# A robot's yaw-rate spline knots (the formation scheme's ω_i at 0, yaw_knot, 2·yaw_knot, ...):
+# at most this many (the drawn spline has 4096), each within ±MAX_ABS.
+MAX_YAW_KNOTS = 4096
+
+
+def _knots(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:
+    if not isinstance(v, list) or not 1 <= len(v) <= MAX_YAW_KNOTS:
+        raise c.err(fld, f"must be a list of 1 to {MAX_YAW_KNOTS} yaw rates (rad/s), the spline's knots at 0, yaw_knot, 2 yaw_knot, ...", v)
+    return tuple(c.num(x, f"{fld}[{n}]", maxv=MAX_ABS, minv=-MAX_ABS) for n, x in enumerate(v))
 
 
 def _inertia(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:

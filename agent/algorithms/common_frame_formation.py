@@ -24,9 +24,11 @@ The commands go to the world's kinematic plant (1) on cmd/<i>: ``vel`` (body fra
 ``yaw_rate``.  The observers use the measured own velocity (sensor ``velocity_body``)
 and yaw rate (gyro, e3 component): what the vehicle does, not what it was told.
 
-Choices the paper leaves open (stated in the README too): p̂_i(0) = p_i(0) + N(0, σ² I)
-with σ = ``p0_std`` (1 m) and ẑ_i(0) = e^{ιθ}, θ uniform on (−π, π], both drawn from
-the run's seed and the robot's id, so robot i can re-draw a neighbour's ẑ_j(0) and start
+Choices the paper leaves open (stated in the README too): unless the scenario states them
+(``[agents.estimate] p``, ``yaw`` = ψ̂_i(0), and ``[[agents]] yaw_rate`` = the spline's
+knots, so that an independent integration can start from the same state),
+p̂_i(0) = p_i(0) + N(0, σ² I) with σ = ``p0_std`` (1 m) and ẑ_i(0) = e^{ιθ}, θ uniform on
+(−π, π], both drawn from the run's seed and the robot's id, so robot i can re-draw a neighbour's ẑ_j(0) and start
 ẑ_ψij(0) = z̄̂_i(0) ẑ_j(0), consistent around every cycle; ⁱp̂_ij(0) is the first
 measurement ⁱp_ij (e_p = 0: only ẑ_ψij has to be learned).  The yaw spline: knots every
 ``yaw_knot`` s with values uniform in ±``yaw_rate_max``, joined by a C¹ cubic
@@ -90,6 +92,7 @@ class State:
     t_pos: float = 0.0  # ... and of the last position step (p̂_i)
     v_cmd: np.ndarray = field(default_factory=lambda: np.zeros(3))
     w_cmd: float = 0.0
+    yaw0: Mapping[int, float] = field(default_factory=dict)  # ψ̂_j(0) the scenario states (a neighbour's, to start ẑ_ψij)
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,11 +110,24 @@ def _draw(seed: int, i: int) -> tuple[float, np.ndarray]:
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
-    theta, n = _draw(init.seed, init.id)
-    rng = np.random.default_rng([init.seed % (1 << 63), init.id, 0x5B])
-    knots = rng.uniform(-gains.yaw_rate_max, gains.yaw_rate_max, size=4096)
-    knots[0] = 0.0  # start at rest in yaw, like the vehicle
-    return State(init.id, init.seed, {}, {}, complex(math.cos(theta), math.sin(theta)), np.asarray(init.p0, dtype=float) + gains.p0_std * n, knots)
+    """p̂_i(0), ẑ_i(0) and the yaw-rate knots as the scenario states them, else drawn from the
+    seed (see the module docstring); a stated knot list holds its last value past its end."""
+    theta, n = _initial_yaw(init.seed, init.id, init.yaw0)
+    p_hat = np.asarray(init.p_hat if init.p_stated else np.asarray(init.p0, dtype=float) + gains.p0_std * n, dtype=float)
+    if init.yaw_knots is not None:
+        knots = np.asarray(init.yaw_knots, dtype=float)
+        knots = np.concatenate([knots, np.full(3, knots[-1])])  # the spline reads two knots ahead
+    else:
+        rng = np.random.default_rng([init.seed % (1 << 63), init.id, 0x5B])
+        knots = rng.uniform(-gains.yaw_rate_max, gains.yaw_rate_max, size=4096)
+        knots[0] = 0.0  # start at rest in yaw, like the vehicle
+    return State(init.id, init.seed, {}, {}, complex(math.cos(theta), math.sin(theta)), p_hat, knots, yaw0=dict(init.yaw0))
+
+
+def _initial_yaw(seed: int, i: int, stated: Mapping[int, float]) -> tuple[float, np.ndarray]:
+    """Robot i's ψ̂_i(0) (stated, else drawn) and its position-estimate noise draw."""
+    theta, n = _draw(seed, i)
+    return stated.get(i, theta), n
 
 
 def yaw_rate(state: State, t: float, gains: Gains) -> float:
@@ -210,7 +226,7 @@ def relative_step(state: State, inputs: RelInputs, dt: float, gains: Gains) -> t
         if j not in p_rel:  # first measurement of edge (i, j): stated initialisation
             p_rel[j] = p_ij.copy()
             if j not in z_rel:
-                theta_j, _ = _draw(state.seed, j)
+                theta_j, _ = _initial_yaw(state.seed, j, state.yaw0)
                 z_ij = state.zc.conjugate() * complex(math.cos(theta_j), math.sin(theta_j)) / abs(state.zc)
                 z_rel[j] = np.array([z_ij.real, z_ij.imag])
         q0 = prev.get(("p", j), p_ij)

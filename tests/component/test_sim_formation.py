@@ -1,6 +1,7 @@
 """De Carli et al. §IV on `sim`: decarli-8-formation for its first 12 s (the observers'
 transients; the formation itself needs ≈ 18 s, measured in the README)."""
 
+import numpy as np
 import pytest
 
 from tests.conftest import TOPO
@@ -75,3 +76,56 @@ def summary_moving(tmp_path):
     (tmp_path / "m").mkdir()
     simulate(sc, tmp_path / "m", 2.0, sc.seed, lean=True)
     return make_report(tmp_path / "m", sc, "sim", 2.0, 0.0, sc.seed, plots=False)
+
+
+def _stated(text: str) -> str:
+    """decarli-8-formation with every robot's p̂_i(0), ψ̂_i(0) and yaw-rate knots stated."""
+    import re
+
+    def one(m: "re.Match[str]") -> str:
+        i = int(m.group(1))
+        return f"id = {i}\nestimate = {{ p = [{i}.5, -1.0, 0.25], yaw = {0.4 * i - 1.7:.3f} }}\nyaw_rate = [0.0, {0.05 * i:.3f}, {-0.03 * i:.3f}]"
+
+    return re.sub(r"^id = (\d+)$", one, text, flags=re.M)
+
+
+def test_a_stated_initial_state_makes_the_run_independent_of_the_seed(tmp_path):
+    """Issue 29: De Carli runs reproducible by others.  With p̂_i(0), ψ̂_i(0) and the yaw-rate
+    knots stated (no noise, no link model in this scenario), nothing is drawn from the
+    seed: two seeds give the same estimates, the first estimate is the stated one, and each
+    robot's commanded yaw rate passes through its knots (Catmull–Rom interpolates them)."""
+    from zswarm import wire
+    from zswarm.report import load_recording
+    from zswarm.scenario import loads
+
+    sc = loads(_stated((TOPO / "decarli-8-formation.toml").read_text()), "stated.toml")
+    assert sc.agent(3).estimate.p_hat == (3.5, -1.0, 0.25) and sc.agent(3).estimate.yaw == pytest.approx(-0.5)
+    runs = [simulate(sc, tmp_path, 2.5, seed, record=False) for seed in (1, 2)]
+    a, b = (load_recording(m) for m in runs)
+    for i in sc.ids:
+        assert len(a.est[i]) == len(b.est[i]) > 100
+        assert all((x[1] == y[1]).all() and (x[2] == y[2]).all() for x, y in zip(a.est[i], b.est[i], strict=True)), i
+        t0, R0, p0 = a.est[i][0]
+        assert t0 == 0.0 and (p0 == np.array([i + 0.5, -1.0, 0.25])).all()
+        assert R0[0, 0] == pytest.approx(np.cos(0.4 * i - 1.7)) and R0[1, 0] == pytest.approx(np.sin(0.4 * i - 1.7))
+    knot = sc.gains.get("yaw_knot", 2.0)
+    for i in (1, 5):
+        cmds = [wire.decode(p) for s, p, _ in runs[0] if s == f"cmd/{i}"]
+        at = {round(c["t"], 6): c["yaw_rate"] for c in cmds}
+        assert at[round(knot, 6)] == pytest.approx(0.05 * i, abs=1e-9)  # the second knot, at t = yaw_knot
+
+
+@pytest.mark.parametrize(
+    "new, match",
+    [
+        ("id = 2\nyaw_rate = []", r"agents\[1\]\.yaw_rate: must be a list of 1 to 4096 yaw rates"),
+        ("id = 2\nestimate = { yaw = \"x\" }", r"agents\[1\]\.estimate\.yaw: "),
+        ("id = 2\nestimate = { R = { angle = \"1\", axis = [0, 0, 1] } }", r"agents\[1\]\.estimate\.R: unknown key"),
+    ],
+)
+def test_a_bad_stated_initial_state_is_named(new, match):
+    from zswarm.scenario import ScenarioError, loads
+
+    text = (TOPO / "decarli-8-formation.toml").read_text()
+    with pytest.raises(ScenarioError, match=r"x\.toml: " + match):
+        loads(text.replace("id = 2", new, 1), "x.toml")
