@@ -578,7 +578,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         def on_start(key: str, payload: bytes) -> None:
             if not start:
                 try:
-                    start.update(wire.decode(payload, "start"))
+                    start.update(wire.decode_ctl(payload, "start"))
                 except wire.MessageError:
                     pass
 

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from zswarm.keys import SECRET_ENV
 from zswarm.scenario import Scenario
 
 PORT = 7447
@@ -60,6 +61,9 @@ def services(
         if build is not None:
             s["build"] = build  # every service names the same image; compose builds it once
         s["command"] = command
+        # The run's secret (keys.SECRET_ENV) from the host's environment or .env: with one,
+        # only these services can start or stop the run or stand for its processes.
+        s["environment"] = {SECRET_ENV: "${" + SECRET_ENV + ":-}"}
         s["networks"] = nets
         s["init"] = True  # a real PID 1: signals reach zswarm, zombies are reaped
         s.update(extra)

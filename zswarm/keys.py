@@ -5,9 +5,32 @@
 
 from __future__ import annotations
 
+import hashlib
+import hmac
+import os
 import re
 
 ROOT = "zswarm"
+# The run's secret (``zswarm run`` makes one per run and hands it to its children in the
+# environment; processes started by hand share one by setting it themselves).  With it, a
+# process's liveliness token carries a tag only a holder of the secret can make, and run
+# control (``ctl/...``) is signed (:mod:`zswarm.wire`, ``mac``): a peer on the network can
+# neither stand in for a process that is not up yet nor start or stop the run.  Without it
+# (the default for processes started by hand) anything goes, as before.  A peer that can
+# read the traffic still sees a tag once its process has declared it and can declare a copy
+# (a process killed while such a copy stands is seen as alive by the others: the launcher
+# sees it dead by its PID); only the access control of ``--secure`` stops that.
+SECRET_ENV = "ZSWARM_RUN_SECRET"
+
+
+def run_secret() -> bytes | None:
+    """The run's secret from the environment (SECRET_ENV), or None."""
+    s = os.environ.get(SECRET_ENV)
+    return s.encode() if s else None
+
+
+def alive_tag(secret: bytes, role: str, i: int) -> str:
+    return hmac.new(secret, f"alive/{role}/{i}".encode(), hashlib.sha256).hexdigest()[:24]
 _RUN_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 
@@ -60,8 +83,11 @@ def ctl(run: str, what: str) -> str:
 
 
 def alive(run: str, role: str, i: int) -> str:
-    """Liveliness token of a process (role: world, agent, recorder)."""
-    return f"{ROOT}/{run}/alive/{role}/{i}"
+    """Liveliness token of a process (role: world, agent, recorder); with the run's secret,
+    ``.../alive/<role>/<i>/<tag>`` (:func:`alive_tag`)."""
+    base = f"{ROOT}/{run}/alive/{role}/{i}"
+    secret = run_secret()
+    return base if secret is None else f"{base}/{alive_tag(secret, role, i)}"
 
 
 def alive_all(run: str) -> str:
@@ -94,14 +120,20 @@ def everything(run: str) -> str:
 
 
 def parse_alive(key: str) -> tuple[str, int] | None:
-    """``(role, id)`` of a liveliness key, or None if it is not one."""
+    """``(role, id)`` of a liveliness key, or None if it is not one: with the run's secret,
+    one without its tag or with another is not (a token a peer declared for a process that
+    is not up).  Without the secret (reading a recording later) a tag is not checked."""
     parts = key.split("/")
-    if len(parts) != 5 or parts[2] != "alive":
+    if len(parts) not in (5, 6) or parts[2] != "alive":
         return None
     try:
-        return parts[3], int(parts[4])
+        who = parts[3], int(parts[4])
     except ValueError:
         return None
+    secret = run_secret()
+    if secret is not None and (len(parts) != 6 or not hmac.compare_digest(parts[5], alive_tag(secret, *who))):
+        return None
+    return who
 
 
 def stream_of(run: str, key: str) -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import resource
+import secrets
 import signal
 import socket
 import subprocess
@@ -239,7 +240,7 @@ class _Router:
 
     def _on_progress(self, key: str, payload: bytes) -> None:
         try:
-            self.progress[0] = wire.decode(payload, "progress")["t"]
+            self.progress[0] = wire.decode_ctl(payload, "progress")["t"]
         except wire.MessageError:
             pass
 
@@ -349,6 +350,10 @@ def run(
         certs = (out / "secure") if secure is True else Path(secure)
         sec.make_certs(certs, sec.certificate_names(sc.ids))
     endpoint = f"{'tls' if certs else 'tcp'}/127.0.0.1:{free_port()}"
+    # The run's secret (keys.SECRET_ENV): its children inherit it, so that only they can
+    # start or stop the run and stand for its processes (one given by the user is kept, to
+    # add processes started by hand).
+    os.environ.setdefault(keys.SECRET_ENV, secrets.token_hex(16))
     la = Launch(sc, topology, out, duration, time_scale, seed, quiet)
     interrupted = threading.Event()
     on_signals = procutil.SignalEvent(interrupted)

@@ -90,7 +90,7 @@ def simulate(
     bus.declare_token(keys.alive(run, "world", 0))
     for i in agents:
         sessions[i].declare_token(keys.alive(run, "agent", i))
-    ctl_start.put(wire.encode("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run))
+    ctl_start.put(wire.encode_ctl("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run))
 
     # (time, priority, id, generation): world samples have priority 0, agent ticks 1; a
     # restarted agent's ticks carry its new generation (its old ones are dropped).
@@ -162,7 +162,7 @@ def simulate(
         raise
 
     t_now[0] = duration
-    ctl_stop.put(wire.encode("stop", 0, 0, duration, reason="duration"))
+    ctl_stop.put(wire.encode_ctl("stop", 0, 0, duration, reason="duration"))
     world.publish_stats(duration, final=True)
     for a in agents.values():
         a.publish_stats(duration, final=True)

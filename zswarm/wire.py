@@ -75,15 +75,22 @@ SCHEMAS: Mapping[str, Mapping[str, Any]] = {
     "truth": {"ids": "intlist", "R": (-1, 3, 3), "p": (-1, 3), "w": (-1, 3), "tau": (-1, 3), "u": (-1, 4)},
     # counters of a process
     "stats": {"role": "str", "counters": "counters"},
-    # run control
-    "start": {"epoch": "float", "time_scale": "float", "duration": "float", "seed": "int", "run": "str"},
-    "stop": {"reason": "str"},
-    "progress": {"duration": "float"},
+    # run control; mac: signed with the run's secret when there is one (encode_ctl, decode_ctl)
+    "start": {"epoch": "float", "time_scale": "float", "duration": "float", "seed": "int", "run": "str", "mac": "str"},
+    "stop": {"reason": "str", "mac": "str"},
+    "progress": {"duration": "float", "mac": "str"},
 }
 _F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "inc", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
-OPTIONAL = {"sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"}, "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"}, "truth": {"tau", "u"}}
+OPTIONAL = {
+    "sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"},
+    "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"},
+    "truth": {"tau", "u"},
+    "start": {"mac"},
+    "stop": {"mac"},
+    "progress": {"mac"},
+}
 _OPTIONAL_OF: Mapping[str, frozenset[str]] = {t: frozenset(OPTIONAL.get(t, ())) for t in SCHEMAS}
 # Types whose other keys are named values (a finite number or a float64 array), at most
 # MAX_OPEN of them: what an algorithm declares, which the receiver validates.
@@ -544,14 +551,54 @@ _FIELDS = {t: tuple((k, _kind_handler(kind), k in OPTIONAL.get(t, ())) for k, ki
 _MISSING = object()
 
 
+def ctl_mac(secret: bytes, m: Mapping[str, Any]) -> str:
+    """The signature of a run-control message: HMAC-SHA256 with the run's secret over its
+    envelope and fields (floats by their exact hex), 32 hex digits."""
+    import hashlib
+    import hmac
+
+    parts = [str(m["type"]), str(m["src"]), str(m["seq"]), str(m["inc"]), float(m["t"]).hex()]
+    for k in sorted(SCHEMAS[m["type"]]):
+        if k != "mac":
+            v = m[k]
+            parts.append(f"{k}={float(v).hex() if isinstance(v, float) else v}")
+    return hmac.new(secret, "|".join(parts).encode(), hashlib.sha256).hexdigest()[:32]
+
+
+def encode_ctl(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> bytes:
+    """A run-control message, signed (``mac``) with the run's secret when there is one
+    (keys.run_secret)."""
+    from zswarm.keys import run_secret
+
+    secret = run_secret()
+    if secret is not None:
+        fields["mac"] = ctl_mac(secret, {"type": mtype, "src": src, "seq": seq, "inc": inc, "t": float(t), **fields})
+    return encode(mtype, src, seq, t, inc=inc, **fields)
+
+
 def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
-    """A run-control message (``start`` or ``stop`` on ctl/...), decoded and checked beyond
-    its schema: only the world (src 0) controls a run, and a start's clock must make sense.
+    """A run-control message (``start``, ``stop`` or ``progress`` on ctl/...), decoded and
+    checked beyond its schema: only the world (src 0) controls a run, a start's clock must
+    make sense, and with the run's secret (keys.run_secret) it must carry its signature.
 
     Any payload on ctl/stop used to stop every agent and the recorder, and a start with
-    ``time_scale = 0`` crashed the agents (a division by it in their clock).
+    ``time_scale = 0`` crashed the agents (a division by it in their clock).  A wire-valid
+    stop from a peer stopped the agents and the recorder while the world ran on, and an
+    early start with time scale 1e-3 made a run of 2 steps that read as completed.
     """
-    m = decode(payload, expect)
+    return check_ctl(decode(payload, expect), expect)
+
+
+def check_ctl(m: dict[str, Any], expect: str) -> dict[str, Any]:
+    """:func:`decode_ctl`'s checks on a decoded run-control message (returns it)."""
+    from zswarm.keys import run_secret
+
+    secret = run_secret()
+    if secret is not None:
+        import hmac
+
+        if not hmac.compare_digest(str(m.get("mac", "")), ctl_mac(secret, m)):
+            raise MessageError(f"{expect}: not signed with this run's secret")
     if m["src"] != 0:
         raise MessageError(f"{expect}: from src {m['src']}; only the world (src 0) controls the run")
     if expect == "start":

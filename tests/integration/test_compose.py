@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import shutil
 import signal
 import subprocess
@@ -229,7 +230,9 @@ def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
     base = [compose_cli, "-p", project, "-f", str(f)]
     t0 = time.monotonic()
     try:
-        up = _run([*base, "up", "--no-color"], 300, cwd=tmp_path)
+        # With a run secret in the environment (keys.SECRET_ENV): the compose file hands it to
+        # every container, whose run control is then signed (checked on the recording below).
+        up = _run([*base, "up", "--no-color"], 300, cwd=tmp_path, env={**os.environ, "ZSWARM_RUN_SECRET": secrets.token_hex(16)})
         elapsed = time.monotonic() - t0
         (tmp_path / "up.log").write_text(up.stdout + up.stderr)
         assert up.returncode == 0, up.stdout[-3000:] + up.stderr[-2000:]
@@ -255,3 +258,7 @@ def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
             assert a["attitude_error_final"] < 1e-2, (i, a)
             assert a["position_error_final"] < 0.1, (i, a)
     assert (results / "thesis-3.2-fixed8" / "recording.mcap").stat().st_size > 100_000
+    from zswarm.record import read
+
+    ctl = [m for stream, m, _ in read(results / "thesis-3.2-fixed8" / "recording.mcap") if stream.startswith("ctl/")]
+    assert ctl and all(len(m.get("mac", "")) == 32 for m in ctl), ctl[:2]  # signed in the containers

@@ -219,3 +219,46 @@ def test_a_full_disk_or_a_read_only_folder_is_one_line_and_nothing_half_written(
         assert len(lines) == 1 and lines[0].startswith("zswarm sim: ") and want in lines[0] and str(folder) in lines[0], r.stderr[-3000:]
         if folder.exists():
             assert all(f.stat().st_size > 0 and not f.name.endswith(".part") for f in folder.iterdir()), list(folder.iterdir())
+
+
+def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tmp_path):
+    """Issue 29, the default (non-secure) profile: a peer on the run's router sent a wire-valid
+    ctl/stop (agents and recorder stopped, the world ran on, the run read completed), an
+    early ctl/start with time scale 1e-3, and liveliness tokens for processes: a killed agent
+    was never seen to go.  `zswarm run` now hands its children a secret: run control is
+    signed and tokens are tagged, so none of it takes."""
+    import os
+
+    import zenoh
+
+    from zswarm import wire
+
+    out = tmp_path / "out"
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
+    info = json.loads((out / "processes.json").read_text())
+    run, ep = info["run_id"], info["router"]["endpoint"]
+    with zenoh.open(zenoh_config("client", connect=[ep])) as peer:
+        # Tokens for every agent, the recorder and the world, as a peer would declare them.
+        fakes = [peer.liveliness().declare_token(f"zswarm/{run}/alive/{r}/{i}") for r, i in [("recorder", 0), ("world", 0), *(("agent", k) for k in range(1, 9))]]
+        wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+        time.sleep(2.0)
+        peer.put(keys.ctl(run, "start"), wire.encode("start", 0, 0, 0.0, epoch=time.time(), time_scale=1e-3, duration=8.0, seed=1, run=run))
+        peer.put(keys.ctl(run, "stop"), wire.encode("stop", 0, 0, 2.0, reason="forged"))
+        time.sleep(1.0)
+        # Agent 3 SIGKILLed while a token of its name stands: agent 4 (its out-neighbour) must see it go.
+        a3 = next(c["pid"] for c in kids if c["name"] == "agent-3")
+        os.kill(a3, signal.SIGKILL)
+        code = p.wait(120)
+        for f in fakes:
+            f.undeclare()
+    log = (tmp_path / "launcher.log").read_text()
+    assert code == 0, log[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["completed"], s["problems"]
+    for i, a in s["agents"].items():
+        if i != "3":  # every other agent ran to the end: the forged stop at ~2 s did not take
+            assert a["alive_at_end"] and a["last_estimate_t"] > 7.5, (i, a)
+    assert not s["agents"]["3"]["alive_at_end"]
+    assert "in-neighbour 3 lost (liveliness)" in (out / "logs" / "agent-4.log").read_text()
+    assert s["malformed_in_recording"] >= 2  # the forged start and stop: recorded, counted as not the run's
