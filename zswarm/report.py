@@ -130,7 +130,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
             m = decode(payload)
             wire.check_stream(topic, m)  # est/i is agent i's, whatever src it claims (counted malformed)
             if kind == "ctl":
-                wire.check_ctl(m, m["type"])  # the world's, signed when the run has a secret
+                wire.check_signature(m)  # the world's, signed when the run has a secret
         except wire.MessageError:
             malformed += 1
             counts[kind] -= 1  # not a message of this stream: not counted as recorded on it

@@ -589,8 +589,9 @@ def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
     return check_ctl(decode(payload, expect), expect)
 
 
-def check_ctl(m: dict[str, Any], expect: str) -> dict[str, Any]:
-    """:func:`decode_ctl`'s checks on a decoded run-control message (returns it)."""
+def check_signature(m: Mapping[str, Any]) -> None:
+    """With the run's secret (keys.run_secret), a run-control message must carry its
+    signature (:func:`ctl_mac`); raises MessageError otherwise."""
     from zswarm.keys import run_secret
 
     secret = run_secret()
@@ -598,7 +599,12 @@ def check_ctl(m: dict[str, Any], expect: str) -> dict[str, Any]:
         import hmac
 
         if not hmac.compare_digest(str(m.get("mac", "")), ctl_mac(secret, m)):
-            raise MessageError(f"{expect}: not signed with this run's secret")
+            raise MessageError(f"{m['type']}: not signed with this run's secret")
+
+
+def check_ctl(m: dict[str, Any], expect: str) -> dict[str, Any]:
+    """:func:`decode_ctl`'s checks on a decoded run-control message (returns it)."""
+    check_signature(m)
     if m["src"] != 0:
         raise MessageError(f"{expect}: from src {m['src']}; only the world (src 0) controls the run")
     if expect == "start":

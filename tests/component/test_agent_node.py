@@ -275,3 +275,20 @@ def test_a_restarted_neighbour_is_used_at_once():
     assert [m["inc"] for m in node.inbox.recent["1->3"]] == [2000]  # the dead incarnation's are gone
     link = node.counters()["links"]["1->3"]
     assert (link["delivered"], link["dropped"], link["reordered"], link["restarts"]) == (501, 0, 0, 1)
+
+
+def test_the_inbox_is_bounded_under_a_flood():
+    """A flood of arrivals between two ticks (junk or not) grew the agent's queue without bound
+    (+26 MB): past MAX_PENDING waiting, an arrival is dropped and counted (inbox_overflow)."""
+    from agent.runtime import MAX_PENDING
+
+    sc, bus, clock, node, got = setup()
+    junk = b"\x92" + b"\x00" * 1000
+    for _ in range(MAX_PENDING + 1000):
+        bus.put(keys.edge("t", 1, 3), junk)
+    assert len(node.inbox._pending) == MAX_PENDING
+    c = node.counters()  # drains what waited
+    assert c["inbox_overflow"] == 1000 and c["malformed"] == MAX_PENDING
+    bus.put(keys.sense("t", 3), sense_for(sc, 3, 0.0, np.eye(3)))
+    node.tick(0.0)
+    assert node.steps == 1 and not node.inbox._pending  # and it goes on

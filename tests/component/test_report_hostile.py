@@ -172,3 +172,5 @@ def test_junk_payloads_do_not_reach_the_disk(tmp_path, fixed8):
     bad = [m for s, m, _ in got if s == "events/malformed"]
     assert len(bad) == 300 and all(m["stream"] == "est/3" and m["size"] == 1 << 20 for m in bad)
     assert [s for s, _, _ in got if not s.startswith("events/")] == ["edge/1/3"]
+    # The report counts what the recorder described (summary.json said 0: the count was dropped).
+    assert load_recording([*msgs, *got]).malformed == 300

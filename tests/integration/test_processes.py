@@ -262,3 +262,22 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     assert not s["agents"]["3"]["alive_at_end"]
     assert "in-neighbour 3 lost (liveliness)" in (out / "logs" / "agent-4.log").read_text()
     assert s["malformed_in_recording"] >= 2  # the forged start and stop: recorded, counted as not the run's
+
+
+def test_a_run_whose_world_died_is_not_completed(procs, tmp_path):
+    """The world SIGKILLed at ~3 s of 8: the launcher exited 0 and the table showed every agent
+    alive (summary.json alone said completed: false).  Now exit 1 and the reasons, printed."""
+    import os
+
+    out = tmp_path / "out"
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out)), log=tmp_path / "launcher.log")
+    kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
+    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    time.sleep(3.0)
+    os.kill(next(c["pid"] for c in kids if c["role"] == "world"), signal.SIGKILL)
+    assert p.wait(120) == 1
+    log = (tmp_path / "launcher.log").read_text()
+    s = json.loads((out / "summary.json").read_text())
+    assert not s["completed"] and s["exit_codes"]["world"] == -9
+    assert "the world exited with -9" in s["problems"] and any("stop is not in the recording" in x for x in s["problems"]), s["problems"]
+    assert "NOT COMPLETED: " in log and "the world exited with -9" in log, log[-2000:]
