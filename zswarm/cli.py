@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from zswarm import keys, procutil
+from zswarm.text import one_line
 
 
 def _common_run_args(p: argparse.ArgumentParser) -> None:
@@ -265,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
         problem = procutil.write_problem(exc)
         if problem is None:
             raise
-        print(f"zswarm {args.cmd}: {procutil.one_line(problem)}", file=sys.stderr)
+        print(f"zswarm {args.cmd}: {one_line(problem)}", file=sys.stderr)
         return 1
 
 

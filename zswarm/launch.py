@@ -27,6 +27,7 @@ from zswarm import keys, procutil, report, wire
 from zswarm import secure as sec
 from zswarm.bus import ZenohBus, zenoh_config
 from zswarm.scenario import Fault, Scenario, fault_actions
+from zswarm.text import one_line
 
 
 def free_port() -> int:
@@ -460,7 +461,7 @@ def run(
     except Exception as exc:  # noqa: BLE001 - the run is over: keep what it left (recording, logs, exit codes)
         problem = procutil.write_problem(exc)
         if problem is not None:  # a full disk, a read-only folder: every process is stopped and reaped already
-            print(f"zswarm run: {procutil.one_line(problem)} (the run's processes stopped; what was written is in {out})", file=sys.stderr)
+            print(f"zswarm run: {one_line(problem)} (the run's processes stopped; what was written is in {out})", file=sys.stderr)
             return 1
         # Counters that pass the wire's bounds may still be what the report did not expect.
         say(f"zswarm run: the report failed ({type(exc).__name__}: {exc}); the recording and logs are in {out}")
