@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from zswarm import keys
+
 if TYPE_CHECKING:
     from zswarm.report import Recording
     from zswarm.scenario import Fault, Scenario
@@ -41,11 +43,12 @@ def world_time(rec: Recording, event: dict[str, Any]) -> float | None:
     return None if log_t is None else log_t / 1e9
 
 
-def _token(rec: Recording, key_suffix: str, f: Fault) -> dict[str, Any]:
-    """When the token went (first loss at or after the fault's start) and came back."""
+def _token(rec: Recording, who: tuple[str, int], f: Fault) -> dict[str, Any]:
+    """When the token of ``who`` (role, id) went (first loss at or after the fault's start) and
+    came back; a token with the run secret's tag when it had one (keys.parse_alive)."""
     lost = back = None
     for e in rec.alive_events:
-        if not e.get("key", "").endswith(key_suffix):
+        if keys.parse_alive(str(e.get("key", ""))) != who:
             continue
         t = world_time(rec, e)
         if t is None:
@@ -116,7 +119,7 @@ def summary(sc: Scenario, rec: Recording, engine: str, t: np.ndarray, err: np.nd
             continue
         d["applied"] = True
         if f.agent is not None:
-            d["token"] = _token(rec, f"/alive/agent/{f.agent}", f)
+            d["token"] = _token(rec, ("agent", f.agent), f)
             detected: dict[str, Any] = {}
             for a in sc.agents:
                 if f.agent not in a.neighbors:

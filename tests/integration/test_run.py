@@ -11,6 +11,7 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, zswarm
+from zswarm import keys
 from zswarm.record import read
 from zswarm.report import load_recording
 from zswarm.scenario import load as load_scenario
@@ -106,7 +107,7 @@ def test_killed_agent_others_continue(procs, tmp_path):
     last8 = rec.est[8][-1][0]
     start_epoch = rec.start["epoch"]
     assert abs((start_epoch + last8) - t_kill) < 0.5
-    assert any(e["key"].endswith("/alive/agent/8") and not e["alive"] for e in rec.alive_events)
+    assert any(keys.parse_alive(e["key"]) == ("agent", 8) and not e["alive"] for e in rec.alive_events)  # its token, tagged
 
 
 def test_ctrl_c_stops_everything_and_writes_results(procs, tmp_path):
