@@ -104,7 +104,7 @@ class _WriteErrors(logging.Filter):
         msg = record.getMessage()
         if not msg.startswith("error logging message"):
             return True
-        if not self.count:
+        if not self.first:
             self.first = msg
         self.count += 1
         return False
@@ -244,6 +244,7 @@ class ViewerOut:
         """Stop writing (and serving) and raise RecordingError naming the file and the problem."""
         writer, self.writer = self.writer, None
         self._errors0 = WRITE_ERRORS.count
+        WRITE_ERRORS.first = ""  # told now: the next failure's own words are kept
         if self.server is not None:
             self.server.stop()
             self.server = None

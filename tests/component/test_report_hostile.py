@@ -16,7 +16,7 @@ import pytest
 
 from tests.conftest import TOPO
 from zswarm import so3, wire
-from zswarm.report import OUTSIDE_RUN_MARGIN_S, TRUTH_GAP_PERIODS, errors, load_recording, make_report
+from zswarm.report import OUTSIDE_RUN_MARGIN_S, TRUTH_GAP_PERIODS, TRUTH_GAP_S, errors, load_recording, make_report
 from zswarm.scenario import load, parse_override
 from zswarm.sim import simulate
 
@@ -110,7 +110,7 @@ def test_no_error_is_computed_across_a_truth_gap(tmp_path, fixed8):
         np.testing.assert_array_equal(e_cut[i][~inside], e_full[i][~inside])
     s = _report(tmp_path, sc, cut, "gap")
     g = s["recording"]["truth_gaps"]
-    assert g["count"] == 1 and g["bound_s"] == pytest.approx(TRUTH_GAP_PERIODS * period)
+    assert g["count"] == 1 and g["bound_s"] == pytest.approx(max(TRUTH_GAP_S, TRUTH_GAP_PERIODS * period))
     (a, b), = g["spans"]
     assert a == pytest.approx(gap[0], abs=period) and b == pytest.approx(gap[1], abs=period)
     assert s["completed"] and not s["recording"]["cut_short"]  # a gap is not an end
