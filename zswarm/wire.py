@@ -558,10 +558,10 @@ def ctl_mac(secret: bytes, m: Mapping[str, Any]) -> str:
     import hmac
 
     parts = [str(m["type"]), str(m["src"]), str(m["seq"]), str(m["inc"]), float(m["t"]).hex()]
-    for k in sorted(SCHEMAS[m["type"]]):
+    for k, kind in sorted(SCHEMAS[m["type"]].items()):
         if k != "mac":
-            v = m[k]
-            parts.append(f"{k}={float(v).hex() if isinstance(v, float) else v}")
+            v = m[k]  # a "float" field is signed as the float the receiver decodes (1 and 1.0 alike)
+            parts.append(f"{k}={float(v).hex() if kind == 'float' else v}")
     return hmac.new(secret, "|".join(parts).encode(), hashlib.sha256).hexdigest()[:32]
 
 
@@ -628,19 +628,18 @@ def check_stream(stream: str, m: Mapping[str, Any]) -> None:
     """
     parts = stream.split("/")
     kind = parts[0]
-    try:
-        if kind in ("est", "cmd") and len(parts) == 2:
-            want_src, want_role = int(parts[1]), None
-        elif kind == "edge" and len(parts) == 3:
-            want_src, want_role = int(parts[1]), None
-        elif kind == "stats" and len(parts) == 3:
-            want_src, want_role = int(parts[2]), parts[1]
-        elif kind in ("truth", "sense", "ctl"):
-            want_src, want_role = 0, None
-        else:
-            raise MessageError(f"{stream!r} is not a zswarm stream")
-    except ValueError:
-        raise MessageError(f"{stream!r}: not a process id in the key") from None
+    want_role = parts[1] if kind == "stats" and len(parts) == 3 else None
+    if kind in ("est", "cmd") and len(parts) == 2 or kind == "edge" and len(parts) == 3:
+        who = parts[1]
+    elif want_role is not None:
+        who = parts[2]
+    elif kind in ("truth", "sense", "ctl"):
+        who = "0"
+    else:
+        raise MessageError(f"{stream!r} is not a zswarm stream")
+    if not who.isdigit() or not who.isascii():
+        raise MessageError(f"{stream!r}: not a process id in the key")
+    want_src = int(who)
     if m.get("src") != want_src:
         raise MessageError(f"src {m.get('src')!r} on {stream}, whose sender is {want_src}")
     if want_role is not None and m.get("role") != want_role:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from zswarm import keys, secure
+import pytest
+
+from zswarm import keys, secure, wire
 from zswarm.bus import key_matches
 
 
@@ -35,3 +37,23 @@ def test_access_control_lets_each_process_ask_only_its_own_key_and_only_the_reco
         assert allowed(name, "declare_queryable", "ingress") == [] and allowed(name, "reply", "ingress") == []
     assert allowed("recorder", "declare_queryable", "ingress") == allowed("recorder", "reply", "ingress") == [keys.recorded_all("r1")]
     assert allowed("agent-1", "reply", "egress") == [keys.recorded_all("r1")]  # the answer reaches the asker
+
+
+def test_run_control_and_tokens_with_a_run_secret(monkeypatch):
+    """With the run's secret (keys.SECRET_ENV) a ctl message must carry its HMAC and a token
+    its tag; without it anything decodes as before (processes started by hand, old files)."""
+    plain = wire.encode("stop", 0, 0, 2.0, reason="forged")
+    monkeypatch.setenv(keys.SECRET_ENV, "s3cret")
+    signed = wire.encode_ctl("start", 0, 0, 0.0, epoch=1, time_scale=1, duration=5, seed=1, run="r")  # ints for floats: signed as decoded
+    assert wire.decode_ctl(signed, "start")["mac"]
+    with pytest.raises(wire.MessageError, match="not signed with this run's secret"):
+        wire.decode_ctl(plain, "stop")
+    tagged = keys.alive("r", "agent", 3)
+    assert tagged.startswith("zswarm/r/alive/agent/3/") and keys.parse_alive(tagged) == ("agent", 3)
+    assert keys.parse_alive("zswarm/r/alive/agent/3") is None  # a token without the tag: not the run's
+    assert keys.parse_alive(tagged.replace("/agent/3/", "/agent/4/")) is None  # another's tag
+    monkeypatch.setenv(keys.SECRET_ENV, "other")
+    with pytest.raises(wire.MessageError, match="not signed"):
+        wire.decode_ctl(signed, "start")
+    monkeypatch.delenv(keys.SECRET_ENV)
+    assert wire.decode_ctl(plain, "stop")["reason"] == "forged" and keys.parse_alive(tagged) == ("agent", 3)
