@@ -4,7 +4,7 @@ A full disk or a dying process must not leave a 0-byte ``summary.json`` or half 
 reads as a result: each file is written beside its place (``NAME.part``) and renamed over it
 once complete (a rename within a folder is atomic); on any failure the part is removed and
 the error goes on to the caller, which names the path and the problem in one line
-(``zswarm.procutil.fail_io``).
+(``zswarm.procutil.write_problem``, printed by ``zswarm.cli.main``).
 """
 
 from __future__ import annotations

@@ -30,7 +30,10 @@ def run_secret() -> bytes | None:
 
 
 def alive_tag(secret: bytes, role: str, i: int) -> str:
+    """The tag of ``role`` ``i``'s liveliness token under ``secret`` (24 hex digits)."""
     return hmac.new(secret, f"alive/{role}/{i}".encode(), hashlib.sha256).hexdigest()[:24]
+
+
 _RUN_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 

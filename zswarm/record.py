@@ -148,7 +148,62 @@ def _dumps(obj: Any) -> bytes:
     return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
 
 
-class ViewerOut:
+class _McapOut:
+    """What the two recordings' writers share (:class:`ViewerOut`, :class:`RawOut`): an MCAP
+    writer (``writer``, None once closed) and maybe a live server (``server``), closed
+    together; a failed write (disk full, read-only) closes them and raises RecordingError
+    naming ``path`` and the problem."""
+
+    path: Path | None
+    writer: Any
+    server: Any = None
+    _errors0: int = 0
+
+    def _write_metadata(self, metadata: dict[str, str]) -> None:
+        try:
+            self.writer.write_metadata("zswarm", metadata)
+        except RuntimeError as exc:
+            self._failed(WRITE_ERRORS.first or str(exc))
+
+    def _failed(self, text: str) -> None:
+        """Stop writing (and serving) and raise RecordingError naming the file and the problem."""
+        writer, self.writer = self.writer, None
+        self._errors0 = WRITE_ERRORS.count
+        WRITE_ERRORS.first = ""  # told now: the next failure's own words are kept
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        if writer is not None:
+            try:
+                writer.close()
+            except Exception:  # noqa: BLE001, S110 - it failed already: the first error is the one to tell
+                pass
+        if self.path is not None and Path(self.path).exists() and Path(self.path).stat().st_size == 0:
+            Path(self.path).unlink()  # nothing of it reached the disk: no 0-byte file is left
+        raise RecordingError(f"{self.path}: cannot write the recording: {io_problem(text, self.path)}")
+
+    def flush(self) -> None:
+        if self.writer is not None:
+            try:
+                self.writer.flush()
+            except RuntimeError as exc:
+                self._failed(WRITE_ERRORS.first or str(exc))
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        if self.writer is not None:
+            writer, self.writer = self.writer, None
+            try:
+                writer.close()
+            except RuntimeError as exc:
+                self._failed(WRITE_ERRORS.first or str(exc))
+            if WRITE_ERRORS.count != self._errors0:
+                self._failed(WRITE_ERRORS.first)
+
+
+class ViewerOut(_McapOut):
     """A run's channels on a ``foxglove.Context`` whose sinks are an MCAP file
     (``path``) and/or a Foxglove WebSocket server (``live``): each message as
     JSON on its stream's channel, plus :class:`zswarm.viz.Views`.
@@ -234,49 +289,6 @@ class ViewerOut:
         if WRITE_ERRORS.count != self._errors0:
             self._failed(WRITE_ERRORS.first)
 
-    def _write_metadata(self, metadata: dict[str, str]) -> None:
-        try:
-            self.writer.write_metadata("zswarm", metadata)
-        except RuntimeError as exc:
-            self._failed(WRITE_ERRORS.first or str(exc))
-
-    def _failed(self, text: str) -> None:
-        """Stop writing (and serving) and raise RecordingError naming the file and the problem."""
-        writer, self.writer = self.writer, None
-        self._errors0 = WRITE_ERRORS.count
-        WRITE_ERRORS.first = ""  # told now: the next failure's own words are kept
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
-        if writer is not None:
-            try:
-                writer.close()
-            except Exception:  # noqa: BLE001, S110 - it failed already: the first error is the one to tell
-                pass
-        if self.path is not None and Path(self.path).exists() and Path(self.path).stat().st_size == 0:
-            Path(self.path).unlink()  # nothing of it reached the disk: no 0-byte file is left
-        raise RecordingError(f"{self.path}: cannot write the recording: {io_problem(text, self.path)}")
-
-    def flush(self) -> None:
-        if self.writer is not None:
-            try:
-                self.writer.flush()
-            except RuntimeError as exc:
-                self._failed(WRITE_ERRORS.first or str(exc))
-
-    def close(self) -> None:
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
-        if self.writer is not None:
-            writer, self.writer = self.writer, None
-            try:
-                writer.close()
-            except RuntimeError as exc:
-                self._failed(WRITE_ERRORS.first or str(exc))
-            if WRITE_ERRORS.count != self._errors0:
-                self._failed(WRITE_ERRORS.first)
-
 
 RAW_SUFFIX = ".raw.mcap"
 
@@ -299,7 +311,7 @@ def _raw_schema() -> Any:
     return foxglove.Schema(name=f"zswarm.wire.v{wire.VERSION}", encoding="", data=b"")
 
 
-class RawOut:
+class RawOut(_McapOut):
     """The run's payloads as they came, one msgpack channel per stream, in an MCAP
     file (the format :func:`read` reads as "earlier recordings"); :func:`transcode`
     makes the viewer recording of it."""
@@ -353,18 +365,6 @@ class RawOut:
     def alive(self, event: dict[str, Any], t: int) -> None:
         self.message(ALIVE_CHANNEL, msgpack.packb(event), t)
 
-    _failed = ViewerOut._failed
-    _write_metadata = ViewerOut._write_metadata
-    server = None
-
-    def flush(self) -> None:
-        if self.writer is not None:
-            try:
-                self.writer.flush()
-            except RuntimeError as exc:
-                self._failed(WRITE_ERRORS.first or str(exc))
-
-    close = ViewerOut.close
 
 
 def _open_mcap(path: Path, ctx: Any, opts: Any) -> Any:

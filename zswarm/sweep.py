@@ -421,7 +421,9 @@ def _not_completed(folder: Path) -> list[str] | None:
         s = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):
         return None
-    return [str(p) for p in s.get("problems", [])] or None if s.get("completed") is False else None
+    if s.get("completed") is not False:
+        return None
+    return [str(p) for p in s.get("problems", [])] or None
 
 
 def _repair_tail(path: Path) -> None:
