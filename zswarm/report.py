@@ -81,9 +81,9 @@ OUTSIDE_RUN_MARGIN_S = 1.0
 # error was 0.01.  Estimates in a gap (or after the last sample by more than it) get NaN;
 # the gaps are in summary.json "recording.truth_gaps".  A run on a loaded machine has short
 # gaps of its own, which must not blank its errors (a NaN at a grid point also counts as
-# not converged): a world woken late skips to the newest due sample past two periods
-# (world.CATCH_UP_PERIODS), measured up to 4.7 periods (24 ms) beside stress-ng --cpu 1.
-# 0.1 s is four times that; across it the propagation errs by at most 0.025 rad on §3.2.
+# not converged): a world woken late takes the samples it missed, up to 0.1 s behind
+# (world.CATCH_UP_S), and skips to the newest due sample past that.
+# Across 0.1 s the propagation errs by at most 0.025 rad on §3.2.
 TRUTH_GAP_S = 0.1
 TRUTH_GAP_PERIODS = 4.0
 

@@ -72,7 +72,7 @@ def test_sim_and_run_agree_on_convergence_time_with_lossy_delayed_links(procs, t
     sets = ["links.delay_ms=50", "links.drop=0.2"]
     # At time scale 1 (the links' 50 ms are in world time at any scale).  Beside
     # `stress-ng --cpu 1` the world skipped 1.5-1.6 % of its samples here (2026-12-03) while
-    # it skipped every sample it woke a period late; it now takes them up to two periods late
+    # it skipped every sample it woke a period late; it now takes them late, up to 0.1 s
     # (test_run.py).  Before issue 28 a busy machine made the agents miss up to 23 % of their
     # ticks at 1 (attitude 24.9 s against sim's 11.2 s).
     _, s = run(procs, tmp_path, sets, 40.0)

@@ -87,7 +87,7 @@ def test_hybrid_run(procs, tmp_path, name):
     # Time scale 1.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's cheaper ticks)
     # the agents keep up (≤ 0.13 % missed ticks); the world skipped 0.5-1.9 % of its samples
     # over three runs of each while it skipped every sample it woke a period late, near the
-    # 2 % where a run is overloaded; it now takes them up to two periods late (test_run.py).
+    # 2 % where a run is overloaded; it now takes them late, up to 0.1 s (test_run.py).
     # Before issue 28 the agents missed 15-22 % at 1 and the settle times moved by +45 %.
     sc, out, s, sim_out, ss = run(procs, tmp_path, name, time_scale=1.0)
     for k, e in s["edges"].items():
