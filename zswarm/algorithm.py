@@ -47,6 +47,7 @@ from zswarm.so3 import rotations_ok
 from zswarm.wire import ROT_TOL
 
 ENTRY_POINT_GROUP = "zswarm.algorithms"
+BUILTIN_PACKAGE = "agent.algorithms."  # where zswarm's own algorithms live (registered in pyproject.toml)
 
 # The sensor fields the world can measure, and the sensor-packet key each one fills.
 SENSORS: Mapping[str, str] = MappingProxyType(
@@ -272,11 +273,21 @@ class View(Protocol):
 # --------------------------------------------------------------------------- finding and checking
 
 
-def builtin() -> Mapping[str, str]:
-    """Built-in algorithm names -> module paths."""
-    from agent.algorithms import BUILTIN
+def registered() -> Mapping[str, str]:
+    """Algorithm names -> module paths, from the entry points of ENTRY_POINT_GROUP: zswarm's
+    own algorithms (pyproject.toml) and those of every installed package that declares
+    some.  zswarm's own names cannot be taken over by another package; otherwise the first
+    declaration of a name wins (importlib.metadata's order)."""
+    eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
+    out: dict[str, str] = {}
+    for ep in sorted(eps, key=lambda ep: not ep.value.startswith(BUILTIN_PACKAGE)):
+        out.setdefault(ep.name, ep.value.split(":")[0])
+    return MappingProxyType(out)
 
-    return BUILTIN
+
+def builtin() -> Mapping[str, str]:
+    """zswarm's own algorithms (the entry points its distribution declares) -> module paths."""
+    return MappingProxyType({k: v for k, v in registered().items() if v.startswith(BUILTIN_PACKAGE)})
 
 
 def resolve(name: str, near: str | Path | None = None) -> tuple[ModuleType, str | None]:
@@ -289,13 +300,7 @@ def resolve(name: str, near: str | Path | None = None) -> tuple[ModuleType, str 
         When nothing of that name can be imported, or the module fails the interface.
     """
     added: str | None = None
-    target = builtin().get(name)
-    if target is None:
-        eps = [ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if ep.name == name]
-        if eps:
-            target = eps[0].value.split(":")[0]
-    if target is None:
-        target = name
+    target = registered().get(name, name)
     try:
         spec = importlib.util.find_spec(target)
     except (ImportError, ValueError):
@@ -310,7 +315,7 @@ def resolve(name: str, near: str | Path | None = None) -> tuple[ModuleType, str 
         except (ImportError, ValueError):
             spec = None
     if spec is None:
-        known = ", ".join(builtin())
+        known = ", ".join(builtin()) or f"none: zswarm is not installed (pip install -e .), its entry points of {ENTRY_POINT_GROUP!r} are missing"
         raise AlgorithmError(f"unknown algorithm: no built-in, entry point or importable module {name!r} (built-in: {known}; or a module path like mylab.my_observer)")
     try:
         module = importlib.import_module(target)
