@@ -43,11 +43,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from zswarm import plugins
 from zswarm.so3 import rotations_ok
 from zswarm.wire import ROT_TOL
 
 ENTRY_POINT_GROUP = "zswarm.algorithms"
 BUILTIN_PACKAGE = "agent.algorithms."  # where zswarm's own algorithms live (registered in pyproject.toml)
+REPORT_FAMILY_GROUP = "zswarm.report_families"
+BUILTIN_FAMILIES = "zswarm.report.families."  # zswarm's own report families (registered in pyproject.toml)
 
 # The sensor fields the world can measure, and the sensor-packet key each one fills.
 SENSORS: Mapping[str, str] = MappingProxyType(
@@ -134,6 +137,10 @@ class AlgorithmSpec:
     stale: StalePolicy = StalePolicy(0.2, "drop")
     leader: str | None = None  # the algorithm agents with role "leader" run (None: no leaders)
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
+    # The report family that turns a run of this algorithm into figures (zswarm.report.family):
+    # a name registered in the entry-point group REPORT_FAMILY_GROUP ("leader_follower", "tree",
+    # "sync", "formation" are zswarm's) or a module path (mylab.my_family).
+    report: str = "leader_follower"
 
     def check_edge(self, fields: Mapping[str, Any]) -> Mapping[str, Any]:
         """Validate a received edge message's fields against ``edge_in`` (raises ValueError)."""
@@ -274,15 +281,19 @@ class View(Protocol):
 
 
 def registered() -> Mapping[str, str]:
-    """Algorithm names -> module paths, from the entry points of ENTRY_POINT_GROUP: zswarm's
-    own algorithms (pyproject.toml) and those of every installed package that declares
-    some.  zswarm's own names cannot be taken over by another package; otherwise the first
-    declaration of a name wins (importlib.metadata's order)."""
-    eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
-    out: dict[str, str] = {}
-    for ep in sorted(eps, key=lambda ep: not ep.value.startswith(BUILTIN_PACKAGE)):
-        out.setdefault(ep.name, ep.value.split(":")[0])
-    return MappingProxyType(out)
+    """Algorithm names -> module paths: zswarm's own algorithms (pyproject.toml) and those of
+    every installed package that declares some in ENTRY_POINT_GROUP."""
+    return plugins.registered(ENTRY_POINT_GROUP, BUILTIN_PACKAGE)
+
+
+def family_module(name: str) -> str | None:
+    """The module path of the report family ``name`` (registered, or a module path that can be
+    imported), without importing it; None when there is none."""
+    target = plugins.registered(REPORT_FAMILY_GROUP, BUILTIN_FAMILIES).get(name, name)
+    try:
+        return target if importlib.util.find_spec(target) is not None else None
+    except (ImportError, ValueError):
+        return None
 
 
 def builtin() -> Mapping[str, str]:
@@ -354,6 +365,9 @@ def check(module: ModuleType) -> AlgorithmSpec:
         raise AlgorithmError(f"module {name!r}: SPEC.graph must be one of {GRAPHS} (got {spec.graph!r})")
     if spec.params not in PARAMS:
         raise AlgorithmError(f"module {name!r}: SPEC.params must be one of {PARAMS} (got {spec.params!r})")
+    if not isinstance(spec.report, str) or family_module(spec.report) is None:
+        known = ", ".join(plugins.registered(REPORT_FAMILY_GROUP, BUILTIN_FAMILIES))
+        raise AlgorithmError(f"module {name!r}: SPEC.report: no report family {spec.report!r} (registered: {known}; or a module path like mylab.my_family)")
     if spec.stale.policy not in STALE_POLICIES:
         raise AlgorithmError(f"module {name!r}: SPEC.stale.policy must be one of {STALE_POLICIES}")
     known = set(spec.gains) | (PARAM_NAMES[spec.params])

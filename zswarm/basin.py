@@ -36,6 +36,7 @@ import hashlib
 import json
 import math
 import multiprocessing
+import re
 import signal
 import time
 from collections.abc import Callable
@@ -45,6 +46,9 @@ from typing import Any
 
 import numpy as np
 
+from zswarm import report
+from zswarm.report import family
+from zswarm.report.series import leave_time, settle_time
 from zswarm.scenario import Override, Scenario, load, parse_override
 from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 
@@ -76,15 +80,13 @@ def _rows(R: np.ndarray) -> str:
     return "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in r) + "]" for r in R) + "]"
 
 
-def kind_of(sc: Scenario) -> str:
-    """What a draw randomises: "law" (Chapter 5: R_i(0)) or "observer" (§4: R̂_i(0))."""
-    from zswarm import report_sync
-
-    if report_sync.is_sync(sc):
-        return "law"
-    if sc.info.graph == "tree":
-        return "observer"
-    raise ValueError(f"{sc.name}: zswarm basin covers the tree schemes (Chapter 5 laws, §4 observers); {sc.algorithm} is not one")
+def starts_of(sc: Scenario) -> list[tuple[str, Any]]:
+    """What a draw randomises: the rotations its report family names (``basin_start``: the
+    Chapter 5 laws' R_i(0) and Q_i(0), the §4 observers' R̂_i(0)), with their own values."""
+    fam = family.of(sc)
+    if fam.basin_start is None or fam.basin_series is None:
+        raise ValueError(f"{sc.name}: zswarm basin covers the tree schemes (Chapter 5 laws, §4 observers); {sc.algorithm} is not one")
+    return fam.basin_start(sc)
 
 
 def draw_overrides(sc: Scenario, seed: int, draw: int, near: float | None = None) -> list[Override]:
@@ -94,26 +96,14 @@ def draw_overrides(sc: Scenario, seed: int, draw: int, near: float | None = None
         return []
     rng = np.random.default_rng([seed % (1 << 63), draw])
     out = []
-    kind = kind_of(sc)
-    vf = sc.info.params == "hybrid_vf"
-
-    def one(field: str, own: Any) -> None:
+    for field, own in starts_of(sc):
         R = uniform_rotation(rng) if near is None else near_rotation(np.array(own, dtype=float).reshape(3, 3), near, rng)
         out.append(parse_override(f"{field}={_rows(R)}", "--draw"))
-
-    for n, a in enumerate(sc.agents):
-        if kind == "law":
-            one(f"agents[{n}].R", a.R)
-            if vf:
-                one(f"agents[{n}].estimate.Q", a.estimate.Q)
-        else:
-            one(f"agents[{n}].estimate.R", a.estimate.R_hat)
     return out
 
 
 def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: float, near: float | None = None) -> dict[str, Any]:
     """One draw on ``sim``, in memory; its row of basin.csv."""
-    from zswarm import report, report_sync
     from zswarm.sim import simulate
 
     t0 = time.monotonic()
@@ -121,21 +111,16 @@ def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: fl
     sc = load(topology, draw_overrides(base, seed, draw, near))
     msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
     rec = report.load_recording(msgs)  # type: ignore[arg-type]
-    if kind_of(sc) == "law":
-        m = report_sync.sync_metrics(sc, rec)
-        t, mx = m.t, m.max_rel
-    else:
-        tm = report.tree_metrics(sc, rec)
-        if tm is None:
-            raise RuntimeError("some agent published no estimate")
-        t, mx = tm.t, np.max(np.array(list(tm.rel_att.values())), axis=0)
-    settle = report_sync.settle_time(t, mx, threshold)
+    fam = family.of(sc)
+    assert fam.basin_series is not None  # draw_overrides refused a family without one
+    t, mx = fam.basin_series(sc, rec)
+    settle = settle_time(t, mx, threshold)
     return {
         "draw": draw,
         "kind": _kind(draw, near),
         "synchronized": settle is not None,
-        "left_s": report_sync.leave_time(t, mx),
-        "settle_01_s": report_sync.settle_time(t, mx, 0.1),
+        "left_s": leave_time(t, mx),
+        "settle_01_s": settle_time(t, mx, 0.1),
         "settle_s": settle,
         "final_max": float(mx[-1]),
         "initial_max": float(mx[0]),
@@ -383,11 +368,12 @@ def sc_kind(spec: dict[str, Any]) -> str:
         sc = load(spec["topology"])
     except Exception:  # noqa: BLE001 - moved or edited since: no pairing, the table still stands
         return "?"
-    kind, vf = kind_of(sc), sc.info.params == "hybrid_vf"
-    # draw 0 and every --near draw start from the scenario's own attitudes: they must match too
-    own = [a.R if kind == "law" else a.estimate.R_hat for a in sc.agents] + ([a.estimate.Q for a in sc.agents] if vf else [])
+    starts = starts_of(sc)
+    own = [v for _, v in starts]
     digest = hashlib.sha256(np.round(np.array(own, dtype=float), 12).tobytes()).hexdigest()[:12]
-    return kind + ("+Q" if vf else "") + "@" + digest
+    # the fields, with the agents' indexes left out: "agents[].R+agents[].estimate.Q"
+    fields = "+".join(dict.fromkeys(re.sub(r"\[\d+\]", "[]", f) for f, _ in starts))
+    return fields + "@" + digest
 
 
 def paired(entries: list[dict[str, Any]]) -> list[str]:

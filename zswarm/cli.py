@@ -409,7 +409,7 @@ def cmd_basin(args: argparse.Namespace) -> int:
 
     sc = procutil.load_or_exit(args.topology)
     try:
-        basin.kind_of(sc)
+        basin.starts_of(sc)
     except ValueError as exc:
         procutil.fail_usage(f"{args.topology}: {exc}")
     duration = sc.duration if args.duration is None else args.duration

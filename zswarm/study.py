@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import report, report_formation
+from zswarm import report
+from zswarm.report import family
 from zswarm.scenario import Scenario
 
 
@@ -33,7 +34,7 @@ def refine(sc: Scenario, agent_rate: float = 1000.0, sensor_rate: float = 2000.0
 
 @dataclass(frozen=True)
 class Series:
-    """The mean errors the study compares (report.mean_error_series) and the final ones."""
+    """The team's errors the study compares (its report family's series) and the final ones."""
 
     t: np.ndarray
     att: np.ndarray
@@ -51,16 +52,9 @@ def run(sc: Scenario, out_dir: Path) -> Series:
     assert isinstance(msgs, list)
     s = report.make_report(out_dir, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
     rec = report.load_recording(msgs)
-    if report_formation.is_formation(sc):  # De Carli: max over robots, up to the common rotation (and translation)
-        fm = report_formation.formation_metrics(sc, rec)
-        f = s["formation"]
-        return Series(fm.t, report_formation._max(fm.yaw), report_formation._max(fm.position), float(f["yaw_error_max_final"]), float(f["position_error_max_final_m"]))
-    tm = report.tree_metrics(sc, rec) if sc.info.graph == "tree" else None
-    t, att, pos = report.mean_error_series(sc, report.errors(rec), tm, sc.duration)
-    if tm is not None:
-        fa, fp = s["mean_relative_attitude_error_final"], s.get("mean_relative_position_error_final")
-    else:
-        fa, fp = s["mean_attitude_error_final"], s["mean_position_error_final"]
+    fam = family.of(sc)
+    t, att, pos = fam.series(sc, report.errors(rec), fam.metrics(sc, rec), sc.duration)
+    fa, fp = fam.finals(s)
     return Series(t, att, pos, float(fa), None if fp is None or not np.isfinite(pos).any() else float(fp))
 
 

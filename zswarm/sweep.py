@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import procutil, report
+from zswarm.report import family
 from zswarm.scenario import Override, Scenario, ScenarioError, load, parse_field, parse_override
 from zswarm.text import shown
 
@@ -248,18 +249,8 @@ def _formation_columns(folder: Path, s: dict[str, Any]) -> dict[str, Any]:
 
 
 def _series(folder: Path, sc: Scenario, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The convergence measure of :func:`zswarm.report.mean_error_series`, from the run's CSVs."""
-    if sc.info.graph == "tree":
-        d = np.genfromtxt(folder / "edges.csv", delimiter=",", names=True)
-        edges = {k: d[d["edge"] == k] for k in range(1, len(sc.oriented) + 1)}
-        t = edges[1]["t"]
-        tm = report.TreeMetrics(
-            t, {k: e["relative_attitude_error"] for k, e in edges.items()}, {k: e["relative_position_error"] for k, e in edges.items()}, {}, {}
-        )
-        return report.mean_error_series(sc, {}, tm, duration)
-    d = np.loadtxt(folder / "errors.csv", delimiter=",", skiprows=1, ndmin=2)
-    errs = {int(i): d[d[:, 1] == i][:, [0, 2, 3]] for i in np.unique(d[:, 1])}
-    return report.mean_error_series(sc, errs, None, duration)
+    """The team's error measure of the run's report family, from the run's files."""
+    return family.of(sc).series_from_files(folder, sc, duration)
 
 
 class Progress:

@@ -222,7 +222,7 @@ class Views:
 
     def _error(self, i: int, t: float, R_hat: np.ndarray, p_hat: np.ndarray, log_time: int) -> None:
         # The truth sample before t, its attitude moved on with its ω, its position
-        # interpolated to the next sample: as zswarm.report._estimates_with_truth.
+        # interpolated to the next sample: as zswarm.report.recording.estimates_with_truth.
         k = len(self.truth) - 1
         while k >= 0 and self.truth[k][0] > t:
             k -= 1

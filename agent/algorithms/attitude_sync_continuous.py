@@ -93,6 +93,7 @@ SPEC = AlgorithmSpec(
     parts=(Part("control", inputs, step),),
     command=COMMAND,
     graph="tree",
+    report="sync",
     params="A",
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"gyro": "ω_i, the damping −k_ω ω_i", "rel_att": "R_ij, the coupling"},

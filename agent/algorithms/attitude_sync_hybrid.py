@@ -150,6 +150,7 @@ SPEC = AlgorithmSpec(
     parts=(Part("control", inputs, step),),
     command=COMMAND,
     graph="tree",
+    report="sync",
     params="hybrid",
     # Hold: ξ_k changes slowly between jumps, and a tail without its head's ξ_k
     # would otherwise drop the edge from its torque.

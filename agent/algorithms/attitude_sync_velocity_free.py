@@ -233,6 +233,7 @@ SPEC = AlgorithmSpec(
     parts=(Part("control", inputs, step),),
     command=COMMAND,
     graph="tree",
+    report="sync",
     params="hybrid_vf",
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"attitude": "R_i, for Q̃_i = Q_i^T R_i of (5.20)-(5.23)", "rel_att": "R_ij, the coupling and the jump logic"},

@@ -455,6 +455,7 @@ SPEC = AlgorithmSpec(
     ),
     command=COMMAND,
     graph="sensing",
+    report="formation",
     params="formation",
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"rel_pos": "ⁱp_ij (2), every part", "velocity_body": "v_i in (7) and (21)", "gyro": "ω_i in (7) and (13)"},

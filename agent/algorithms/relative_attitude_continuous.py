@@ -85,6 +85,7 @@ SPEC = AlgorithmSpec(
     edge_out=EDGE_FIELDS,
     parts=(Part("observer", inputs, step),),
     graph="tree",
+    report="tree",
     params="A",
     # Drop: a neighbour's R̂_j is brought to the tick with its last ω_j, an
     # extrapolation whose error grows with the age (½ω̇τ²).

@@ -193,7 +193,8 @@ def test_hybrid_at_100hz_follows_1khz_agents_over_the_transient(tmp_path):
     second order in the period; the plain hold it replaced lost 0.06 of k_ω = 0.1, a 60 % change
     of the decay rate, which 5 % here would catch within the first oscillations.
     """
-    from zswarm import report, report_sync
+    from zswarm import report
+    from zswarm.report.families import sync as report_sync
     from zswarm.scenario import parse_override
 
     got = {}

@@ -19,23 +19,21 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from zswarm import files
+from zswarm.report import base, table
+from zswarm.report.recording import Recording
+from zswarm.report.series import final_of_grid as _final
+from zswarm.report.series import held as _held
+from zswarm.report.series import leave_time, settle_time
+from zswarm.report.series import norm_I as _norm_I
 from zswarm.scenario import Scenario
-
-if TYPE_CHECKING:
-    from zswarm.report import Recording
 
 GRID_S = 0.01
 SYNC_THRESHOLDS = (0.1, 0.01)  # READING-NOTES' figures: below 0.1 from t ≈ 58.5 s, below 0.01 from ≈ 102 s (hybrid)
-
-
-def is_sync(sc: Scenario) -> bool:
-    """A Chapter 5 scenario: the agents send torques to a rigid-body plant."""
-    return sc.plant == "rigid_body" and bool(sc.info.command)
 
 
 @dataclass
@@ -51,19 +49,6 @@ class SyncMetrics:
     @property
     def max_rel(self) -> np.ndarray:
         return np.max(np.array(list(self.rel_att.values())), axis=0)
-
-
-def _norm_I(R: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.clip((3.0 - np.trace(R, axis1=-2, axis2=-1)) / 4.0, 0.0, 1.0))
-
-
-def _held(ts: np.ndarray, vs: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """The newest value at or before each grid time (NaN before the first)."""
-    idx = np.searchsorted(ts, grid + 1e-9, side="right") - 1
-    out = np.full((len(grid),) + vs.shape[1:], np.nan)
-    ok = idx >= 0
-    out[ok] = vs[idx[ok]]
-    return out
 
 
 def sync_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> SyncMetrics:
@@ -95,29 +80,7 @@ def sync_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> SyncMetr
     return SyncMetrics(grid, rel, omega, tau_a, tau_c, qt, zeta)
 
 
-def settle_time(t: np.ndarray, v: np.ndarray, thr: float) -> float | None:
-    """First time after which ``v`` stays below ``thr`` (None: not below at the end)."""
-    bad = np.nonzero(~(v < thr))[0]
-    if len(bad) == 0:
-        return float(t[0])
-    if bad[-1] + 1 >= len(t):
-        return None
-    return float(t[bad[-1] + 1])
-
-
-def leave_time(t: np.ndarray, v: np.ndarray, start: float = 0.9) -> float | None:
-    """When ``v`` (max |R̄_k|_I) first drops below ``start``: the continuous law's escape from its
-    undesired equilibrium (None: it never left)."""
-    below = np.nonzero(v < start)[0]
-    return float(t[below[0]]) if len(below) else None
-
-
-def _final(t: np.ndarray, v: np.ndarray, window: float = 1.0) -> float:
-    sel = t >= t[-1] - window
-    return float(np.nanmean(v[sel])) if np.any(sel) else float("nan")
-
-
-def summary(sc: Scenario, rec: Recording, m: SyncMetrics, agents: dict[str, Any]) -> dict[str, Any]:
+def summary(sc: Scenario, rec: Recording, m: SyncMetrics, agents: dict[str, Any], duration: float) -> dict[str, Any]:
     """The Chapter 5 part of summary.json (per edge, per agent in place, the synchronization block)."""
     hybrid = sc.params is not None and bool(sc.params.Xi)
     edges: dict[str, Any] = {}
@@ -181,7 +144,7 @@ def summary(sc: Scenario, rec: Recording, m: SyncMetrics, agents: dict[str, Any]
     return out
 
 
-def convergence(m: SyncMetrics, duration: float, thresholds: tuple[float, float]) -> dict[str, Any]:
+def convergence(sc: Scenario, errs: dict[int, np.ndarray], m: SyncMetrics, duration: float, thresholds: tuple[float, float]) -> dict[str, Any]:
     """summary.json "convergence" (what ``zswarm sweep`` tabulates): the settle times of max_k |R̄_k|_I."""
     mx = m.max_rel
     return {
@@ -218,7 +181,7 @@ def write_agents_csv(path: Path, sc: Scenario, m: SyncMetrics) -> None:
                 w.writerow([f"{t:.3f}", i] + ["" if not np.isfinite(v) else f"{v:.6e}" for v in vals])
 
 
-def plot(out: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
+def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], m: SyncMetrics, rec: Recording) -> None:
     """Figs. 5.3–5.7 (5.8–5.12 with noise): |R̄_k|_I, ‖ω_i‖, ξ_k, |Q̃_i|_I, ζ_i, and the torques."""
     import matplotlib
 
@@ -249,37 +212,27 @@ def plot(out: Path, sc: Scenario, m: SyncMetrics, rec: Recording) -> None:
     fig2(m.omega, "agent {}", r"$\|\omega_i\|$ (rad/s)", "angular_velocity", "angular velocity per agent (Fig. 5.4)")
     fig2(m.tau_applied, "agent {}", r"$\|\tau_i\|$ applied (N m)", "torque", "torque held by the plant per agent")
     if rec.xi:
-        from zswarm.report import plot_xi
-
-        plot_xi(out, rec, f"{sc.name}: hybrid variables ξ_k (Fig. 5.5; x: jumps)", ncol=6)
+        base.plot_xi(out, rec, f"{sc.name}: hybrid variables ξ_k (Fig. 5.5; x: jumps)", ncol=6)
     if m.q_tilde:
         fig2(m.q_tilde, "agent {}", r"$|\tilde Q_i|_I$", "Q_tilde", "auxiliary attitude error per agent (Fig. 5.6)")
         fig2(m.zeta, "ζ_{}", r"$\zeta_i$ (rad)", "zeta", "hybrid variables ζ_i (Fig. 5.7)", log=False)
-
-
-def _e(x: float | None) -> str:
-    return "n/a" if x is None or not np.isfinite(x) else f"{x:.2e}"
-
-
-def _s(x: float | None) -> str:
-    return "never" if x is None else f"{x:.1f}"
 
 
 def table_lines(summary: dict[str, Any]) -> list[str]:
     """The Chapter 5 lines of the table printed at the end of a run."""
     lines = [f"{'agent':>5} {'alive':<5} {'|ω| final':>10} {'|ω| peak':>9} {'τ peak':>8} {'steps':>6} {'rate Hz':>8} {'missed':>6}" + ("  |Q̃| final  ζ jumps" if any("Q_tilde_final" in a for a in summary["agents"].values()) else "")]
     for i, a in summary["agents"].items():
-        tail = f"  {_e(a.get('Q_tilde_final')):>10} {a.get('zeta_jumps', 0):>8}" if "Q_tilde_final" in a else ""
+        tail = f"  {table.e(a.get('Q_tilde_final')):>10} {a.get('zeta_jumps', 0):>8}" if "Q_tilde_final" in a else ""
         lines.append(
-            f"{i:>5} {'yes' if a['alive_at_end'] else 'NO':<5} {_e(a.get('angular_velocity_final')):>10} {a.get('angular_velocity_peak', float('nan')):>9.3f} "
+            f"{i:>5} {'yes' if a['alive_at_end'] else 'NO':<5} {table.e(a.get('angular_velocity_final')):>10} {a.get('angular_velocity_peak', float('nan')):>9.3f} "
             f"{a.get('torque_peak_applied') or float('nan'):>8.3f} {a['steps']:>6} {a['step_rate_hz']:>8.2f} {a['missed_deadlines']:>6}{tail}"
         )
     lines.append(f"{'edge':>5} {'head->tail':<10} {'|R̄_k|_I':>10} {'<0.1 from':>10} {'<0.01 from':>11} {'jumps':>6} {'ξ final':>9}")
     for k, e in summary["edges"].items():
         xi = e.get("xi_final")
         lines.append(
-            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {_e(e['relative_attitude_error_final']):>10} {_s(e['settles_below_0.1_at']):>10} "
-            f"{_s(e['settles_below_0.01_at']):>11} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
+            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {table.e(e['relative_attitude_error_final']):>10} {table.s(e['settles_below_0.1_at']):>10} "
+            f"{table.s(e['settles_below_0.01_at']):>11} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
         )
     sy = summary["synchronization"]
     cmd_links = {k: v for k, v in summary["links"].items() if k.endswith("->world")}
@@ -287,8 +240,8 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
     dropped = sum(int(v.get("dropped", 0)) for v in cmd_links.values())
     expired = sum(int(v.get("expired", 0)) for v in summary["commands"]["per_agent"].values())
     lines.append(
-        f"max_k |R̄_k|_I: {_e(sy['initial'])} at start, left it at {_s(sy['leaves_start_at'])} s, below 0.1 from {_s(sy['settles_below_0.1_at'])} s, "
-        f"below 0.01 from {_s(sy['settles_below_0.01_at'])} s, final {_e(sy['final'])}"
+        f"max_k |R̄_k|_I: {table.e(sy['initial'])} at start, left it at {table.s(sy['leaves_start_at'])} s, below 0.1 from {table.s(sy['settles_below_0.1_at'])} s, "
+        f"below 0.01 from {table.s(sy['settles_below_0.01_at'])} s, final {table.e(sy['final'])}"
         + (f"; jumps: {summary['jumps_total']}" if "jumps_total" in summary else "")
         + (f", ζ jumps: {summary['zeta_jumps_total']}" if "zeta_jumps_total" in summary else "")
     )
@@ -296,3 +249,44 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
         f"commands: {sent} sent, {dropped} lost, {expired} expired ({summary['commands']['policy']}), {summary['commands']['malformed']} malformed"
     )
     return lines
+
+
+def metrics(sc: Scenario, rec: Recording) -> SyncMetrics:
+    return sync_metrics(sc, rec)
+
+
+def headline(sc: Scenario, agents: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+    """The mean over edges of the truth's final |R̄_k|_I (agents have no estimate error here)."""
+    return base.headline(sc, agents, extra) | {"mean_attitude_error_final": extra["mean_relative_attitude_error_final"], "mean_over": "edges: |R̄_k|_I of the truth"}
+
+
+def series(sc: Scenario, errs: dict[int, np.ndarray], m: SyncMetrics, duration: float) -> base.Series:
+    """max over edges of the truth's |R̄_k|_I, on the 0.1 s grid (a fault's re-convergence, zswarm sweep)."""
+    return base.edges_on_grid(m.t, m.rel_att, {}, duration, np.max)
+
+
+def series_from_files(folder: Path, sc: Scenario, duration: float) -> base.Series:
+    t, rel_att, _ = base.read_edges_csv(folder / "edges.csv", len(sc.oriented))
+    return base.edges_on_grid(t, rel_att, {}, duration, np.max)
+
+
+def write(out_dir: Path, sc: Scenario, rec: Recording, m: SyncMetrics) -> None:
+    write_edges_csv(out_dir / "edges.csv", sc, m, rec)
+    write_agents_csv(out_dir / "agents.csv", sc, m)
+
+
+def basin_start(sc: Scenario) -> list[tuple[str, Any]]:
+    """A basin draw randomises every agent's attitude R_i(0) (and the velocity-free law's Q_i(0))."""
+    vf = sc.info.params == "hybrid_vf"
+    out: list[tuple[str, Any]] = []
+    for n, a in enumerate(sc.agents):
+        out.append((f"agents[{n}].R", a.R))
+        if vf:
+            out.append((f"agents[{n}].estimate.Q", a.estimate.Q))
+    return out
+
+
+def basin_series(sc: Scenario, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """max_k |R̄_k|_I of the truth on the 100 Hz grid."""
+    m = sync_metrics(sc, rec)
+    return m.t, m.max_rel

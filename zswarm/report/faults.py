@@ -25,7 +25,7 @@ import numpy as np
 from zswarm import keys
 
 if TYPE_CHECKING:
-    from zswarm.report import Recording
+    from zswarm.report.recording import Recording
     from zswarm.scenario import Fault, Scenario
 
 PRE_WINDOW_S = 1.0  # the level before a fault: the error's largest value over this window

@@ -23,7 +23,12 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
-from zswarm.report_sync import _final, _held, settle_time
+from zswarm.report import base, table
+from zswarm.report.recording import Recording
+from zswarm.report.series import final_of_grid as _final
+from zswarm.report.series import held as _held
+from zswarm.report.series import max_over as _max
+from zswarm.report.series import settle_time
 from zswarm.scenario import Scenario
 
 GRID_S = 0.01
@@ -33,10 +38,6 @@ GRID_S = 0.01
 PE_WINDOW_S = 10.0
 PE_MIN = 1e-6
 THRESHOLDS = {"relative_yaw": 0.05, "yaw": 0.05, "position_m": 0.1, "formation_m": 0.1}
-
-
-def is_formation(sc: Scenario) -> bool:
-    return sc.info.graph == "sensing"
 
 
 @dataclass
@@ -57,7 +58,7 @@ def _extra_series(rec: Any, i: int, key: str, grid: np.ndarray, width: int) -> n
     return _held(np.array([t for t, _ in rows]), np.array([np.asarray(v, dtype=float).reshape(width) for _, v in rows]), grid)
 
 
-def formation_metrics(sc: Scenario, rec: Any, step: float = GRID_S) -> FormationMetrics:
+def formation_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> FormationMetrics:
     t_end = float(rec.truth_t[-1])
     grid = np.arange(0.0, t_end + 1e-9, step)
     ids = list(rec.truth_ids)
@@ -103,16 +104,7 @@ def formation_metrics(sc: Scenario, rec: Any, step: float = GRID_S) -> Formation
     return FormationMetrics(grid, rel, yaw, position, formation, alpha, exc)
 
 
-def _max(series: dict[Any, np.ndarray]) -> np.ndarray:
-    """The max over edges / robots at each grid time (NaN before any estimate)."""
-    x = np.stack(list(series.values()))
-    out = np.full(x.shape[1], np.nan)
-    ok = ~np.all(np.isnan(x), axis=0)
-    out[ok] = np.nanmax(x[:, ok], axis=0)
-    return out
-
-
-def summary(sc: Scenario, rec: Any, m: FormationMetrics, agents: dict[str, Any]) -> dict[str, Any]:
+def summary(sc: Scenario, rec: Recording, m: FormationMetrics, agents: dict[str, Any], duration: float) -> dict[str, Any]:
     """The De Carli part of summary.json: per edge (a), per robot (b)-(d) (in ``agents``), settle times."""
     edges = {
         f"{i}->{j}": {
@@ -168,7 +160,8 @@ def _drift(t: np.ndarray, alpha: np.ndarray, t0: float | None) -> float | None:
     return float(a.max() - a.min()) if a.size else None
 
 
-def convergence(m: FormationMetrics, duration: float) -> dict[str, Any]:
+def convergence(sc: Scenario, errs: dict[int, np.ndarray], m: FormationMetrics, duration: float, thresholds: tuple[float, float]) -> dict[str, Any]:
+    """Settle times at the family's own THRESHOLDS (the run's attitude/position thresholds are the observers')."""
     s = {k: settle_time(m.t, _max(v), thr) for k, v, thr in (("yaw", m.yaw, THRESHOLDS["yaw"]), ("position", m.position, THRESHOLDS["position_m"]))}
     return {"attitude_below": THRESHOLDS["yaw"], "position_below": THRESHOLDS["position_m"], "attitude_converged_at": s["yaw"], "position_converged_at": s["position"], "over": "max over robots, up to the common rotation (and translation)"}
 
@@ -183,7 +176,7 @@ def write_csv(path: Path, m: FormationMetrics) -> None:
             w.writerow([f"{m.t[k]:.2f}", f"{m.alpha[k]:.6f}", *(f"{c[k]:.6e}" for c in cols)])
 
 
-def plot(out: Path, sc: Scenario, m: FormationMetrics) -> None:
+def plot_formation(out: Path, sc: Scenario, m: FormationMetrics) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -211,7 +204,7 @@ def plot(out: Path, sc: Scenario, m: FormationMetrics) -> None:
     plt.close(fig)
 
 
-def table_lines(summary: dict[str, Any]) -> list[str]:
+def formation_lines(summary: dict[str, Any]) -> list[str]:
     f = summary.get("formation", {})
     pe = [w for w in summary.get("warnings", []) if "persistent excitation" in w]
     s = f.get("settle_s", {})
@@ -228,3 +221,58 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
         f"common-frame position (up to rotation and translation): final {e(f.get('position_error_max_final_m'))} m, below {THRESHOLDS['position_m']:g} m from {g(s.get('position_max'))}",
         f"formation error (max over robots): final {e(f.get('formation_error_max_final_m'))} m, below {THRESHOLDS['formation_m']:g} m from {g(s.get('formation_max'))}",
     ] + [f"WARNING: {w}" for w in pe]
+
+
+def metrics(sc: Scenario, rec: Recording) -> FormationMetrics:
+    return formation_metrics(sc, rec)
+
+
+def headline(sc: Scenario, agents: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+    """The means over the robots of their errors as they stand (the formation block has them up to the common frame)."""
+    return base.headline(sc, agents, extra) | {"mean_over": "robots: |R̂_i R_i^T|_I and |p̂_i − p_i| as they stand, without the common rotation (see formation)"}
+
+
+def series(sc: Scenario, errs: dict[int, np.ndarray], m: FormationMetrics, duration: float) -> base.Series:
+    """The max over robots of the common-frame yaw and position errors, up to the common rotation
+    (and translation), on the 10 ms grid."""
+    return m.t, _max(m.yaw), _max(m.position)
+
+
+def finals(summary: dict[str, Any]) -> tuple[float | None, float | None]:
+    f = summary["formation"]
+    return f["yaw_error_max_final"], f["position_error_max_final_m"]
+
+
+def series_from_files(folder: Path, sc: Scenario, duration: float) -> base.Series:
+    """:func:`series` from formation.csv (its 10 Hz rows)."""
+    with open(folder / "formation.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    t = np.array([float(r["t"]) for r in rows])
+    out = []
+    for prefix in ("yaw_", "position_"):
+        cols = [c for c in rows[0] if c.startswith(prefix)] if rows else []
+        out.append(_max({c: np.array([float(r[c]) for r in rows]) for c in cols}) if cols else np.full(len(t), np.nan))
+    return t, out[0], out[1]
+
+
+def write(out_dir: Path, sc: Scenario, rec: Recording, m: FormationMetrics) -> None:
+    write_csv(out_dir / "formation.csv", m)
+
+
+def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], m: FormationMetrics, rec: Recording) -> None:
+    """De Carli et al.'s Fig. 2, and each robot's errors as they stand."""
+    plot_formation(out, sc, m)
+    base.plot_errors(out, sc, errs, rec)
+
+
+def table_lines(summary: dict[str, Any]) -> list[str]:
+    lines = table.agent_rows(summary)
+    lines.append("(att.err / pos.err as they stand; up to the common rotation and translation:)")
+    lines += formation_lines(summary)
+    parts: dict[str, list[float]] = {n: [] for a in summary["agents"].values() for n in a.get("parts", {})}
+    for a in summary["agents"].values():
+        for n, v in a.get("parts", {}).items():
+            parts[n].append(v["rate_hz"])
+    if parts:
+        lines.append("part rates (Hz, min-max over robots): " + ", ".join(f"{n} {min(v):.1f}-{max(v):.1f}" for n, v in parts.items()))
+    return lines + [table.mean_line(summary, "followers")]
