@@ -22,13 +22,13 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from functools import partial
-from types import ModuleType
+from types import MappingProxyType, ModuleType
 from typing import Any
 
 import numpy as np
 
 from zswarm import keys, timing, wire
-from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, make_gains
+from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, initial_value, jumps, make_gains
 from zswarm.bus import Bus
 from zswarm.clock import AgentClock
 from zswarm.links import LinkCounter, LinkModel
@@ -268,10 +268,9 @@ class Inbox:
 
 
 def _edge_link(key: str) -> str | None:
-    parts = key.split("/")
-    if len(parts) == 5 and parts[2] == "edge":
-        return f"{parts[3]}->{parts[4]}"
-    return None
+    """``"j->i"`` of an edge key (keys.parse), else None."""
+    k = keys.parse(key)
+    return f"{k.src}->{k.dst}" if k is not None and k.kind == "edge" else None
 
 
 def _edge_links(agent_id: int, neighbors: tuple[int, ...]) -> Callable[[str], str | None]:
@@ -346,6 +345,7 @@ class TickView:
         self.sense: Mapping[str, Any] = {}
         self.sense_t = self.sense_t_world = 0.0
         self._cache: dict[Any, Any] = {}
+        self.stale_read: set[int] = set()  # in-neighbours whose message this step read stale (the node counts them)
 
     def begin(self, t: float, t_world: float, sense: Mapping[str, Any], first: bool) -> None:
         self.t, self.t_world, self.sense, self.first = t, t_world, sense, first
@@ -353,6 +353,7 @@ class TickView:
         self.sense_t = self._node.clock.local(sense["t"])
         self.dt = 0.0
         self._cache = {}
+        self.stale_read = set()
 
     @property
     def align(self) -> np.ndarray:
@@ -384,7 +385,7 @@ class TickView:
             age = self.t - t_j
             stale = age > node.stale.max_age or j in node.lost  # a lost neighbour's data are stale whatever their age
             if stale:
-                node.stale_terms[j] = node.stale_terms.get(j, 0) + 1
+                self.stale_read.add(j)  # a read changes nothing outside the view: the node counts it (_count_stale)
             if not (stale and node.stale.policy == "drop"):
                 n = _Neighbor(m, t_j, m["t"], age)
         self._cache[key] = n
@@ -479,10 +480,8 @@ class AgentNode:
         self.algo: ModuleType = scenario.module_for(self.spec.role)
         self.aspec: AlgorithmSpec = self.algo.SPEC
         values: dict[str, Any] = dict(self.spec.gains)
-        if scenario.params is not None:
-            pr = scenario.params
-            values.update(A=pr.A_matrix, u=np.array(pr.u), gamma=pr.gamma, delta=pr.delta, Xi=pr.Xi, delta_Q=pr.delta_Q, Pi=pr.Pi)
-            values["p_star"] = {a.id: np.array(pr.p_star[n]) for n, a in enumerate(scenario.agents)} if pr.p_star else {}
+        if scenario.params is not None:  # [algorithm.params]: onto the Gains fields of the same names
+            values.update(scenario.params.gains(scenario.ids))
         self.gains = make_gains(self.algo, values)
         # Tree edges (§4): neighbour j -> (edge index k, whether this agent heads k and owns ξ_k).
         self.tree_edges: dict[int, tuple[int, bool]] = {}
@@ -492,18 +491,12 @@ class AgentNode:
         est = self.spec.estimate
         init = Initial(
             agent_id,
-            np.array(est.R_hat).reshape(3, 3),
-            np.array(est.p_hat),
-            np.array(est.Omega),
-            {k: float(est.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if head},
-            {k: float(scenario.agent(scenario.oriented[k - 1][0]).estimate.xi.get(k, 0.0)) for k, head in self.tree_edges.values() if not head},
-            np.array(est.Q).reshape(3, 3),
-            est.zeta,
+            MappingProxyType({name: initial_value(f, est.get(name, f.default)) for name, f in self.aspec.initial.items()}),
+            est.stated,
+            self.tree_edges,
+            {a.id: {n: a.estimate[n] for n in a.estimate.stated} for a in scenario.agents},
             seed,
             np.array(self.spec.p),
-            est.p_stated,
-            {a.id: a.estimate.yaw for a in scenario.agents if a.estimate.yaw is not None},
-            est.yaw_rate,
         )
         self.state = self.algo.initial_state(init, self.gains)
         self.parts = [_PartState(p, self.spec.clock.rate, scenario.part_rate_scale) for p in self.aspec.parts]
@@ -550,7 +543,7 @@ class AgentNode:
         self.started = False
         self.catch_up_steps = 0  # steps beyond one per tick, taken to catch up after a late tick
         self.t_step = -math.inf  # own-clock time the state refers to (the last step's end)
-        self.hybrid = self.aspec.params in ("hybrid", "hybrid_vf")  # jump sets tested on the initial state (_advance)
+        self.hybrid = jumps(self.aspec)  # a hybrid scheme: jump sets tested on the initial state (_advance)
         self.idle_ticks = 0  # ticks with no sensor packet newer than the last step
         self.step_failures = 0  # ticks whose step raised or gave a non-finite estimate (_step_failed)
         self.compute_s = 0.0
@@ -708,12 +701,19 @@ class AgentNode:
         newest sensor packet at or before it; ``t_send``: when what it sends should reach the
         world (own clock: the tick plus the network's transit)."""
         t_w = packet["t"] if self.clock.local(packet["t"]) == t_local else self.clock.world(t_local)
+        self._count_stale()
         self.view.begin(t_local, t_w, packet, first)
         # A command is held from its arrival for one period: the middle of that hold, after
         # the step's end.  In sim (ticks at samples, no transit) exactly half a period; over
         # Zenoh the measurement is 0-5 ms old at the tick and the command 1-3 ms in transit,
         # which a controller that aimed at half a period would act that much late.
         self.view.command_lead = 0.0 if t_send is None else max(0.0, t_send - t_local) + 0.5 * self.view.period
+
+    def _count_stale(self) -> None:
+        """Count the in-neighbours the last step's view read stale (stats ``stale_terms``)."""
+        for j in self.view.stale_read:
+            self.stale_terms[j] = self.stale_terms.get(j, 0) + 1
+        self.view.stale_read = set()
 
     def _step_part(self, ps: _PartState, dt: float) -> Any:
         """Step one part by ``dt`` on the view as it stands; its outputs (None: it had no inputs)."""
@@ -795,6 +795,7 @@ class AgentNode:
     # ------------------------------------------------------------------ reporting
 
     def counters(self) -> dict[str, Any]:
+        self._count_stale()
         span = (self.t_last - self.t_first) if (self.t_first is not None and self.t_last is not None) else 0.0
         c = self.inbox.counters()
         c.update(

@@ -21,10 +21,8 @@ from zswarm.scenario import PLANT_INPUTS, Scenario
 
 def _cmd_agent(key: str) -> int | None:
     """The agent id of a ``zswarm/<run>/cmd/<i>`` key (None: not one)."""
-    parts = key.split("/")
-    if len(parts) == 4 and parts[2] == "cmd" and parts[3].isdigit():
-        return int(parts[3])
-    return None
+    k = keys.parse(key)
+    return k.src if k is not None and k.kind == "cmd" else None
 
 
 PLAN_SAMPLES = 200  # sensor samples whose motion is evaluated at once (1 s at 200 Hz)

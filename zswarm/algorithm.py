@@ -39,7 +39,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, ModuleType
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -67,7 +67,6 @@ SENSORS: Mapping[str, str] = MappingProxyType(
 )
 GRAPHS = ("any", "leader_follower", "tree", "sensing")
 RESERVED = frozenset({"v", "type", "src", "seq", "inc", "t", "t_local", "rx"})  # message envelope and runtime keys
-PARAMS = ("", "A", "hybrid", "hybrid_vf", "formation")
 
 
 class AlgorithmError(ValueError):
@@ -121,6 +120,79 @@ class Part:
     rate: float | None = None
 
 
+class Reader(Protocol):
+    """How a params type or an initial-state field reads its part of a scenario file (the
+    loader's reader, ``zswarm.scenario._Ctx``): each method checks and converts one value,
+    and ``err`` makes the ``file: field: problem (got X)`` error to raise."""
+
+    def err(self, fld: str, problem: str, got: Any = ...) -> Exception: ...
+
+    def table(self, d: Any, fld: str, allowed: set[str], required: set[str] = ...) -> dict[str, Any]: ...
+
+    def num(self, v: Any, fld: str, *, positive: bool = False, nonneg: bool = False, maxv: float | None = None, minv: float | None = None) -> float: ...
+
+    def vec3(self, v: Any, fld: str) -> tuple[float, float, float]: ...
+
+    def rotation(self, v: Any, fld: str) -> tuple[float, ...]: ...
+
+    def expr(self, v: Any, fld: str) -> Callable[[float], Any]: ...
+
+
+class Params(Protocol):
+    """What ``SPEC.params`` is: a frozen dataclass type of the algorithm's scenario-wide
+    parameters (``[algorithm.params]``), which lives beside the math that uses them
+    (:mod:`zswarm.hybrid`'s for the §4/§5 hybrid schemes).  Its field names are the names
+    of the ``Gains`` fields its values go to."""
+
+    jumps: ClassVar[bool]  # a hybrid scheme: the runtime tests its jump sets on the initial state
+
+    @classmethod
+    def load(cls, r: Reader, d: Any, fld: str) -> Params:
+        """The parameters from the ``[algorithm.params]`` table ``d`` (None: absent)."""
+        ...
+
+    def check_agents(self, r: Reader, fld: str, ids: tuple[int, ...]) -> None:
+        """Checks against the scenario's agents (ids in the agents' order); raise ``r.err``."""
+        ...
+
+    def gains(self, ids: tuple[int, ...]) -> Mapping[str, Any]:
+        """The values of the ``Gains`` fields they provide, by name."""
+        ...
+
+
+INITIAL_KINDS = ("vector", "rotation", "number", "angle", "edges", "custom")
+
+
+@dataclass(frozen=True, slots=True)
+class InitialField:
+    """One initial-state value an agent can be given in the scenario: ``[agents.estimate] name``
+    (``table="agent"``: ``[[agents]] name``).
+
+    ``kind``: "vector" (3 numbers), "rotation" ({angle, axis} or 3x3 rows), "number",
+    "angle" (a number or an expression like "0.3*pi"), "edges" (a table {edge index k =
+    number}, the value of each tree edge k, held by its head: ``symbol`` names it in
+    messages), "custom" (``parse(reader, value, field)``).  ``default``: the value when not
+    stated (None: not stated is None)."""
+
+    kind: str
+    default: Any = None
+    doc: str = ""
+    symbol: str = ""
+    table: str = "estimate"
+    parse: Callable[[Reader, Any, str], Any] | None = None
+
+
+IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+# What an algorithm's agents start from unless its SPEC says otherwise: p̂_i(0), R̂_i(0), Ω̂_i(0).
+POSE_ESTIMATE: Mapping[str, InitialField] = MappingProxyType(
+    {
+        "p": InitialField("vector", (0.0, 0.0, 0.0), "p̂_i(0)"),
+        "R": InitialField("rotation", IDENTITY, "R̂_i(0)"),
+        "Omega": InitialField("vector", (0.0, 0.0, 0.0), "Ω̂_i(0) (filtered observer)"),
+    }
+)
+
+
 @dataclass(frozen=True, slots=True)
 class AlgorithmSpec:
     """The declaration of an algorithm (see the module docstring)."""
@@ -133,7 +205,8 @@ class AlgorithmSpec:
     parts: tuple[Part, ...]  # empty: the agent only publishes what it measures (a leader)
     command: Mapping[str, Field] = field(default_factory=dict)  # sent to the world on cmd/<i> (observers: none)
     graph: str = "any"  # "leader_follower" (Assumptions 3.2/3.4) | "tree" (Assumption 4.2) | "sensing" (De Carli et al.: directed sensing, undirected communication) | "any"
-    params: str = ""  # "" | "A" (continuous, Assumption 4.4) | "hybrid" (Prop. 4.2 set P) | "hybrid_vf" (and δ_Q̃, Π of Condition 5.1) | "formation" (p*_i)
+    params: type | None = None  # the [algorithm.params] type (see Params), e.g. zswarm.hybrid.HybridParams; None: takes none
+    initial: Mapping[str, InitialField] = field(default_factory=lambda: POSE_ESTIMATE)  # the initial-state values an agent may be given, by name
     stale: StalePolicy = StalePolicy(0.2, "drop")
     leader: str | None = None  # the algorithm agents with role "leader" run (None: no leaders)
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
@@ -164,21 +237,37 @@ def _check_fields(fields: Mapping[str, Any], spec: Mapping[str, Field], what: st
 
 @dataclass(frozen=True, slots=True)
 class Initial:
-    """What a scenario gives an agent to start from (``[agents.estimate]``, the graph)."""
+    """What a scenario gives an agent to start from: its ``SPEC.initial`` values (stated in the
+    scenario or their defaults; vectors and rotations as arrays), and the graph around it."""
 
     id: int
-    R_hat: np.ndarray
-    p_hat: np.ndarray
-    Omega: np.ndarray
-    xi: Mapping[int, float]  # ξ_k(0) of every edge k this agent heads (0 unless given)
-    xi_in: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of every edge k this agent is the tail of
-    Q: np.ndarray = field(default_factory=lambda: np.eye(3))  # Q_i(0) (velocity-free law, §5.4)
-    zeta: float = 0.0  # ζ_i(0)
+    values: Mapping[str, Any]  # every declared initial value of this agent, by name
+    stated: frozenset[str] = frozenset()  # the names stated in the scenario (the rest are defaults)
+    tree_edges: Mapping[int, tuple[int, bool]] = field(default_factory=dict)  # tree neighbour j -> (edge k, this agent heads k)
+    others: Mapping[int, Mapping[str, Any]] = field(default_factory=dict)  # every agent's stated values, by id
     seed: int = 0  # the run's seed: for initial estimates drawn as a paper draws them (De Carli et al. §IV)
     p0: np.ndarray = field(default_factory=lambda: np.zeros(3))  # true p_i(0), for estimates drawn around it
-    p_stated: bool = False  # p_hat is the scenario's (else the algorithm may draw it, as a paper does)
-    yaw0: Mapping[int, float] = field(default_factory=dict)  # ψ̂_j(0) stated in the scenario, of every agent j that has one
-    yaw_knots: tuple[float, ...] | None = None  # this robot's yaw-rate spline knots, when stated
+
+    @property
+    def R_hat(self) -> np.ndarray:
+        return np.asarray(self.values.get("R", np.eye(3)), dtype=float).reshape(3, 3)
+
+    @property
+    def p_hat(self) -> np.ndarray:
+        return np.asarray(self.values.get("p", np.zeros(3)), dtype=float)
+
+    @property
+    def Omega(self) -> np.ndarray:
+        return np.asarray(self.values.get("Omega", np.zeros(3)), dtype=float)
+
+    def edges_headed(self, name: str) -> dict[int, float]:
+        """An "edges" value of every tree edge k this agent heads (0 unless stated)."""
+        own = self.values.get(name) or {}
+        return {k: float(own.get(k, 0.0)) for k, head in self.tree_edges.values() if head}
+
+    def edges_tailed(self, name: str) -> dict[int, float]:
+        """An "edges" value of every tree edge k this agent is the tail of, as its head was given it."""
+        return {k: float((self.others.get(j, {}).get(name) or {}).get(k, 0.0)) for j, (k, head) in self.tree_edges.items() if not head}
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,8 +327,9 @@ class View(Protocol):
 
     def neighbor(self, j: int) -> NeighborMsg | None:
         """j's newest message stamped at or before t; None if none arrived yet, at the first
-        step, or if it is older than the stale-data max_age under the "drop" policy
-        (counted either way)."""
+        step, or if it is older than the stale-data max_age under the "drop" policy.  A read
+        changes nothing: the runtime counts the steps that read a neighbour stale (either
+        policy) after the step, in ``stale_terms``."""
         ...
 
     def heard_all(self) -> bool:
@@ -363,29 +453,47 @@ def check(module: ModuleType) -> AlgorithmSpec:
         raise AlgorithmError(f"module {name!r}: SPEC.sensors: unknown {sorted(unknown)} (known: {', '.join(SENSORS)})")
     if spec.graph not in GRAPHS:
         raise AlgorithmError(f"module {name!r}: SPEC.graph must be one of {GRAPHS} (got {spec.graph!r})")
-    if spec.params not in PARAMS:
-        raise AlgorithmError(f"module {name!r}: SPEC.params must be one of {PARAMS} (got {spec.params!r})")
+    if spec.params is not None and not (isinstance(spec.params, type) and dataclasses.is_dataclass(spec.params) and callable(getattr(spec.params, "load", None)) and callable(getattr(spec.params, "gains", None))):
+        raise AlgorithmError(f"module {name!r}: SPEC.params must be a dataclass type with load() and gains() (zswarm.algorithm.Params), or None")
+    for key, f in spec.initial.items():
+        if not isinstance(f, InitialField) or f.kind not in INITIAL_KINDS or (f.kind == "custom") != (f.parse is not None) or f.table not in ("estimate", "agent"):
+            raise AlgorithmError(f"module {name!r}: SPEC.initial[{key!r}] must be a zswarm.algorithm.InitialField of a kind in {INITIAL_KINDS} (parse given for custom only), table 'estimate' or 'agent'")
     if not isinstance(spec.report, str) or family_module(spec.report) is None:
         known = ", ".join(plugins.registered(REPORT_FAMILY_GROUP, BUILTIN_FAMILIES))
         raise AlgorithmError(f"module {name!r}: SPEC.report: no report family {spec.report!r} (registered: {known}; or a module path like mylab.my_family)")
     if spec.stale.policy not in STALE_POLICIES:
         raise AlgorithmError(f"module {name!r}: SPEC.stale.policy must be one of {STALE_POLICIES}")
-    known = set(spec.gains) | (PARAM_NAMES[spec.params])
+    known = set(spec.gains) | param_names(spec)
     for f in dataclasses.fields(module.Gains):
         if f.name not in known:
-            raise AlgorithmError(f"module {name!r}: Gains.{f.name} is neither a declared gain (SPEC.gains) nor a param of SPEC.params={spec.params!r}")
+            raise AlgorithmError(f"module {name!r}: Gains.{f.name} is neither a declared gain (SPEC.gains) nor a field of SPEC.params ({param_names(spec) or 'none'})")
     return spec
 
 
-PARAM_NAMES: Mapping[str, frozenset[str]] = MappingProxyType(
-    {
-        "": frozenset(),
-        "A": frozenset({"A"}),
-        "hybrid": frozenset({"A", "u", "gamma", "delta", "Xi"}),
-        "hybrid_vf": frozenset({"A", "u", "gamma", "delta", "Xi", "delta_Q", "Pi"}),
-        "formation": frozenset({"p_star"}),  # {agent id: p*_i} (De Carli et al. (30))
-    }
-)
+def initial_value(f: InitialField, v: Any) -> Any:
+    """A scenario's initial value (tuples, as loaded) as an algorithm receives it in
+    ``Initial.values``: vectors as arrays, rotations as 3x3 arrays, edge values as a dict."""
+    if v is None:
+        return None
+    if f.kind == "vector":
+        return np.array(v)
+    if f.kind == "rotation":
+        return np.array(v).reshape(3, 3)
+    if f.kind in ("number", "angle"):
+        return float(v)
+    if f.kind == "edges":
+        return dict(v)
+    return v
+
+
+def param_names(spec: AlgorithmSpec) -> set[str]:
+    """The names SPEC.params gives values to (its dataclass fields)."""
+    return {f.name for f in dataclasses.fields(spec.params)} if spec.params is not None else set()
+
+
+def jumps(spec: AlgorithmSpec) -> bool:
+    """A hybrid scheme (its params type says so): jump sets tested on the initial state."""
+    return bool(getattr(spec.params, "jumps", False))
 
 
 def make_gains(module: ModuleType, values: Mapping[str, Any]) -> Any:

@@ -21,10 +21,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from zswarm.algorithm import InitialField
 from zswarm.so3 import Mat3, Ra, Vec3, psi
 
 # The published designs take γ and δ at 95 % of their Prop. 4.2 bounds:
@@ -229,3 +232,131 @@ def check_parameters(A: Mat3, u: Vec3, gamma: float, delta: float, Xi: Sequence[
     if not all(g > d.delta for g in gaps):
         raise DesignError("delta", f"Condition {condition} fails: gaps U(R̄,0) − min_Ξ U(R̄,ξ) at the undesired critical points are {[round(g, 6) for g in gaps]}, not all > δ = {d.delta:g}")
     return Design(d.case, d.eigenvalues, d.eigenvectors, d.alpha, u, d.Delta_star, d.gamma_max, d.gamma, d.delta_max, d.delta, d.Xi, gaps)
+
+
+# --------------------------------------------------------------------------- scenario parameters
+# The [algorithm.params] of the §4 observers and Chapter 5 laws (SPEC.params, the
+# zswarm.algorithm.Params protocol): read and checked against Assumption 4.4, Prop. 4.2 and
+# Condition 5.1 here, beside the math; their fields go to the algorithms' Gains by name.
+
+_PARAMS_FIELD = "algorithm.params"
+
+
+def _read_A(r: Any, d: dict[str, Any], f: str) -> NDArray[np.float64]:
+    a = d["A"]
+    if isinstance(a, list) and len(a) == 3 and all(not isinstance(x, list) for x in a):
+        A = np.diag(r.vec3(a, f"{f}.A"))
+    elif isinstance(a, list) and len(a) == 3 and all(isinstance(row, list) and len(row) == 3 for row in a):
+        A = np.array([[r.num(e, f"{f}.A[{x}][{y}]") for y, e in enumerate(row)] for x, row in enumerate(a)])
+    else:
+        raise r.err(f"{f}.A", "must be 3 eigenvalues (a diagonal A) or a 3x3 list of rows", a)
+    try:
+        check_A(A, "A")
+    except DesignError as exc:
+        raise r.err(f"{f}.{exc.field}", exc.problem) from None
+    return A
+
+
+def angle_set(r: Any, v: Any, fld: str, example: str) -> tuple[float, ...]:
+    """A hybrid set (Ξ, Π): a non-empty list of numbers or expressions like ``"0.9*pi"``."""
+    if not isinstance(v, list) or not v:
+        raise r.err(fld, f'must be a non-empty list of numbers or expressions like "{example}"', v)
+    return tuple(float(r.expr(x, f"{fld}[{n}]")(0.0)) if isinstance(x, str) else r.num(x, f"{fld}[{n}]") for n, x in enumerate(v))
+
+
+@dataclass(frozen=True, slots=True)
+class ContinuousParams:
+    """A of the continuous observer (4.8) and law (5.13) (Assumption 4.4: symmetric, three
+    distinct positive eigenvalues), row-major."""
+
+    A: tuple[float, ...]
+    jumps = False
+
+    @classmethod
+    def load(cls, r: Any, d: Any, fld: str = _PARAMS_FIELD) -> ContinuousParams:
+        d = r.table(d if d is not None else {}, fld, {"A"}, {"A"})
+        return cls(tuple(_read_A(r, d, fld).ravel().tolist()))
+
+    def check_agents(self, r: Any, fld: str, ids: tuple[int, ...]) -> None:
+        pass
+
+    def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
+        return {"A": np.array(self.A, dtype=float).reshape(3, 3)}
+
+
+@dataclass(frozen=True, slots=True)
+class HybridParams:
+    """The set P = (A, u, γ, δ, Ξ) of Prop. 4.2 (hybrid observers (4.25)-(4.26), hybrid law
+    (5.14)-(5.16)); u is made unit (the thesis prints it to 4 decimals; Prop. 4.1 needs |u| = 1)."""
+
+    A: tuple[float, ...]
+    u: tuple[float, float, float]
+    gamma: float
+    delta: float
+    Xi: tuple[float, ...]
+    jumps = True
+    FIELDS: ClassVar[frozenset[str]] = frozenset({"A", "u", "gamma", "delta", "Xi"})
+
+    @classmethod
+    def _read(cls, r: Any, d: Any, fld: str, allowed: set[str]) -> tuple[dict[str, Any], NDArray[np.float64], tuple[float, float, float], tuple[Any, ...]]:
+        d = r.table(d if d is not None else {}, fld, allowed, allowed)
+        A = _read_A(r, d, fld)
+        u = r.vec3(d["u"], f"{fld}.u")
+        gamma = r.num(d["gamma"], f"{fld}.gamma", positive=True)
+        delta = r.num(d["delta"], f"{fld}.delta", positive=True)
+        Xi = angle_set(r, d["Xi"], f"{fld}.Xi", "0.08*pi")
+        try:
+            check_parameters(A, np.array(u), gamma, delta, Xi)
+        except DesignError as exc:
+            raise r.err(f"{fld}.{exc.field}", exc.problem) from None
+        un = np.array(u) / np.linalg.norm(u)
+        return d, A, u, (tuple(A.ravel().tolist()), (float(un[0]), float(un[1]), float(un[2])), gamma, delta, Xi)
+
+    @classmethod
+    def load(cls, r: Any, d: Any, fld: str = _PARAMS_FIELD) -> HybridParams:
+        return cls(*cls._read(r, d, fld, set(cls.FIELDS))[3])
+
+    def check_agents(self, r: Any, fld: str, ids: tuple[int, ...]) -> None:
+        pass
+
+    def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
+        return {"A": np.array(self.A, dtype=float).reshape(3, 3), "u": np.array(self.u), "gamma": self.gamma, "delta": self.delta, "Xi": self.Xi}
+
+
+@dataclass(frozen=True, slots=True)
+class VelocityFreeParams:
+    """P of Prop. 4.2 and the velocity-free law's (δ_Q̃, Π) of Condition 5.1 (§5.4)."""
+
+    A: tuple[float, ...]
+    u: tuple[float, float, float]
+    gamma: float
+    delta: float
+    Xi: tuple[float, ...]
+    delta_Q: float
+    Pi: tuple[float, ...]
+    jumps = True
+
+    @classmethod
+    def load(cls, r: Any, d: Any, fld: str = _PARAMS_FIELD) -> VelocityFreeParams:
+        d, A, u, base = HybridParams._read(r, d, fld, set(HybridParams.FIELDS) | {"delta_Q", "Pi"})
+        # Condition 5.1 for (A, u, γ, δ_Q̃, Π): the same potential (4.23) on SO(3) × R, so
+        # Prop. 4.2 (Remark 5.2, Wang & Tayebi 2022 Prop. 2) bounds δ_Q̃ with Π as δ with Ξ.
+        delta_Q = r.num(d["delta_Q"], f"{fld}.delta_Q", positive=True)
+        Pi = angle_set(r, d["Pi"], f"{fld}.Pi", "0.9*pi")
+        try:
+            check_parameters(A, np.array(u), base[2], delta_Q, Pi, condition="5.1")
+        except DesignError as exc:
+            name = {"delta": "delta_Q", "Xi": "Pi"}.get(exc.field, exc.field)
+            raise r.err(f"{fld}.{name}", exc.problem.replace("δ", "δ_Q̃").replace("Ξ", "Π")) from None
+        return cls(*base, delta_Q, Pi)
+
+    def check_agents(self, r: Any, fld: str, ids: tuple[int, ...]) -> None:
+        pass
+
+    def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
+        return HybridParams.gains(self, ids) | {"delta_Q": self.delta_Q, "Pi": self.Pi}  # type: ignore[arg-type]
+
+
+# ξ_k(0) of the tree edges an agent heads ([agents.estimate] xi = {k = ξ_k(0)}; 0 unless stated):
+# every hybrid scheme's initial state besides its estimates (SPEC.initial).
+XI_INITIAL = InitialField("edges", MappingProxyType({}), "ξ_k(0) of the edges k this agent heads (Remark 4.4)", symbol="ξ")

@@ -9,6 +9,7 @@ import hashlib
 import hmac
 import os
 import re
+from dataclasses import dataclass
 
 ROOT = "zswarm"
 # The run's secret (``zswarm run`` makes one per run and hands it to its children in the
@@ -107,36 +108,107 @@ def recorded_all(run: str) -> str:
     return f"{ROOT}/{run}/recorded/*/*"
 
 
-def parse_recorded(run: str, key: str) -> tuple[str, int] | None:
-    """``(role, id)`` of a :func:`recorded` key of ``run``, or None if it is not one."""
-    parts = key.split("/")
-    if len(parts) != 5 or parts[:3] != [ROOT, run, "recorded"] or parts[3] not in ("agent", "world"):
-        return None
-    try:
-        return parts[3], int(parts[4])
-    except ValueError:
-        return None
-
-
 def everything(run: str) -> str:
     return f"{ROOT}/{run}/**"
+
+
+# --------------------------------------------------------------------------- parsing: the one parser
+
+
+ROLES = ("world", "agent", "recorder")
+
+
+@dataclass(frozen=True, slots=True)
+class Key:
+    """A zswarm key taken apart (:func:`parse`): the run, the kind of stream, and whose it is.
+
+    ``src`` is the id of the process whose stream it is: an edge's tail j, ``est``/``cmd``'s
+    agent, ``stats``/``alive``/``recorded``'s process, and 0 (the world) for ``truth``,
+    ``sense`` and ``ctl``; ``dst`` the receiving agent of an edge or a sensor packet."""
+
+    run: str
+    kind: str  # edge, sense, cmd, est, stats, truth, ctl, alive, recorded
+    src: int
+    dst: int | None = None
+    role: str | None = None  # stats, alive, recorded: world | agent | recorder
+    what: str | None = None  # ctl: start | stop | progress
+    tag: str | None = None  # alive: the token's tag (with the run's secret)
+
+    @property
+    def stream(self) -> str:
+        """The key without the ``zswarm/<run>/`` prefix (a recording channel)."""
+        if self.kind == "edge":
+            return f"edge/{self.src}/{self.dst}"
+        if self.kind == "sense":
+            return f"sense/{self.dst}"
+        if self.kind in ("cmd", "est"):
+            return f"{self.kind}/{self.src}"
+        if self.kind == "truth":
+            return "truth"
+        if self.kind == "ctl":
+            return f"ctl/{self.what}"
+        tail = f"/{self.tag}" if self.tag is not None else ""
+        return f"{self.kind}/{self.role}/{self.src}{tail}"
+
+
+def _id(s: str) -> int | None:
+    """A process id in a key, written as zswarm writes it: ASCII digits without a leading
+    zero (int() also takes "+3", " 3", "٣" and "03", each another key for the same id)."""
+    return int(s) if s.isascii() and s.isdigit() and len(s) <= 10 and (s == "0" or s[0] != "0") else None
+
+
+def parse_stream(stream: str, run: str = "") -> Key | None:
+    """A stream (a key without its ``zswarm/<run>/`` prefix) taken apart, or None if it is
+    not one of zswarm's."""
+    p = stream.split("/")
+    kind, n = p[0], len(p)
+    if kind == "edge" and n == 3:
+        j, i = _id(p[1]), _id(p[2])
+        return None if j is None or i is None else Key(run, kind, j, i)
+    if kind == "sense" and n == 2:
+        i = _id(p[1])
+        return None if i is None else Key(run, kind, 0, i)
+    if kind in ("cmd", "est") and n == 2:
+        i = _id(p[1])
+        return None if i is None else Key(run, kind, i)
+    if kind == "truth" and n == 1:
+        return Key(run, kind, 0)
+    if kind == "ctl" and n == 2:
+        return Key(run, kind, 0, what=p[1])
+    if kind in ("stats", "recorded") and n == 3 or kind == "alive" and n in (3, 4):
+        i = _id(p[2])
+        return None if i is None or p[1] not in ROLES else Key(run, kind, i, role=p[1], tag=p[3] if n == 4 else None)
+    return None
+
+
+def parse(key: str) -> Key | None:
+    """A zswarm key (``zswarm/<run>/<stream>``) taken apart, or None if it is not one."""
+    root, _, rest = key.partition("/")
+    run, _, stream = rest.partition("/")
+    if root != ROOT or not run or not stream:
+        return None
+    return parse_stream(stream, run)
+
+
+def parse_recorded(run: str, key: str) -> tuple[str, int] | None:
+    """``(role, id)`` of a :func:`recorded` key of ``run`` (an agent's or the world's), or None."""
+    k = parse(key)
+    if k is None or k.kind != "recorded" or k.run != run or k.role not in ("agent", "world"):
+        return None
+    return k.role, k.src
 
 
 def parse_alive(key: str) -> tuple[str, int] | None:
     """``(role, id)`` of a liveliness key, or None if it is not one: with the run's secret,
     one without its tag or with another is not (a token a peer declared for a process that
     is not up).  Without the secret (reading a recording later) a tag is not checked."""
-    parts = key.split("/")
-    if len(parts) not in (5, 6) or parts[2] != "alive":
-        return None
-    try:
-        who = parts[3], int(parts[4])
-    except ValueError:
+    k = parse(key)
+    if k is None or k.kind != "alive" or k.role is None:
         return None
     secret = run_secret()
-    if secret is not None and (len(parts) != 6 or not hmac.compare_digest(parts[5], alive_tag(secret, *who))):
+    if secret is not None and (k.tag is None or not hmac.compare_digest(k.tag, alive_tag(secret, k.role, k.src))):
         return None
-    return who
+    return k.role, k.src
 
 
 def stream_of(run: str, key: str) -> str:

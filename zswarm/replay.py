@@ -42,10 +42,8 @@ def recorded_run_id(path: Path) -> str | None:
 
 def _rerun_alive_key(key: str, run: str) -> str | None:
     """``zswarm/<old>/alive/<role>/<i>`` under run id ``run``."""
-    parts = key.split("/")
-    if len(parts) < 3 or parts[0] != "zswarm" or parts[2] != "alive":
-        return None
-    return "/".join(["zswarm", run, *parts[2:]])
+    k = keys.parse(key)
+    return None if k is None or k.kind != "alive" else keys.stream_key(run, k.stream)
 
 
 def replay(

@@ -8,7 +8,8 @@ Format (units: seconds, Hz, metres, radians)::
     [scenario]  name, description, duration, seed
     [algorithm] name (built-in, entry point or module path: zswarm.algorithm.resolve);
                 [algorithm.gains] as the algorithm's SPEC.gains declares;
-                [algorithm.params] A, u, gamma, delta, Xi (§4 observers)
+                [algorithm.params] read by the algorithm's params type (SPEC.params: the §4/§5
+                schemes' A, u, gamma, delta, Xi, delta_Q, Pi in zswarm.hybrid; De Carli's p_star)
     [world]     step (s, <= 0.001), sensor_rate (Hz), plant ("prescribed" motions, or
                 "rigid_body": (5.1) driven by the agents' torques; the default when the
                 algorithm sends a torque), sensors (the sensors fitted; default: what the
@@ -24,8 +25,9 @@ Format (units: seconds, Hz, metres, radians)::
                 in t] (inertial velocity), gyro_bias, neighbors (N_i), k_neighbors (k_ij),
                 gains (per-agent overrides, e.g. k_R = k_i^R of §3.3), J (rigid_body: the
                 inertia, 3 principal moments or a 3x3 list of rows; omega is then ω_i(0)),
-                [agents.estimate] p, R, Omega, xi = {k = ξ_k(0)}, Q, zeta (the velocity-free
-                law's Q_i(0), ζ_i(0)); [agents.clock] overrides
+                [agents.estimate] what the algorithm declares (SPEC.initial: p, R, Omega by
+                default; xi = {k = ξ_k(0)}, Q, zeta, yaw as its scheme has them);
+                [agents.clock] overrides
     [links]     delay_ms, jitter_ms, jitter, reorder, drop, ge_*: agent→agent edges;
                 [links.sensors] the same for world→agent links; [links.commands] for the
                 agent→world command links; [links.per_link."j->i"] (or "world->i", "i->world") one link
@@ -49,9 +51,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm import hybrid, so3
+from zswarm import so3
 from zswarm.wire import MAX_ABS
-from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, StalePolicy, resolve
+from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, InitialField, StalePolicy, resolve
 from zswarm.expr import Expr, ExprError, parse
 from zswarm.graph import GraphError, check_leader_follower, check_tree
 from zswarm.links import JITTER_KINDS, LinkSpec
@@ -79,27 +81,6 @@ class ScenarioError(ValueError):
 
 
 @dataclass(frozen=True, slots=True)
-class Params:
-    """The set P of §4.3.2.3: A (row-major 3×3), u, γ, δ, Ξ (only A for the continuous observer)."""
-
-    A: tuple[float, ...]
-    u: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    gamma: float = 0.0
-    delta: float = 0.0
-    Xi: tuple[float, ...] = ()
-
-    @property
-    def A_matrix(self) -> np.ndarray:
-        return np.array(self.A, dtype=float).reshape(3, 3)
-
-    # The velocity-free law's auxiliary hybrid variable ζ_i (§5.4, Condition 5.1): its δ_Q̃ and Π.
-    delta_Q: float = 0.0
-    Pi: tuple[float, ...] = ()
-    # De Carli et al. (30): the desired offsets p*_i, one per agent in the agents' order.
-    p_star: tuple[tuple[float, float, float], ...] = ()
-
-
-@dataclass(frozen=True, slots=True)
 class Formation:
     """A rigidly rotating formation: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis) (§3.3.4, §4.5)."""
 
@@ -119,18 +100,18 @@ class ClockSpec:
 
 @dataclass(frozen=True, slots=True)
 class Estimate:
-    """Initial estimates of a follower (body/inertial frames as in the thesis)."""
+    """What an agent starts from: every initial value its algorithm declares (``SPEC.initial``),
+    stated in ``[agents.estimate]`` / ``[[agents]]`` or its default (vectors and rotations as
+    tuples, rotations row-major), and which of them were stated."""
 
-    p_hat: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    R_hat: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # row-major
-    Omega: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    xi: Mapping[int, float] = field(default_factory=dict)  # ξ_k(0) of the edges k this agent heads
-    Q: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # Q_i(0), row-major (velocity-free law)
-    zeta: float = 0.0  # ζ_i(0) (velocity-free law)
-    # The formation scheme (De Carli et al.): stated instead of drawn from the seed.
-    p_stated: bool = False  # p_hat was given ([agents.estimate] p), not drawn around p_i(0)
-    yaw: float | None = None  # ψ̂_i(0), the angle of ẑ_i(0) (rad)
-    yaw_rate: tuple[float, ...] | None = None  # the robot's yaw-rate spline knots (rad/s at 0, yaw_knot, ...)
+    values: Mapping[str, Any] = field(default_factory=dict)
+    stated: frozenset[str] = frozenset()
+
+    def __getitem__(self, name: str) -> Any:
+        return self.values[name]
+
+    def get(self, name: str, default: Any = None) -> Any:
+        return self.values.get(name, default)
 
 
 @dataclass(frozen=True, slots=True)
@@ -235,7 +216,7 @@ class Scenario:
     velocity_var: float = 0.0
     rel_att_var: float = 0.0
     formation: Formation | None = None
-    params: Params | None = None
+    params: Any = None  # the [algorithm.params], of the algorithm's SPEC.params type (None: it takes none)
     oriented: tuple[tuple[int, int], ...] = ()  # §4: edge k = oriented[k-1] = (head, tail)
     oriented_from: str = ""  # "graph.edges" or how the orientation was derived
     warnings: tuple[str, ...] = ()  # accepted, but worth telling the user (printed by the CLI)
@@ -668,8 +649,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         if agents[-1].id in seen:
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
-    if params is not None and info.params == "formation" and len(params.p_star) != len(agents):
-        raise c.err("algorithm.params.p_star", f"lists {len(params.p_star)} offsets for {len(agents)} agents (one per agent, in the agents' order)")
+    if params is not None:
+        params.check_agents(c, "algorithm.params", tuple(a.id for a in agents))
     ids = sorted(seen)
     if ids != list(range(1, len(ids) + 1)):
         raise c.err("agents", "ids must be 1..n, each once", ids)
@@ -711,15 +692,18 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             # Every tree neighbour is an in-neighbour: the edges carry messages both ways.
             if a.neighbors and tuple(sorted(a.neighbors)) != nbrs[a.id]:
                 raise c.err(f"{seen[a.id]}.neighbors", f"disagrees with the tree's neighbours {list(nbrs[a.id])} of agent {a.id}", list(a.neighbors))
-            for ek in a.estimate.xi:
-                if not 1 <= ek <= len(oriented):
-                    raise c.err(f"{seen[a.id]}.estimate.xi.{ek}", f"no edge {ek} (edges are 1..{len(oriented)})")
-                head, tail = oriented[ek - 1]
-                if head != a.id:
-                    raise c.err(
-                        f"{seen[a.id]}.estimate.xi.{ek}",
-                        f"ξ_{ek} lives at the head of edge {ek} ({head} -> {tail}), agent {head} (Remark 4.4), not agent {a.id}",
-                    )
+            for key, fi in info.initial.items():
+                if fi.kind != "edges":
+                    continue
+                for ek in a.estimate.get(key) or {}:
+                    if not 1 <= ek <= len(oriented):
+                        raise c.err(f"{seen[a.id]}.estimate.{key}.{ek}", f"no edge {ek} (edges are 1..{len(oriented)})")
+                    head, tail = oriented[ek - 1]
+                    if head != a.id:
+                        raise c.err(
+                            f"{seen[a.id]}.estimate.{key}.{ek}",
+                            f"{fi.symbol}_{ek} lives at the head of edge {ek} ({head} -> {tail}), agent {head} (Remark 4.4), not agent {a.id}",
+                        )
             out.append(replace(a, neighbors=nbrs[a.id], k_neighbors=(1.0,) * len(nbrs[a.id])))
         agents = out
 
@@ -984,62 +968,15 @@ def _snapshots(agents: list[AgentSpec], formation: Formation | None, duration: f
     return [{a.id: tuple(row[n_]) for n_, a in enumerate(agents)} for row in out]
 
 
-def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Params | None:
-    """``[algorithm.params]``: A for (4.8); the whole set P of Prop. 4.2 for the hybrid observers."""
+def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Any:
+    """``[algorithm.params]``, read by the algorithm's params type (SPEC.params, e.g. the set P of
+    Prop. 4.2 in zswarm.hybrid); None for an algorithm that takes none."""
     f = "algorithm.params"
-    if not info.params:
+    if info.params is None:
         if d is not None:
             raise c.err(f, "this algorithm takes no params")
         return None
-    if info.params == "formation":
-        d = c.table(d if d is not None else {}, f, {"p_star"}, {"p_star"})
-        ps = d["p_star"]
-        if not isinstance(ps, list) or not ps:
-            raise c.err(f"{f}.p_star", "must be a list of desired offsets [x, y, z] (m), one per agent in the agents' order", ps)
-        return Params((1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), p_star=tuple(c.vec3(x, f"{f}.p_star[{n}]") for n, x in enumerate(ps)))
-    allowed = {"A"} if info.params == "A" else {"A", "u", "gamma", "delta", "Xi"} | ({"delta_Q", "Pi"} if info.params == "hybrid_vf" else set())
-    d = c.table(d if d is not None else {}, f, allowed, allowed)
-    a = d["A"]
-    if isinstance(a, list) and len(a) == 3 and all(not isinstance(x, list) for x in a):
-        A = np.diag(c.vec3(a, f"{f}.A"))
-    elif isinstance(a, list) and len(a) == 3 and all(isinstance(r, list) and len(r) == 3 for r in a):
-        A = np.array([[c.num(e, f"{f}.A[{x}][{y}]") for y, e in enumerate(r)] for x, r in enumerate(a)])
-    else:
-        raise c.err(f"{f}.A", "must be 3 eigenvalues (a diagonal A) or a 3x3 list of rows", a)
-    try:
-        hybrid.check_A(A, "A")
-    except hybrid.DesignError as exc:
-        raise c.err(f"{f}.{exc.field}", exc.problem) from None
-    if info.params == "A":
-        return Params(tuple(A.ravel().tolist()))
-    u = c.vec3(d["u"], f"{f}.u")
-    gamma = c.num(d["gamma"], f"{f}.gamma", positive=True)
-    delta = c.num(d["delta"], f"{f}.delta", positive=True)
-    Xi = _angle_set(c, d["Xi"], f"{f}.Xi", "0.08*pi")
-    try:
-        hybrid.check_parameters(A, np.array(u), gamma, delta, Xi)
-    except hybrid.DesignError as exc:
-        raise c.err(f"{f}.{exc.field}", exc.problem) from None
-    un = np.array(u) / np.linalg.norm(u)  # printed to 4 decimals in the thesis; Prop. 4.1 needs |u| = 1
-    delta_Q, Pi = 0.0, ()
-    if info.params == "hybrid_vf":
-        # Condition 5.1 for (A, u, γ, δ_Q̃, Π): the same potential (4.23) on SO(3) × R, so
-        # Prop. 4.2 (Remark 5.2, Wang & Tayebi 2022 Prop. 2) bounds δ_Q̃ with Π as δ with Ξ.
-        delta_Q = c.num(d["delta_Q"], f"{f}.delta_Q", positive=True)
-        Pi = _angle_set(c, d["Pi"], f"{f}.Pi", "0.9*pi")
-        try:
-            hybrid.check_parameters(A, np.array(u), gamma, delta_Q, Pi, condition="5.1")
-        except hybrid.DesignError as exc:
-            fld = {"delta": "delta_Q", "Xi": "Pi"}.get(exc.field, exc.field)
-            raise c.err(f"{f}.{fld}", exc.problem.replace("δ", "δ_Q̃").replace("Ξ", "Π")) from None
-    return Params(tuple(A.ravel().tolist()), (float(un[0]), float(un[1]), float(un[2])), gamma, delta, Xi, delta_Q, Pi)
-
-
-def _angle_set(c: _Ctx, v: Any, fld: str, example: str) -> tuple[float, ...]:
-    """A hybrid set (Ξ, Π): a non-empty list of numbers or expressions like ``"0.9*pi"``."""
-    if not isinstance(v, list) or not v:
-        raise c.err(fld, f'must be a non-empty list of numbers or expressions like "{example}"', v)
-    return tuple(float(c.expr(x, f"{fld}[{n}]")(0.0)) if isinstance(x, str) else c.num(x, f"{fld}[{n}]") for n, x in enumerate(v))
+    return info.params.load(c, d, f)
 
 
 def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:
@@ -1133,7 +1070,7 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
     d = c.table(
         d,
         f,
-        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()) | ({"yaw_rate"} if info.params == "formation" else set()),
+        {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()) | {n for n, fi in info.initial.items() if fi.table == "agent"},
         ({"id", "omega"} if rigid else {"id", "p"} if kin else {"id", "p", "omega"}) | ({"role"} if info.graph == "leader_follower" else set()),
     )
     if kin:
@@ -1188,51 +1125,44 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
     agent_gains = dict(gains)
     for k, v in own.items():
         agent_gains[k] = c.num(v, f"{f}.gains.{k}", positive=True)
-    formation = info.params == "formation"
-    est = c.table(
-        d.get("estimate", {}), f"{f}.estimate", {"p"} | ({"yaw"} if formation else {"R", "Omega", "xi"}) | ({"Q", "zeta"} if info.params == "hybrid_vf" else set())
-    )
+    est = c.table(d.get("estimate", {}), f"{f}.estimate", {n for n, fi in info.initial.items() if fi.table == "estimate"})
     if role == "leader" and est:
         raise c.err(f"{f}.estimate", "a leader knows its pose and has no estimate")
-    xi: dict[int, float] = {}
-    if "xi" in est:
-        if info.params not in ("hybrid", "hybrid_vf"):
-            raise c.err(f"{f}.estimate.xi", "only the hybrid schemes have ξ")
-        if not isinstance(est["xi"], dict):
-            raise c.err(f"{f}.estimate.xi", "must be a table {edge index k = ξ_k(0)}", est["xi"])
-        for k, v in est["xi"].items():
-            if not k.isdigit() or int(k) < 1:
-                raise c.err(f"{f}.estimate.xi.{toml_key(k)}", "keys are edge indices k = 1..m")
-            xi[int(k)] = c.num(v, f"{f}.estimate.xi.{k}")
-    estimate = Estimate(
-        c.vec3(est.get("p", [0, 0, 0]), f"{f}.estimate.p"),
-        c.rotation(est.get("R", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.estimate.R"),
-        c.vec3(est.get("Omega", [0, 0, 0]), f"{f}.estimate.Omega"),
-        MappingProxyType(xi),
-        c.rotation(est.get("Q", [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), f"{f}.estimate.Q"),
-        c.num(est.get("zeta", 0.0), f"{f}.estimate.zeta"),
-        "p" in est,
-        None if "yaw" not in est else _angle(c, est["yaw"], f"{f}.estimate.yaw"),
-        None if "yaw_rate" not in d else _knots(c, d["yaw_rate"], f"{f}.yaw_rate"),
-    )
+    values: dict[str, Any] = {}
+    stated: set[str] = set()
+    for name, fi in info.initial.items():
+        src, fld = (est, f"{f}.estimate.{name}") if fi.table == "estimate" else (d, f"{f}.{name}")
+        if name in src:
+            values[name] = _initial_value(c, fi, src[name], fld)
+            stated.add(name)
+        else:
+            values[name] = fi.default
+    estimate = Estimate(MappingProxyType(values), frozenset(stated))
     clock = _clock(c, d.get("clock", {}), f"{f}.clock", default_clock)
     return AgentSpec(aid, role, p, R, omega, bias, neighbors, k_neighbors, estimate, clock, velocity, MappingProxyType(agent_gains), J)  # type: ignore[arg-type]
 
 
-def _angle(c: _Ctx, v: Any, fld: str) -> float:
-    """An angle (rad): a number or an expression like ``"0.3*pi"``."""
-    return float(c.expr(v, fld)(0.0)) if isinstance(v, str) else c.num(v, fld)
-
-
-# A robot's yaw-rate spline knots (the formation scheme's ω_i at 0, yaw_knot, 2·yaw_knot, ...):
-# at most this many (the drawn spline has 4096), each within ±MAX_ABS.
-MAX_YAW_KNOTS = 4096
-
-
-def _knots(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:
-    if not isinstance(v, list) or not 1 <= len(v) <= MAX_YAW_KNOTS:
-        raise c.err(fld, f"must be a list of 1 to {MAX_YAW_KNOTS} yaw rates (rad/s), the spline's knots at 0, yaw_knot, 2 yaw_knot, ...", v)
-    return tuple(c.num(x, f"{fld}[{n}]", maxv=MAX_ABS, minv=-MAX_ABS) for n, x in enumerate(v))
+def _initial_value(c: _Ctx, fi: InitialField, v: Any, fld: str) -> Any:
+    """One stated initial value (SPEC.initial) read by its kind."""
+    if fi.kind == "vector":
+        return c.vec3(v, fld)
+    if fi.kind == "rotation":
+        return c.rotation(v, fld)
+    if fi.kind == "number":
+        return c.num(v, fld)
+    if fi.kind == "angle":  # a number or an expression like "0.3*pi" (rad)
+        return float(c.expr(v, fld)(0.0)) if isinstance(v, str) else c.num(v, fld)
+    if fi.kind == "edges":  # {edge index k = value}, held by the head of k (checked with the tree)
+        if not isinstance(v, dict):
+            raise c.err(fld, f"must be a table {{edge index k = {fi.symbol}_k(0)}}", v)
+        out: dict[int, float] = {}
+        for k, x in v.items():
+            if not k.isdigit() or int(k) < 1:
+                raise c.err(f"{fld}.{toml_key(k)}", "keys are edge indices k = 1..m")
+            out[int(k)] = c.num(x, f"{fld}.{k}")
+        return MappingProxyType(out)
+    assert fi.parse is not None  # "custom" (zswarm.algorithm.check_module)
+    return fi.parse(c, v, fld)
 
 
 def _inertia(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:

@@ -626,23 +626,14 @@ def check_stream(stream: str, m: Mapping[str, Any]) -> None:
     peer holding agent 4's certificate put ``src = 3`` in ``est/4`` and the report filed it
     as agent 3's estimate).
     """
-    parts = stream.split("/")
-    kind = parts[0]
-    want_role = parts[1] if kind == "stats" and len(parts) == 3 else None
-    if kind in ("est", "cmd") and len(parts) == 2 or kind == "edge" and len(parts) == 3:
-        who = parts[1]
-    elif want_role is not None:
-        who = parts[2]
-    elif kind in ("truth", "sense", "ctl"):
-        who = "0"
-    else:
-        raise MessageError(f"{stream!r} is not a zswarm stream")
-    if not who.isdigit() or not who.isascii():
-        raise MessageError(f"{stream!r}: not a process id in the key")
-    want_src = int(who)
-    if m.get("src") != want_src:
-        raise MessageError(f"src {m.get('src')!r} on {stream}, whose sender is {want_src}")
-    if want_role is not None and m.get("role") != want_role:
+    from zswarm import keys
+
+    k = keys.parse_stream(stream)
+    if k is None or k.kind not in ("est", "cmd", "edge", "stats", "truth", "sense", "ctl"):
+        raise MessageError(f"{stream!r} is not a zswarm stream (or not a process id in the key)")
+    if m.get("src") != k.src:
+        raise MessageError(f"src {m.get('src')!r} on {stream}, whose sender is {k.src}")
+    if k.kind == "stats" and m.get("role") != k.role:
         raise MessageError(f"role {m.get('role')!r} on {stream}")
 
 

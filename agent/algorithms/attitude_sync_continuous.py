@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, continuous_coupling, measured_edges, predict
+from zswarm import hybrid
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
 
@@ -94,7 +95,7 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="tree",
     report="sync",
-    params="A",
+    params=hybrid.ContinuousParams,
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"gyro": "ω_i, the damping −k_ω ω_i", "rel_att": "R_ij, the coupling"},
 )

@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, coupling, flow_xi, jump, measured_edges, predict, published_xi, tail_xi
-from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
+from zswarm import hybrid
+from zswarm.algorithm import POSE_ESTIMATE, AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
 
 
@@ -127,7 +128,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
-    return State(dict(init.xi), dict(init.xi_in))
+    return State(init.edges_headed("xi"), init.edges_tailed("xi"))
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
@@ -151,7 +152,8 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="tree",
     report="sync",
-    params="hybrid",
+    params=hybrid.HybridParams,
+    initial=POSE_ESTIMATE | {"xi": hybrid.XI_INITIAL},
     # Hold: ξ_k changes slowly between jumps, and a tail without its head's ξ_k
     # would otherwise drop the edge from its torque.
     stale=StalePolicy(0.2, "hold"),

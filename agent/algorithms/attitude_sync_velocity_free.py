@@ -42,7 +42,8 @@ import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
-from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
+from zswarm import hybrid
+from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, InitialField, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Ra, Vec3, exp, hat, log, psi
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
@@ -204,7 +205,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
-    return State(np.array(init.Q, dtype=float), float(init.zeta), dict(init.xi), dict(init.xi_in))
+    return State(np.array(init.values["Q"], dtype=float), float(init.values["zeta"]), init.edges_headed("xi"), init.edges_tailed("xi"))
 
 
 def inputs(view: View, gains: Gains) -> Inputs | None:
@@ -234,7 +235,13 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="tree",
     report="sync",
-    params="hybrid_vf",
+    params=hybrid.VelocityFreeParams,
+    initial=POSE_ESTIMATE
+    | {
+        "xi": hybrid.XI_INITIAL,
+        "Q": InitialField("rotation", IDENTITY, "Q_i(0), the auxiliary attitude (5.20)"),
+        "zeta": InitialField("number", 0.0, "ζ_i(0) (5.22)"),
+    },
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"attitude": "R_i, for Q̃_i = Q_i^T R_i of (5.20)-(5.23)", "rel_att": "R_ij, the coupling and the jump logic"},
 )

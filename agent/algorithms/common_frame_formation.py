@@ -43,12 +43,13 @@ import cmath
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from agent.algorithms import planar_localization_terms as pl
-from zswarm.algorithm import AlgorithmSpec, Field, Initial, Part, Publish, StalePolicy, View
+from zswarm.algorithm import AlgorithmSpec, Field, Initial, InitialField, Part, Publish, Reader, StalePolicy, View
+from zswarm.wire import MAX_ABS
 
 EDGE_OUT = {
     "vel": Field((3,), doc="v_i, body frame (m/s): V̄_i for the neighbour's (7)"),
@@ -109,19 +110,62 @@ def _draw(seed: int, i: int) -> tuple[float, np.ndarray]:
     return theta, rng.normal(size=3)
 
 
+@dataclass(frozen=True, slots=True)
+class FormationParams:
+    """[algorithm.params] of (30): the desired offsets p*_i, one per robot in the agents' order."""
+
+    p_star: tuple[tuple[float, float, float], ...]
+    jumps: ClassVar[bool] = False
+
+    @classmethod
+    def load(cls, r: Reader, d: Any, fld: str) -> FormationParams:
+        d = r.table(d if d is not None else {}, fld, {"p_star"}, {"p_star"})
+        ps = d["p_star"]
+        if not isinstance(ps, list) or not ps:
+            raise r.err(f"{fld}.p_star", "must be a list of desired offsets [x, y, z] (m), one per agent in the agents' order", ps)
+        return cls(tuple(r.vec3(x, f"{fld}.p_star[{n}]") for n, x in enumerate(ps)))
+
+    def check_agents(self, r: Reader, fld: str, ids: tuple[int, ...]) -> None:
+        if len(self.p_star) != len(ids):
+            raise r.err(f"{fld}.p_star", f"lists {len(self.p_star)} offsets for {len(ids)} agents (one per agent, in the agents' order)")
+
+    def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
+        return {"p_star": {i: np.array(self.p_star[n]) for n, i in enumerate(ids)}}
+
+
+# A robot's yaw-rate spline knots (its ω_i at 0, yaw_knot, 2·yaw_knot, ...) when stated:
+# at most this many (the drawn spline has 4096), each within the wire's ±MAX_ABS.
+MAX_YAW_KNOTS = 4096
+
+
+def _knots(r: Reader, v: Any, fld: str) -> tuple[float, ...]:
+    if not isinstance(v, list) or not 1 <= len(v) <= MAX_YAW_KNOTS:
+        raise r.err(fld, f"must be a list of 1 to {MAX_YAW_KNOTS} yaw rates (rad/s), the spline's knots at 0, yaw_knot, 2 yaw_knot, ...", v)
+    return tuple(r.num(x, f"{fld}[{n}]", maxv=MAX_ABS, minv=-MAX_ABS) for n, x in enumerate(v))
+
+
+# What a robot can be given instead of drawing it from the seed (De Carli et al. §IV draws them).
+INITIAL = {
+    "p": InitialField("vector", (0.0, 0.0, 0.0), "p̂_i(0) (else p_i(0) + p0_std·n, n drawn from the seed)"),
+    "yaw": InitialField("angle", None, "ψ̂_i(0), the angle of ẑ_i(0) (else drawn from the seed)"),
+    "yaw_rate": InitialField("custom", None, "[[agents]] yaw_rate: the yaw-rate spline's knots (rad/s)", table="agent", parse=_knots),
+}
+
+
 def initial_state(init: Initial, gains: Gains) -> State:
     """p̂_i(0), ẑ_i(0) and the yaw-rate knots as the scenario states them, else drawn from the
     seed (see the module docstring); a stated knot list holds its last value past its end."""
-    theta, n = _initial_yaw(init.seed, init.id, init.yaw0)
-    p_hat = np.asarray(init.p_hat if init.p_stated else np.asarray(init.p0, dtype=float) + gains.p0_std * n, dtype=float)
-    if init.yaw_knots is not None:
-        knots = np.asarray(init.yaw_knots, dtype=float)
+    yaw0 = {j: float(v["yaw"]) for j, v in init.others.items() if "yaw" in v}
+    theta, n = _initial_yaw(init.seed, init.id, yaw0)
+    p_hat = np.asarray(init.p_hat if "p" in init.stated else np.asarray(init.p0, dtype=float) + gains.p0_std * n, dtype=float)
+    if init.values.get("yaw_rate") is not None:
+        knots = np.asarray(init.values["yaw_rate"], dtype=float)
         knots = np.concatenate([knots, np.full(3, knots[-1])])  # the spline reads two knots ahead
     else:
         rng = np.random.default_rng([init.seed % (1 << 63), init.id, 0x5B])
         knots = rng.uniform(-gains.yaw_rate_max, gains.yaw_rate_max, size=4096)
         knots[0] = 0.0  # start at rest in yaw, like the vehicle
-    return State(init.id, init.seed, {}, {}, complex(math.cos(theta), math.sin(theta)), p_hat, knots, yaw0=dict(init.yaw0))
+    return State(init.id, init.seed, {}, {}, complex(math.cos(theta), math.sin(theta)), p_hat, knots, yaw0=yaw0)
 
 
 def _initial_yaw(seed: int, i: int, stated: Mapping[int, float]) -> tuple[float, np.ndarray]:
@@ -456,7 +500,8 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="sensing",
     report="formation",
-    params="formation",
+    params=FormationParams,
+    initial=INITIAL,
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"rel_pos": "ⁱp_ij (2), every part", "velocity_body": "v_i in (7) and (21)", "gyro": "ω_i in (7) and (13)"},
 )

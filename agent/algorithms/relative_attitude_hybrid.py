@@ -42,7 +42,7 @@ from agent.algorithms import relative_attitude_continuous
 from agent.algorithms.relative_attitude_continuous import Inputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, hybrid_correction, relative_error
 from zswarm import hybrid
-from zswarm.algorithm import Initial, Part, Publish, View
+from zswarm.algorithm import POSE_ESTIMATE, Initial, Part, Publish, View
 from zswarm.so3 import Mat3, Vec3, exp
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step", "SPEC"]
@@ -138,7 +138,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
-    return State(init.R_hat, dict(init.xi))
+    return State(init.R_hat, init.edges_headed("xi"))
 
 
 def inputs(view: View, gains: Gains) -> Inputs:
@@ -160,5 +160,6 @@ SPEC = replace(
     description="thesis §4.3.2: hybrid observer (4.25)-(4.26) from relative attitudes",
     gains={"k_R": None, "k_xi": None},
     parts=(Part("observer", inputs, step),),
-    params="hybrid",
+    params=hybrid.HybridParams,
+    initial=POSE_ESTIMATE | {"xi": hybrid.XI_INITIAL},
 )

@@ -76,7 +76,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
-    return State(init.R_hat, init.p_hat, dict(init.xi))
+    return State(init.R_hat, init.p_hat, init.edges_headed("xi"))
 
 
 def inputs(view: View, gains: Gains) -> Inputs:

@@ -53,7 +53,7 @@ def test_near_draws_turn_the_scenarios_own_start_by_eps():
         assert [o.field for o in ov] == [f for n in range(7) for f in (f"agents[{n}].R", f"agents[{n}].estimate.Q")]
         for o in ov:
             n = int(o.field[7])
-            own = law.agents[n].R_matrix if o.field.endswith("].R") else np.array(law.agents[n].estimate.Q).reshape(3, 3)
+            own = law.agents[n].R_matrix if o.field.endswith("].R") else np.array(law.agents[n].estimate["Q"]).reshape(3, 3)
             R = np.array(o.value)
             # R = own·exp(ε[n]×): a rotation at geodesic distance ε from own (acos loses
             # half the digits near 0: |Δθ| ≲ √(2·1e-16) ≈ 1.5e-8).
@@ -62,7 +62,7 @@ def test_near_draws_turn_the_scenarios_own_start_by_eps():
     obs = load(TOPO / "thesis-4.5-hybrid5.toml")
     for o in basin.draw_overrides(obs, 1, 2, near=0.1):
         n = int(o.field[7])
-        assert angle(np.array(obs.agents[n].estimate.R_hat).reshape(3, 3), np.array(o.value)) == pytest.approx(0.1, abs=1e-12)
+        assert angle(np.array(obs.agents[n].estimate["R"]).reshape(3, 3), np.array(o.value)) == pytest.approx(0.1, abs=1e-12)
     # The axes differ from draw to draw and from agent to agent.
     a, b = basin.draw_overrides(law, 1, 5, near=0.1), basin.draw_overrides(law, 1, 6, near=0.1)
     assert a[0].value != b[0].value and a[0].value != a[2].value

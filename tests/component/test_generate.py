@@ -48,13 +48,13 @@ def test_a_seed_fixes_the_file_and_another_seed_changes_it():
 def test_initial_errors_follow_the_options():
     _, sc = generate("bearing-fixed", 20, 3, max_angle=0.25, spread=0.0)
     for a in sc.agents[2:]:
-        R_hat, R = np.array(a.estimate.R_hat).reshape(3, 3), np.array(a.R_matrix)
+        R_hat, R = np.array(a.estimate["R"]).reshape(3, 3), np.array(a.R_matrix)
         angle = np.arccos(np.clip((np.trace(R_hat.T @ R) - 1) / 2, -1, 1))
         # R starts at the identity (the thesis' §3.2 agents), so the error is the drawn angle:
         # in [0.1π, 0.25π].  Written rounded to 4 decimals of π (≤ 5e-5·π = 1.6e-4 rad; the
         # axis's rounding does not change the angle: the loader normalizes it), so 1e-3 rad of slack
         assert 0.1 * np.pi - 1e-3 <= angle <= 0.25 * np.pi + 1e-3
-        assert np.allclose(a.estimate.p_hat, a.p)  # spread 0: positions estimated exactly
+        assert np.allclose(a.estimate["p"], a.p)  # spread 0: positions estimated exactly
 
 
 @pytest.mark.parametrize(

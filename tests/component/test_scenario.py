@@ -24,9 +24,9 @@ def test_fixed8_reproduces_thesis_3_2_5():
     assert sc.agent(7).p == (2.0, 2.0, 6.0)
     assert sc.agent(6).neighbors == (2, 4, 5)
     assert [a.role for a in sc.agents] == ["leader"] * 2 + ["follower"] * 6
-    R6 = np.array(sc.agent(6).estimate.R_hat).reshape(3, 3)
+    R6 = np.array(sc.agent(6).estimate["R"]).reshape(3, 3)
     assert np.allclose(R6, so3.Ra(0.9 * math.pi, np.array([1.0, 0, 0])), atol=1e-15)
-    assert sc.agent(8).estimate.p_hat == (-3.0, 0.5, 2.0)
+    assert sc.agent(8).estimate["p"] == (-3.0, 0.5, 2.0)
     assert sc.agent(5).omega[2](0.1) == pytest.approx(math.sin(0.9))
     assert dict(sc.gains) == {"k_R": 1.0, "k_p": 1.0}
     noisy = load(TOPO / "thesis-3.2-fixed8-noisy.toml")
@@ -77,7 +77,7 @@ def test_axes_far_from_unit_length(axis, unit):
     assert sc.formation.axis == pytest.approx(unit, abs=1e-15)  # one division each: a few ulps
     fixed8 = (TOPO / "thesis-3.2-fixed8.toml").read_text()
     sc8 = loads(fixed8.replace('R = { angle = "0.1*pi", axis = [1, 0, 0] }', f'R = {{ angle = "0.1*pi", axis = {axis} }}', 1), "x.toml")
-    R = np.array(sc8.agent(3).estimate.R_hat).reshape(3, 3)
+    R = np.array(sc8.agent(3).estimate["R"]).reshape(3, 3)
     # The same rotation of axes equal to a few ulps (above): entries within ~1e-16 each.
     assert np.allclose(R, so3.Ra(0.1 * math.pi, np.array(unit)), atol=1e-15)
     with pytest.raises(ScenarioError, match=r"x\.toml: world\.formation\.axis: must be non-zero"):

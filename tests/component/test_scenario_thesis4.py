@@ -46,11 +46,11 @@ def test_hybrid5_reproduces_thesis_4_5():
     assert sc.params.Xi == pytest.approx((0.08 * math.pi,)) and sc.params.delta == 0.003 and sc.params.gamma == 1.9251
     assert dict(sc.gains) == {"k_R": 1.1, "k_xi": 3.5}
     assert sc.agent(5).omega[2](3.0) == 5.0 and sc.agent(2).neighbors == (1, 3)
-    R2 = np.array(sc.agent(2).estimate.R_hat).reshape(3, 3)
+    R2 = np.array(sc.agent(2).estimate["R"]).reshape(3, 3)
     assert np.allclose(R2, so3.Ra(math.pi / 2, np.array([0.0, 0, 1])))
-    assert dict(sc.agent(1).estimate.xi) == {1: 0.0}
+    assert dict(sc.agent(1).estimate["xi"]) == {1: 0.0}
     pose = load(TOPO / "thesis-4.5-hybrid-pose5.toml")
-    assert pose.agent(3).estimate.p_hat == (-2.0, 0.0, -1.0) and pose.gains["k_p"] == 1.0
+    assert pose.agent(3).estimate["p"] == (-2.0, 0.0, -1.0) and pose.gains["k_p"] == 1.0
     noisy = load(TOPO / "thesis-4.5-hybrid5-noisy.toml")
     assert (noisy.gyro_var, noisy.rel_att_var) == (0.01, 0.01)
 

@@ -99,7 +99,7 @@ def test_a_stated_initial_state_makes_the_run_independent_of_the_seed(tmp_path):
     from zswarm.scenario import loads
 
     sc = loads(_stated((TOPO / "decarli-8-formation.toml").read_text()), "stated.toml")
-    assert sc.agent(3).estimate.p_hat == (3.5, -1.0, 0.25) and sc.agent(3).estimate.yaw == pytest.approx(-0.5)
+    assert sc.agent(3).estimate["p"] == (3.5, -1.0, 0.25) and sc.agent(3).estimate["yaw"] == pytest.approx(-0.5)
     runs = [simulate(sc, tmp_path, 2.5, seed, record=False) for seed in (1, 2)]
     a, b = (load_recording(m) for m in runs)
     for i in sc.ids:

@@ -55,8 +55,8 @@ def test_moving5_matches_reading_notes(moving5):
     # (3.26), computed here from the scenario's initial values, is what errors.csv reports.
     sc = load(TOPO / "thesis-3.3-moving5.toml")
     fol = [a for a in sc.agents if a.role == "follower"]
-    direct = np.mean([np.linalg.norm(np.array(a.p) - np.array(a.estimate.p_hat)) for a in fol])
-    tilde = np.mean([np.linalg.norm(np.array(a.p) - a.R_matrix @ np.array(a.estimate.R_hat).reshape(3, 3).T @ np.array(a.estimate.p_hat)) for a in fol])
+    direct = np.mean([np.linalg.norm(np.array(a.p) - np.array(a.estimate["p"])) for a in fol])
+    tilde = np.mean([np.linalg.norm(np.array(a.p) - a.R_matrix @ np.array(a.estimate["R"]).reshape(3, 3).T @ np.array(a.estimate["p"])) for a in fol])
     assert direct == pytest.approx(5.5, rel=0.01)  # READING-NOTES prints two figures: ±0.05 = 0.9 %
     # The first row is the initial estimate against the truth at t = 0: the same formula,
     # so only round-off (1e-15) separates them.

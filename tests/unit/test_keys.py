@@ -57,3 +57,28 @@ def test_run_control_and_tokens_with_a_run_secret(monkeypatch):
         wire.decode_ctl(signed, "start")
     monkeypatch.delenv(keys.SECRET_ENV)
     assert wire.decode_ctl(plain, "stop")["reason"] == "forged" and keys.parse_alive(tagged) == ("agent", 3)
+
+
+def test_one_parser_takes_every_key_apart_and_back():
+    """keys.parse is the one parser (the agent's edge links, the world's command keys, the
+    replay's liveliness keys and wire.check_stream use it): every key zswarm builds parses to
+    its kind and ids and back to the same stream; keys of another shape, or ids written
+    another way than zswarm writes them ("03", "+3", "٣"), are not zswarm's."""
+    built = {
+        keys.edge("r", 1, 3): ("edge", 1, 3),
+        keys.sense("r", 2): ("sense", 0, 2),
+        keys.cmd("r", 4): ("cmd", 4, None),
+        keys.est("r", 5): ("est", 5, None),
+        keys.stats("r", "agent", 6): ("stats", 6, None),
+        keys.truth("r"): ("truth", 0, None),
+        keys.ctl("r", "start"): ("ctl", 0, None),
+        keys.recorded("r", "world", 0): ("recorded", 0, None),
+        "zswarm/r/alive/agent/3/abc": ("alive", 3, None),
+    }
+    for key, (kind, src, dst) in built.items():
+        k = keys.parse(key)
+        assert k is not None and (k.run, k.kind, k.src, k.dst) == ("r", kind, src, dst), key
+        assert keys.stream_key("r", k.stream) == key
+    for bad in ("zswarm/r/edge/03/4", "zswarm/r/cmd/+3", "zswarm/r/est/\u0663", "zswarm/r/edge/1", "zswarm/r/stats/ghost/1", "other/r/est/1", "zswarm//est/1", "zswarm/r"):
+        assert keys.parse(bad) is None, bad
+    assert keys.parse_recorded("r", keys.recorded("r", "agent", 2)) == ("agent", 2) and keys.parse_recorded("s", keys.recorded("r", "agent", 2)) is None

@@ -5,7 +5,7 @@ The package, from the bottom up (each module imports only those above it in this
 * :mod:`~zswarm.report.recording` — the recording decoded, each message filed under its
   key's process; the per-agent estimate errors; the truth's gaps;
 * :mod:`~zswarm.report.series` — time-series helpers (the one settle-time function);
-* :mod:`~zswarm.report.table` — the text pieces of the end-of-run table;
+* :mod:`~zswarm.report.text` — the text pieces of the end-of-run table;
 * :mod:`~zswarm.report.faults` — what each fault cost, and its marks on the plots;
 * :mod:`~zswarm.report.base` — the leader–follower measures every family defaults to;
 * :mod:`~zswarm.report.families` — ``leader_follower``, ``tree`` (§4 observers), ``sync``

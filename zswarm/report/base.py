@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
-from zswarm.report import faults, table
+from zswarm.report import faults, text
 from zswarm.report.recording import Recording
 from zswarm.report.series import nanmean, settle_time
 from zswarm.scenario import Scenario
@@ -129,7 +129,7 @@ def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], m: Any, rec: Reco
 
 
 def table_lines(summary: dict[str, Any]) -> list[str]:
-    return table.agent_rows(summary) + [table.mean_line(summary, "followers")]
+    return text.agent_rows(summary) + [text.mean_line(summary, "followers")]
 
 
 def plot_errors(out: Path, sc: Scenario, errs: dict[int, np.ndarray], rec: Recording | None = None) -> None:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
-from zswarm.report import base, table
+from zswarm.report import base, text
 from zswarm.report.recording import Recording
 from zswarm.report.series import final_of_grid as _final
 from zswarm.report.series import held as _held
@@ -86,7 +86,7 @@ def formation_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> For
     e = ph - rp
     e = e - np.nanmean(e, axis=1, keepdims=True)
     position = {i: np.linalg.norm(e[:, n], axis=-1) for n, i in enumerate(ids)}
-    pstar = np.array(sc.params.p_star if sc.params is not None and sc.params.p_star else np.zeros((len(ids), 3)))
+    pstar = np.array(getattr(sc.params, "p_star", None) or np.zeros((len(ids), 3)))
     pstar = pstar[[ [a.id for a in sc.agents].index(i) for i in ids]] - pstar.mean(axis=0)
     # R_z(−α)(p*_i − p̄*)
     ds = np.stack([c[:, None] * pstar[None, :, 0] + sn[:, None] * pstar[None, :, 1], -sn[:, None] * pstar[None, :, 0] + c[:, None] * pstar[None, :, 1], np.broadcast_to(pstar[None, :, 2], (len(grid), len(ids)))], axis=-1)
@@ -266,7 +266,7 @@ def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], m: FormationMetri
 
 
 def table_lines(summary: dict[str, Any]) -> list[str]:
-    lines = table.agent_rows(summary)
+    lines = text.agent_rows(summary)
     lines.append("(att.err / pos.err as they stand; up to the common rotation and translation:)")
     lines += formation_lines(summary)
     parts: dict[str, list[float]] = {n: [] for a in summary["agents"].values() for n in a.get("parts", {})}
@@ -275,4 +275,4 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
             parts[n].append(v["rate_hz"])
     if parts:
         lines.append("part rates (Hz, min-max over robots): " + ", ".join(f"{n} {min(v):.1f}-{max(v):.1f}" for n, v in parts.items()))
-    return lines + [table.mean_line(summary, "followers")]
+    return lines + [text.mean_line(summary, "followers")]

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
-from zswarm.report import base, table
+from zswarm.report import base, text
 from zswarm.report.recording import Recording
 from zswarm.report.series import final_of_grid as _final
 from zswarm.report.series import held as _held
@@ -82,7 +82,7 @@ def sync_metrics(sc: Scenario, rec: Recording, step: float = GRID_S) -> SyncMetr
 
 def summary(sc: Scenario, rec: Recording, m: SyncMetrics, agents: dict[str, Any], duration: float) -> dict[str, Any]:
     """The Chapter 5 part of summary.json (per edge, per agent in place, the synchronization block)."""
-    hybrid = sc.params is not None and bool(sc.params.Xi)
+    hybrid = bool(getattr(sc.params, "Xi", ()))  # ξ_k: the hybrid law (a jump set Ξ)
     edges: dict[str, Any] = {}
     for k, (h, tl) in enumerate(sc.oriented, start=1):
         v = m.rel_att[k]
@@ -222,17 +222,17 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
     """The Chapter 5 lines of the table printed at the end of a run."""
     lines = [f"{'agent':>5} {'alive':<5} {'|ω| final':>10} {'|ω| peak':>9} {'τ peak':>8} {'steps':>6} {'rate Hz':>8} {'missed':>6}" + ("  |Q̃| final  ζ jumps" if any("Q_tilde_final" in a for a in summary["agents"].values()) else "")]
     for i, a in summary["agents"].items():
-        tail = f"  {table.e(a.get('Q_tilde_final')):>10} {a.get('zeta_jumps', 0):>8}" if "Q_tilde_final" in a else ""
+        tail = f"  {text.e(a.get('Q_tilde_final')):>10} {a.get('zeta_jumps', 0):>8}" if "Q_tilde_final" in a else ""
         lines.append(
-            f"{i:>5} {'yes' if a['alive_at_end'] else 'NO':<5} {table.e(a.get('angular_velocity_final')):>10} {a.get('angular_velocity_peak', float('nan')):>9.3f} "
+            f"{i:>5} {'yes' if a['alive_at_end'] else 'NO':<5} {text.e(a.get('angular_velocity_final')):>10} {a.get('angular_velocity_peak', float('nan')):>9.3f} "
             f"{a.get('torque_peak_applied') or float('nan'):>8.3f} {a['steps']:>6} {a['step_rate_hz']:>8.2f} {a['missed_deadlines']:>6}{tail}"
         )
     lines.append(f"{'edge':>5} {'head->tail':<10} {'|R̄_k|_I':>10} {'<0.1 from':>10} {'<0.01 from':>11} {'jumps':>6} {'ξ final':>9}")
     for k, e in summary["edges"].items():
         xi = e.get("xi_final")
         lines.append(
-            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {table.e(e['relative_attitude_error_final']):>10} {table.s(e['settles_below_0.1_at']):>10} "
-            f"{table.s(e['settles_below_0.01_at']):>11} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
+            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {text.e(e['relative_attitude_error_final']):>10} {text.s(e['settles_below_0.1_at']):>10} "
+            f"{text.s(e['settles_below_0.01_at']):>11} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
         )
     sy = summary["synchronization"]
     cmd_links = {k: v for k, v in summary["links"].items() if k.endswith("->world")}
@@ -240,8 +240,8 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
     dropped = sum(int(v.get("dropped", 0)) for v in cmd_links.values())
     expired = sum(int(v.get("expired", 0)) for v in summary["commands"]["per_agent"].values())
     lines.append(
-        f"max_k |R̄_k|_I: {table.e(sy['initial'])} at start, left it at {table.s(sy['leaves_start_at'])} s, below 0.1 from {table.s(sy['settles_below_0.1_at'])} s, "
-        f"below 0.01 from {table.s(sy['settles_below_0.01_at'])} s, final {table.e(sy['final'])}"
+        f"max_k |R̄_k|_I: {text.e(sy['initial'])} at start, left it at {text.s(sy['leaves_start_at'])} s, below 0.1 from {text.s(sy['settles_below_0.1_at'])} s, "
+        f"below 0.01 from {text.s(sy['settles_below_0.01_at'])} s, final {text.e(sy['final'])}"
         + (f"; jumps: {summary['jumps_total']}" if "jumps_total" in summary else "")
         + (f", ζ jumps: {summary['zeta_jumps_total']}" if "zeta_jumps_total" in summary else "")
     )
@@ -277,12 +277,12 @@ def write(out_dir: Path, sc: Scenario, rec: Recording, m: SyncMetrics) -> None:
 
 def basin_start(sc: Scenario) -> list[tuple[str, Any]]:
     """A basin draw randomises every agent's attitude R_i(0) (and the velocity-free law's Q_i(0))."""
-    vf = sc.info.params == "hybrid_vf"
+    vf = "Q" in sc.info.initial  # the velocity-free law starts from Q_i(0) too
     out: list[tuple[str, Any]] = []
     for n, a in enumerate(sc.agents):
         out.append((f"agents[{n}].R", a.R))
         if vf:
-            out.append((f"agents[{n}].estimate.Q", a.estimate.Q))
+            out.append((f"agents[{n}].estimate.Q", a.estimate["Q"]))
     return out
 
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
-from zswarm.report import base, table
+from zswarm.report import base, text
 from zswarm.report.recording import Recording, estimates_with_truth
 from zswarm.report.series import final, settle_time
 from zswarm.scenario import Scenario
@@ -92,7 +92,7 @@ def summary(sc: Scenario, rec: Recording, tm: TreeMetrics | None, agents: dict[s
             e["relative_attitude_error_settles_below_1e-2_at"] = settle_time(tm.t, tm.rel_att[k], 1e-2)
             if pose:
                 e["relative_position_error_final"] = final(tm.t, tm.rel_pos[k], t_end)
-        if sc.params is not None and sc.params.Xi:
+        if getattr(sc.params, "Xi", ()):
             e["jumps"] = len(js)
             e["jumps_reported_by_head"] = int(rec.stats.get(("agent", h), {}).get("jumps", {}).get(str(k), len(js)))
             e["jump_log"] = [{"t": t, "xi_before": b, "xi_after": a} for _, t, b, a in js]
@@ -116,7 +116,7 @@ def summary(sc: Scenario, rec: Recording, tm: TreeMetrics | None, agents: dict[s
         if pose:
             out["mean_relative_position_error_final"] = float(np.mean([e["relative_position_error_final"] for e in edges.values()]))
             out["max_relative_position_error_final"] = float(np.max([e["relative_position_error_final"] for e in edges.values()]))
-    if sc.params is not None and sc.params.Xi:
+    if getattr(sc.params, "Xi", ()):
         out["jumps_total"] = len(rec.jumps)
     return out
 
@@ -230,21 +230,21 @@ def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], tm: TreeMetrics |
 
 
 def table_lines(summary: dict[str, Any]) -> list[str]:
-    lines = table.agent_rows(summary)
+    lines = text.agent_rows(summary)
     lines.append("(agent errors are up to a common frame; see summary.json errors_up_to)")
     lines.append(f"{'edge':>5} {'head->tail':<10} {'|R̄_k|_I':>10} {'rel.pos':>10} {'jumps':>6} {'ξ final':>9}")
     for k, e in summary["edges"].items():
         xi = e.get("xi_final")
         lines.append(
-            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {table.e(e.get('relative_attitude_error_final')):>10} "
-            f"{table.e(e.get('relative_position_error_final')):>10} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
+            f"{k:>5} {str(e['head']) + '->' + str(e['tail']):<10} {text.e(e.get('relative_attitude_error_final')):>10} "
+            f"{text.e(e.get('relative_position_error_final')):>10} {e.get('jumps', '-'):>6} {'-' if xi is None else f'{xi:.4f}':>9}"
         )
-    return lines + [table.mean_line(summary, "agents")]
+    return lines + [text.mean_line(summary, "agents")]
 
 
 def basin_start(sc: Scenario) -> list[tuple[str, Any]]:
     """A basin draw randomises every agent's initial estimate R̂_i(0)."""
-    return [(f"agents[{n}].estimate.R", a.estimate.R_hat) for n, a in enumerate(sc.agents)]
+    return [(f"agents[{n}].estimate.R", a.estimate["R"]) for n, a in enumerate(sc.agents)]
 
 
 def basin_series(sc: Scenario, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
