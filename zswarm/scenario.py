@@ -650,7 +650,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
     if params is not None:
-        params.check_agents(c, "algorithm.params", tuple(a.id for a in agents))
+        _user_code(c, "algorithm.params", lambda: params.check_agents(c, "algorithm.params", tuple(a.id for a in agents)))
     ids = sorted(seen)
     if ids != list(range(1, len(ids) + 1)):
         raise c.err("agents", "ids must be 1..n, each once", ids)
@@ -976,7 +976,19 @@ def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Any:
         if d is not None:
             raise c.err(f, "this algorithm takes no params")
         return None
-    return info.params.load(c, d, f)
+    return _user_code(c, f, lambda: info.params.load(c, d, f))
+
+
+def _user_code(c: _Ctx, fld: str, call: Any) -> Any:
+    """Run a params type's or an initial field's own reading code (an algorithm's, maybe a
+    user's): a ScenarioError it raises stands; anything else it raises is one ``file: field:``
+    line naming the exception, not a traceback."""
+    try:
+        return call()
+    except ScenarioError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a user's code may raise anything
+        raise c.err(fld, f"the algorithm's own check failed: {type(exc).__name__}: {exc}") from None
 
 
 def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:
@@ -1162,7 +1174,7 @@ def _initial_value(c: _Ctx, fi: InitialField, v: Any, fld: str) -> Any:
             out[int(k)] = c.num(x, f"{fld}.{k}")
         return MappingProxyType(out)
     assert fi.parse is not None  # "custom" (zswarm.algorithm.check_module)
-    return fi.parse(c, v, fld)
+    return _user_code(c, fld, lambda: fi.parse(c, v, fld))  # type: ignore[misc]
 
 
 def _inertia(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:

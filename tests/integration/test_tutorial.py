@@ -96,6 +96,17 @@ def test_the_family_s_table_line_and_plot_and_a_wrong_param(tmp_path):
     assert r.returncode == 2 and "bearing-localization8.toml: algorithm.params.v_max: must be > 0 (got -1.0)" in r.stderr, r.stderr
 
 
+def test_a_params_type_that_raises_is_one_line(tmp_path):
+    """A user's params type whose own code fails (here a TypeError) is exit 2 naming the field
+    and the exception, not a traceback."""
+    topo = user_folder(tmp_path)
+    mod = topo.parent / "bearing_localization.py"
+    mod.write_text(mod.read_text().replace('return cls(r.num(d["v_max"], f"{fld}.v_max", positive=True))', 'return cls(d["v_max"] + "m/s")'))
+    r = subprocess.run([sys.executable, "-m", "zswarm", "sim", str(topo), "--duration", "1", "--quiet"], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "bearing-localization8.toml: algorithm.params: the algorithm's own check failed: TypeError:" in r.stderr, r.stderr
+
+
 def test_a_wrong_gain_names_the_field(tmp_path):
     topo = user_folder(tmp_path)
     topo.write_text(topo.read_text().replace("k_p = 3.0", "k_p = -1.0"))
