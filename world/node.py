@@ -14,7 +14,7 @@ import numpy as np
 from world import sensors
 from world.motion import PrescribedMotion
 from world.plant import CommandInbox, KinematicPlant, RigidBodyPlant
-from zswarm import keys, wire
+from zswarm import keys
 from zswarm.bus import Bus
 from zswarm.scenario import PLANT_INPUTS, Scenario
 

@@ -122,7 +122,7 @@ class Part:
 
 class Reader(Protocol):
     """How a params type or an initial-state field reads its part of a scenario file (the
-    loader's reader, ``zswarm.scenario._Ctx``): each method checks and converts one value,
+    loader's reader, ``zswarm.reader._Ctx``): each method checks and converts one value,
     and ``err`` makes the ``file: field: problem (got X)`` error to raise."""
 
     def err(self, fld: str, problem: str, got: Any = ...) -> Exception: ...

@@ -31,6 +31,7 @@ settle-time quantiles) and ``basin.png`` (the settle times' distribution).
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import json
@@ -38,6 +39,7 @@ import math
 import multiprocessing
 import re
 import signal
+import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -46,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import report
+from zswarm import procutil, report
 from zswarm.report import family
 from zswarm.report.series import leave_time, settle_time
 from zswarm.scenario import Override, Scenario, load, parse_override
@@ -475,3 +477,63 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+
+
+def command(args: argparse.Namespace) -> int:
+    import os
+    import threading
+
+    from zswarm import basin
+    from zswarm.launch import results_dir
+
+    sc = procutil.load_or_exit(args.topology)
+    try:
+        basin.starts_of(sc)
+    except ValueError as exc:
+        procutil.fail_usage(f"{args.topology}: {exc}")
+    duration = sc.duration if args.duration is None else args.duration
+    out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("basins"))
+    out.mkdir(parents=True, exist_ok=True)
+    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near}
+    spec_path = out / "basin_def.json"
+    if spec_path.exists():
+        old = json.loads(spec_path.read_text())
+        diff = sorted(k for k in spec if k != "topology" and old.get(k) != spec[k])
+        if diff:
+            procutil.fail_usage(f"--out {out}: holds a different basin check (differs in: {', '.join(diff)}); use another --out")
+    else:
+        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+    stop = threading.Event()
+    procutil.stop_on_signals_into(stop)
+    jobs = args.jobs or (os.cpu_count() or 1)
+    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) on sim, {jobs} at a time; {out}", file=sys.stderr)
+    t0 = time.monotonic()
+    rows, interrupted = basin.run_basin(
+        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near
+    )
+    if interrupted:
+        print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
+        return 130
+    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near)
+    print(basin.table(sc.name, s))
+    print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")
+    return 0 if not s["failed"] else 1
+
+
+def compare_command(args: argparse.Namespace) -> int:
+    from zswarm import basin
+
+    try:
+        entries = basin.compare(args.dirs)
+    except ValueError as exc:
+        procutil.fail_usage(str(exc))
+    print(basin.compare_table(entries))
+    for line in basin.paired(entries):
+        print(f"\n{line}")
+    if args.out.parent != Path(""):
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+    print(f"figure: {basin.plot_compare(entries, args.out)}", file=sys.stderr)
+    return 0

@@ -1,4 +1,6 @@
-"""The ``zswarm`` command: run, sim, sweep, basin, basin-compare, router, compose, record, replay, report, design-hybrid, generate."""
+"""The ``zswarm`` command: builds the parser and hands each subcommand to the run function of its
+module (``zswarm.sim.command``, ``zswarm.sweep.command``, ...); run, router, report and certs are
+small enough to stay here."""
 
 from __future__ import annotations
 
@@ -6,7 +8,6 @@ import argparse
 import json
 import sys
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -48,17 +49,6 @@ def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
         metavar="HOST:PORT",
         help=f"{what} (default {procutil.LIVE_DEFAULT})",
     )
-
-
-def _load(args: argparse.Namespace) -> Any:
-    """The scenario of ``args.topology`` with the ``--set`` overrides (exit 2 on any error)."""
-    from zswarm.scenario import ScenarioError, fault_override, parse_override
-
-    try:
-        overrides = [parse_override(o) for o in args.overrides] + [fault_override(f) for f in getattr(args, "faults", [])]
-    except ScenarioError as exc:
-        procutil.fail_usage(str(exc))
-    return procutil.load_or_exit(args.topology, overrides)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -256,10 +246,35 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _lazy(module: str, name: str) -> Any:
+    """The run function ``name`` of ``zswarm.<module>``, imported when its command runs."""
+
+    def run(args: argparse.Namespace) -> int:
+        import importlib
+
+        return int(getattr(importlib.import_module(f"zswarm.{module}"), name)(args))
+
+    return run
+
+
 def main(argv: list[str] | None = None) -> int:
     procutil.die_with_parent()  # as a sweep's child: ends with the sweep
     args = build_parser().parse_args(argv)
-    cmds = {"run": cmd_run, "sim": cmd_sim, "sweep": cmd_sweep, "basin": cmd_basin, "basin-compare": cmd_basin_compare, "router": cmd_router, "compose": cmd_compose, "record": cmd_record, "replay": cmd_replay, "report": cmd_report, "design-hybrid": cmd_design_hybrid, "generate": cmd_generate, "certs": cmd_certs}
+    cmds = {
+        "run": cmd_run,
+        "sim": _lazy("sim", "command"),
+        "sweep": _lazy("sweep", "command"),
+        "basin": _lazy("basin", "command"),
+        "basin-compare": _lazy("basin", "compare_command"),
+        "router": cmd_router,
+        "compose": _lazy("compose", "command"),
+        "record": _lazy("recorder", "command"),
+        "replay": _lazy("replay", "command"),
+        "report": cmd_report,
+        "design-hybrid": _lazy("hybrid", "design_command"),
+        "generate": _lazy("generate", "command"),
+        "certs": cmd_certs,
+    }
     try:
         return cmds[args.cmd](args)
     except Exception as exc:
@@ -273,188 +288,10 @@ def main(argv: list[str] | None = None) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from zswarm import launch
 
-    sc = _load(args)
-    _warn(sc)
+    sc = procutil.load_args(args)
+    procutil.warn_notes(sc)
     secure = None if args.secure is None else Path(args.secure) if args.secure else True
     return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure)
-
-
-def cmd_sim(args: argparse.Namespace) -> int:
-
-    from zswarm import report
-    from zswarm.launch import results_dir
-    from zswarm.sim import LEAN_SKIP, simulate
-
-    sc = _load(args)
-    _warn(sc)
-    duration = sc.duration if args.duration is None else args.duration
-    seed = sc.seed if args.seed is None else args.seed
-    out = results_dir(args.out, sc.name)
-    (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
-    tty = sys.stderr.isatty()
-
-    def progress(t: float) -> None:
-        if tty:
-            print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
-
-    t0 = time.perf_counter()
-    kept: list[tuple[str, bytes, int]] = []
-    times: dict[str, float] = {}
-    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times)
-    wall = time.perf_counter() - t0
-    if tty and not args.quiet:
-        print(file=sys.stderr)
-    messages = recorded if isinstance(recorded, list) else (kept or None)
-    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages, not_recorded=LEAN_SKIP if args.lean else ())
-    summary["wall_time_s"] = wall
-    summary["wall_time_run_s"] = times["run_s"]
-    summary["wall_time_recording_s"] = times["record_s"]
-    summary["wall_time_report_s"] = time.perf_counter() - t0 - wall
-    report.write_summary(out / "summary.json", summary)
-    if not args.quiet:
-        print(report.table(summary))
-        print(
-            f"simulated {duration:g} s in {times['run_s']:.1f} s of wall time ({duration / max(times['run_s'], 1e-9):.1f}x real time), "
-            f"then the recording in {times['record_s']:.1f} s and the report in {summary['wall_time_report_s']:.1f} s; results: {out}"
-        )
-    return 0 if summary["completed"] else 1
-
-
-def cmd_sweep(args: argparse.Namespace) -> int:
-    import os
-    import threading
-
-    from zswarm import sweep
-    from zswarm.launch import results_dir
-    from zswarm.scenario import ScenarioError, parse_override
-
-    thresholds = (0.01, 0.1)
-    if args.thresholds is not None:
-        parts = args.thresholds.split(",")
-        if len(parts) != 2:
-            procutil.fail_usage(f"--thresholds: give ATT,POS, e.g. 0.01,0.1 (got {args.thresholds!r})")
-        a, p_ = (_number(x, "--thresholds") for x in parts)
-        if not (a > 0 and p_ > 0):
-            procutil.fail_usage(f"--thresholds: both must be > 0 (got {args.thresholds!r})")
-        thresholds = (a, p_)
-    try:
-        sets = [parse_override(o) for o in args.overrides]
-        varies = [sweep.parse_vary(v) for v in args.vary]
-    except ScenarioError as exc:
-        procutil.fail_usage(str(exc))
-    seen: set[str] = set()
-    for v in varies:
-        if v.field in seen:
-            procutil.fail_usage(f"--vary {v.field}: field: given twice")
-        seen.add(v.field)
-        if v.field in {o.field for o in sets}:
-            procutil.fail_usage(f"--vary {v.field}: field: also fixed by --set")
-    sc = procutil.load_or_exit(args.topology, sets)
-    duration = sc.duration if args.duration is None else args.duration
-    seed = sc.seed if args.seed is None else args.seed
-    try:
-        jobs = sweep.plan(args.topology, sc, sets, varies, args.repeats, seed)
-    except ScenarioError as exc:
-        procutil.fail_usage(str(exc))
-    out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("sweeps"))
-    out.mkdir(parents=True, exist_ok=True)
-    spec = sweep.definition(
-        args.topology,
-        sc,
-        {
-            "vary": {v.field: list(v.values) for v in varies},
-            "set": [o.flag for o in sets],
-            "repeats": args.repeats,
-            "engine": args.engine,
-            "duration_s": duration,
-            "seed": seed,
-            "thresholds": list(thresholds),
-        },
-    )
-    spec_path = out / "sweep.json"
-    if spec_path.exists():
-        old = json.loads(spec_path.read_text())
-        diff = sorted(k for k in set(old) | set(spec) if k != "topology" and old.get(k) != spec.get(k))
-        if diff:
-            procutil.fail_usage(f"--out {out}: holds a different sweep (differs in: {', '.join(diff)}); use another --out to start a new one")
-    else:
-        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
-    n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine == "sim" else 1)
-    timeout = args.timeout or (max(120.0, 10.0 * duration) if args.engine == "sim" else duration + 180.0)
-    stop = threading.Event()
-    procutil.stop_on_signals_into(stop)
-    n_points = len(jobs) // args.repeats
-    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {n_jobs} at a time; {out}", file=sys.stderr)
-    t0 = time.monotonic()
-    ok, _failed, interrupted = sweep.run_sweep(
-        args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
-    )
-    wall = time.monotonic() - t0
-    rows = sweep.load_rows(out / "sweep.csv")
-    if interrupted:
-        print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
-        return 130
-    plots = sweep.plot_sweep(out, rows, [v.field for v in varies], duration)
-    n_failed = sum(1 for r in rows if r["status"] == "failed")
-    print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")
-    return 0 if n_failed == 0 else 1
-
-
-def cmd_basin(args: argparse.Namespace) -> int:
-    import os
-    import threading
-
-    from zswarm import basin
-    from zswarm.launch import results_dir
-
-    sc = procutil.load_or_exit(args.topology)
-    try:
-        basin.starts_of(sc)
-    except ValueError as exc:
-        procutil.fail_usage(f"{args.topology}: {exc}")
-    duration = sc.duration if args.duration is None else args.duration
-    out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("basins"))
-    out.mkdir(parents=True, exist_ok=True)
-    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near}
-    spec_path = out / "basin_def.json"
-    if spec_path.exists():
-        old = json.loads(spec_path.read_text())
-        diff = sorted(k for k in spec if k != "topology" and old.get(k) != spec[k])
-        if diff:
-            procutil.fail_usage(f"--out {out}: holds a different basin check (differs in: {', '.join(diff)}); use another --out")
-    else:
-        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
-    stop = threading.Event()
-    procutil.stop_on_signals_into(stop)
-    jobs = args.jobs or (os.cpu_count() or 1)
-    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) on sim, {jobs} at a time; {out}", file=sys.stderr)
-    t0 = time.monotonic()
-    rows, interrupted = basin.run_basin(
-        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near
-    )
-    if interrupted:
-        print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
-        return 130
-    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near)
-    print(basin.table(sc.name, s))
-    print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")
-    return 0 if not s["failed"] else 1
-
-
-def cmd_basin_compare(args: argparse.Namespace) -> int:
-    from zswarm import basin
-
-    try:
-        entries = basin.compare(args.dirs)
-    except ValueError as exc:
-        procutil.fail_usage(str(exc))
-    print(basin.compare_table(entries))
-    for line in basin.paired(entries):
-        print(f"\n{line}")
-    if args.out.parent != Path(""):
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-    print(f"figure: {basin.plot_compare(entries, args.out)}", file=sys.stderr)
-    return 0
 
 
 def cmd_router(args: argparse.Namespace) -> int:
@@ -505,170 +342,6 @@ def cmd_certs(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_compose(args: argparse.Namespace) -> int:
-    from zswarm import compose
-
-    sc = _load(args)
-    undone = [f.describe() for f in sc.faults if f.kind != "cut"]
-    if undone:
-        # A cut is the receivers' link emulation and happens in containers too; a kill, stop
-        # or router fault needs a launcher, which compose does not have.
-        print(f"zswarm compose: note: docker compose does not carry out these faults (zswarm run and sim do): {'; '.join(undone)}", file=sys.stderr)
-    topology = Path(args.topology)
-    if args.overrides:
-        if args.output is None:
-            procutil.fail_usage("--set needs -o FILE (the scenario as run is written beside it)")
-        topology = args.output.with_name(args.output.stem + ".scenario.toml")
-        topology.write_text(sc.text, encoding="utf-8")
-    build = None
-    if not args.no_build:
-        build = args.build_context
-        if build is None:
-            src = Path(__file__).resolve().parent.parent
-            build = src if (src / "Dockerfile").exists() else None
-        elif not (build / "Dockerfile").exists():
-            procutil.fail_usage(f"{build}: no Dockerfile there")
-    text = compose.write(
-        sc,
-        topology,
-        args.output,
-        args.image,
-        build,
-        args.base,
-        keys.check_run_id(args.run_id),
-        args.results,
-        args.network,
-        args.duration,
-        args.time_scale,
-        args.seed,
-        args.live,
-        argv=sys.argv[2:],
-    )
-    _write_output(text, args.output, f"({len(sc.ids)} agents); run it with: docker compose -f {args.output} up")
-    return 0
-
-
-# The recorder gives back what a catch-up freed (procutil.trim_heap) every 30 s.  A trim took
-# 20-80 ms here on a heap of 85 MiB churned, with the soak saturating both cores: <= 0.3 % of
-# the recorder's time; meanwhile samples wait in the kernel's socket buffer and Zenoh's FIFO.
-TRIM_EVERY_S = 30.0
-FINAL_STATS_WAIT_S = 8.0  # the recorder's wait for the processes' final stats after the run's stop
-
-
-def cmd_record(args: argparse.Namespace) -> int:
-    from zswarm import report, wire
-    from zswarm.bus import ZenohBus
-    from zswarm.launch import results_dir
-    from zswarm.record import RAW_SUFFIX, Recorder
-
-    sc = procutil.load_or_exit(args.topology)
-    conf = procutil.zenoh_conf(args, "recorder")
-    log = procutil.setup_logging("recorder")
-    run = keys.check_run_id(args.run_id)
-    out = results_dir(args.out, sc.name)
-    if not (out / "scenario.toml").exists():
-        (out / "scenario.toml").write_text(sc.text)
-    start: dict[str, object] = {}
-    with ZenohBus(conf) as bus:
-        stop = procutil.stop_on_signals()
-        # Without a live view the recorder copies payloads as they come (recording.raw.mcap);
-        # the report below (or zswarm report) transcodes them into recording.mcap.
-        path = out / ("recording" + (RAW_SUFFIX if args.live is None else ".mcap"))
-        rec = Recorder(bus, run, path, metadata={"engine": "run", "scenario": sc.name, "run": run}, scenario=sc, live=args.live, raw=args.live is None)
-
-        def on_start(key: str, payload: bytes) -> None:
-            if not start:
-                try:
-                    start.update(wire.decode_ctl(payload, "start"))
-                except wire.MessageError:
-                    pass
-
-        bus.subscribe(keys.ctl(run, "start"), on_start)
-        procutil.warm_up()
-        bus.declare_token(keys.alive(run, "recorder", 0))
-        log.info("recording run %r into %s", run, path)
-        if args.live is not None:
-            log.info("live view on ws://%s:%d (Foxglove or Lichtblick: open connection, Foxglove WebSocket)", args.live[0], rec.live_port)
-        procs = [("world", 0), *(("agent", i) for i in sc.ids)]
-        try:
-            next_flush = time.monotonic() + 0.5
-            next_trim = time.monotonic() + TRIM_EVERY_S
-            while not stop.is_set() and not rec.stopped.is_set():
-                stop.wait(0.01)
-                rec.poll()
-                if time.monotonic() >= next_flush:
-                    rec.flush()
-                    next_flush += 0.5
-                if time.monotonic() >= next_trim:
-                    procutil.trim_heap()  # what a catch-up freed goes back (procutil.trim_heap)
-                    next_trim += TRIM_EVERY_S
-            if rec.stopped.is_set() and not stop.is_set():
-                # The run ended: wait for the final stats of every process still up.  A fixed
-                # second was not always enough on a loaded machine (an agent behind its
-                # schedule stops later), and a missed one reads as an agent that died.
-                # Bounded: `zswarm run` kills a process that has not stopped 6 s after the world.
-                end = time.monotonic() + FINAL_STATS_WAIT_S
-                while not stop.is_set() and time.monotonic() < end and rec.awaiting_finals(procs):
-                    stop.wait(0.01)
-                    rec.poll()
-                end = time.monotonic() + 0.2  # what is in flight from processes that went meanwhile
-                while not stop.is_set() and time.monotonic() < end:
-                    stop.wait(0.01)
-                    rec.poll()
-        finally:
-            rec.close()  # takes what arrived since the last poll
-            log.info("closed recording: %d messages", rec.count)
-        if rec.stopped.is_set() and not stop.is_set() and (missing := rec.missing_finals(procs)):
-            # The report will call them not alive at the end: say what was seen of them.
-            log.warning(
-                "no final stats from %s (token up at the end: %s)",
-                ", ".join(f"{r} {i}" for r, i in missing),
-                ", ".join(f"{r} {i}: {rec.alive.get(keys.alive(run, r, i))}" for r, i in missing),
-            )
-    if not args.no_report and start:
-        summary = report.make_report(out, sc, "run", float(start["duration"]), float(start["time_scale"]), int(start["seed"]))  # type: ignore[arg-type]
-        print(report.table(summary))
-    return 0
-
-
-def cmd_replay(args: argparse.Namespace) -> int:
-    from zswarm import replay
-    from zswarm.record import ensure_recording
-
-    sc = procutil.load_or_exit(str(args.results / "scenario.toml")) if (args.results / "scenario.toml").exists() else None
-    rec_path = ensure_recording(args.results, sc)
-    if not rec_path.exists():
-        procutil.fail_usage(f"{rec_path}: no recording there")
-    zenoh_out = bool(args.connect or args.listen or args.config)
-    if args.live is None and not zenoh_out:
-        procutil.fail_usage("replay needs --live [HOST:PORT] or a Zenoh endpoint (--connect/--listen/--config)")
-    log = procutil.setup_logging("replay")
-    stop = procutil.stop_on_signals()
-    run = None
-    if zenoh_out:
-        run = keys.check_run_id(args.run_id or replay.recorded_run_id(rec_path) or "default")
-    bus = None
-    try:
-        if zenoh_out:
-            from zswarm.bus import ZenohBus
-
-            bus = ZenohBus(procutil.zenoh_conf(args))
-            if args.wait_for_recorder:
-                up = threading.Event()
-                bus.watch_alive(keys.alive(run, "recorder", 0), lambda _k, alive: up.set() if alive else None)  # type: ignore[arg-type]
-                log.info("waiting for a recorder of run %r", run)
-                while not up.wait(0.2):
-                    if stop.is_set():
-                        return 130
-        counts = replay.run_replay(args.results, sc, args.speed, args.live, bus, run, stop, hold=args.hold)
-        log.info("replayed %d messages and %d liveliness events%s", counts["messages"], counts["alive_events"], f" onto run {run!r}" if run else "")
-    finally:
-        if bus is not None:
-            time.sleep(0.5)  # let the last samples leave before the session closes
-            bus.close()
-    return 130 if stop.is_set() else 0
-
-
 def cmd_report(args: argparse.Namespace) -> int:
     from zswarm import report, wire
     from zswarm.record import decode, ensure_recording, read
@@ -695,115 +368,6 @@ def cmd_report(args: argparse.Namespace) -> int:
     summary = report.make_report(args.results, sc, engine, duration, scale, seed, not_recorded=prev.get("recording", {}).get("not_recorded", ()))
     print(report.table(summary))
     return 0
-
-
-def cmd_generate(args: argparse.Namespace) -> int:
-    from zswarm import generate
-
-    if args.list:
-        for fam, what, graphs in generate.describe():
-            print(f"{fam:<28} graphs: {', '.join(graphs):<22} {what}")
-        return 0
-    if args.family is None or args.agents is None:
-        procutil.fail_usage("generate needs a FAMILY and -n N (zswarm generate --list shows the families)")
-    try:
-        text, sc = generate.generate(
-            args.family,
-            args.agents,
-            args.seed,
-            graph=args.graph,
-            in_degree=args.in_degree,
-            max_angle=args.max_angle,
-            spread=args.spread,
-            duration=args.duration,
-            name=args.name,
-        )
-    except ValueError as exc:
-        procutil.fail_usage(f"generate: {exc}")
-    _write_output(text, args.output, f": {sc.name}, {len(sc.ids)} agents, {sc.duration:g} s")
-    return 0
-
-
-def _write_output(text: str, output: Path | None, what: str) -> None:
-    """``text`` to standard output, or to ``output`` (its folder made) with "wrote FILE<what>" on stderr."""
-    if output is None:
-        sys.stdout.write(text)
-        return
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(text, encoding="utf-8")
-    print(f"wrote {output}{what}", file=sys.stderr)
-
-
-def _warn(sc: object) -> None:
-    for w in getattr(sc, "warnings", ()):
-        print(f"{getattr(sc, 'path', '')}: note: {w}", file=sys.stderr)
-
-
-def _number(s: str, flag: str) -> float:
-    """A number or an expression such as ``0.08pi`` / ``0.08*pi`` / ``pi/2``."""
-    import math
-    import re
-
-    from zswarm.expr import ExprError, parse
-
-    text = s.strip()
-    text = re.sub(r"^([0-9.eE+-]+)\s*pi$", r"\1*pi", text)
-    try:
-        x = float(parse(text)(0.0))
-    except ExprError as exc:
-        procutil.fail_usage(f"{flag}: {exc} (got {s!r})")
-    if not math.isfinite(x):
-        procutil.fail_usage(f"{flag}: must be finite (got {s!r})")
-    return x
-
-
-def cmd_design_hybrid(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from zswarm import hybrid
-
-    vals = [_number(x, "--A") for x in args.A.split(",")]
-    if len(vals) == 3:
-        A = np.diag(vals)
-    elif len(vals) == 9:
-        A = np.array(vals).reshape(3, 3)
-    else:
-        procutil.fail_usage(f"--A: give 3 eigenvalues or 9 entries (got {len(vals)} numbers)")
-    Xi = [_number(x, "--xi") for x in args.xi.split(",")]
-    gamma = None if args.gamma is None else _number(args.gamma, "--gamma")
-    delta = None if args.delta is None else _number(args.delta, "--delta")
-    try:
-        if args.u is not None:
-            u = [_number(x, "--u") for x in args.u.split(",")]
-            if len(u) != 3:
-                procutil.fail_usage(f"--u: give 3 numbers (got {len(u)})")
-            base = hybrid.design(A, Xi, gamma, delta)
-            d = hybrid.check_parameters(A, np.array(u), base.gamma, base.delta, Xi)
-        else:
-            d = hybrid.design(A, Xi, gamma, delta)
-    except hybrid.DesignError as exc:
-        procutil.fail_usage(f"--{exc.field.lower()}: {exc.problem}")
-    if args.json:
-        print(json.dumps(d.as_dict(), indent=2))
-        return 0
-    lam = d.eigenvalues
-    case_text = {1: "λ1 = λ2", 2: "λ2 ≥ λ1λ3/(λ3−λ1)", 3: "λ1 < λ2 < λ1λ3/(λ3−λ1)"}[d.case]
-    print(
-        f"A: eigenvalues λ = {lam[0]:g}, {lam[1]:g}, {lam[2]:g}; Prop. 4.2 case {d.case} ({case_text}; λ1λ3/(λ3−λ1) = {lam[0] * lam[2] / (lam[2] - lam[0]):.6g})"
-    )
-    print(f"u       = [{', '.join(f'{x:.4f}' for x in d.u)}]   (α = [{', '.join(f'{a:.4f}' for a in d.alpha)}] on the eigenvectors of A)")
-    print(f"Δ*      = {d.Delta_star:.6g}")
-    print(f"γ       = {d.gamma:.6g}   (bound: γ < 4Δ*/π² = {d.gamma_max:.6g})")
-    print(f"δ       = {d.delta:.6g}   (bound: 0 < δ < (4Δ*/π² − γ) ξ_L²/2 = {d.delta_max:.6g}, ξ_L = {max(abs(x) for x in Xi):.6g})")
-    print(f"Ξ       = {{{', '.join(f'{x:.6g}' for x in Xi)}}}")
-    gaps = ", ".join(f"{g:.4g}" for g in d.gaps)
-    print(f"Condition 4.1: U(R̄,0) − min_Ξ U(R̄,ξ) at R̄ = Ra(π, q_β), β = 1,2,3: {gaps}  (> δ: {'holds' if d.condition_holds else 'FAILS'})")
-    print(
-        "Condition 5.1 (the velocity-free law's (Q̃_i, ζ_i), §5.4) is the same condition on the same potential (4.23): "
-        f"with δ_Q̃ = {d.delta:.6g} and Π = Ξ it {'holds' if d.condition_holds else 'FAILS'} (Remark 5.2); "
-        "[algorithm.params] delta_Q, Pi are checked against these bounds too"
-    )
-    return 0 if d.condition_holds else 1
 
 
 if __name__ == "__main__":

@@ -10,11 +10,42 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Protocol
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
-from zswarm.scenario import ClockSpec
+from zswarm.reader import _Ctx
+
+# An agent's own clock reads (1 + drift)·t + offset and stamps its messages (t_local): past
+# ±1e10 s a double resolves it to no better than 2 µs, and 2e12 put every message beyond the
+# wire's ±MAX_ABS (all dropped, exit 0); 1e300 froze the clock (t + dt == t: sim hung).
+MAX_CLOCK_OFFSET_S = 1e10
+
+
+@dataclass(frozen=True, slots=True)
+class ClockSpec:
+    """An agent's clock: tick rate on its own clock, tick jitter, drift and offset."""
+
+    rate: float = 100.0  # Hz
+    jitter: float = 0.0  # s, standard deviation of each tick's wake-up time
+    drift_ppm: float = 0.0  # own clock runs (1 + drift_ppm·1e-6) times world time
+    offset: float = 0.0  # s, own clock reading at world time 0
+
+
+def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
+    d = c.table(d, f, {"rate", "jitter", "drift_ppm", "offset"})
+    rate = c.num(d.get("rate", base.rate), f"{f}.rate", positive=True, maxv=10000.0)
+    jitter = c.num(d.get("jitter", base.jitter), f"{f}.jitter", nonneg=True)
+    if jitter >= 0.5 / rate:
+        raise c.err(f"{f}.jitter", f"must be < half the period ({0.5 / rate:g} s)", jitter)
+    drift = c.num(d.get("drift_ppm", base.drift_ppm), f"{f}.drift_ppm")
+    if abs(drift) >= 1e5:
+        raise c.err(f"{f}.drift_ppm", "must be within ±100000 ppm", drift)
+    offset = c.num(d.get("offset", base.offset), f"{f}.offset")
+    if abs(offset) > MAX_CLOCK_OFFSET_S:
+        raise c.err(f"{f}.offset", f"must be within ±{MAX_CLOCK_OFFSET_S:g} s (the own clock's resolution stays under 2 µs)", offset)
+    return ClockSpec(rate, jitter, drift, offset)
 
 
 class Clock(Protocol):

@@ -39,3 +39,7 @@ def save_png(fig: object, path: Path) -> None:
     """A matplotlib figure as a PNG at ``path``, whole or not at all."""
     with whole(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")  # type: ignore[attr-defined]
+
+
+class RecordingError(Exception):
+    """A recording that cannot be read or written as a whole (message names the file)."""

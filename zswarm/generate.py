@@ -12,16 +12,17 @@ next sub-seed; in practice the first one loads: random positions are generic).
 
 from __future__ import annotations
 
+import argparse
+import json
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import json
-import re
-
 import numpy as np
 
+from zswarm import procutil
 from zswarm.scenario import Scenario, ScenarioError, loads
 
 HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}
@@ -366,3 +367,32 @@ def describe() -> list[tuple[str, str, tuple[str, ...]]]:
     """``(family, what, graph shapes)`` of every family, for ``zswarm generate --list``."""
     return [(k, f.what, GRAPHS[f.graph]) for k, f in FAMILIES.items()]
 
+
+# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+
+
+def command(args: argparse.Namespace) -> int:
+    from zswarm import generate
+
+    if args.list:
+        for fam, what, graphs in generate.describe():
+            print(f"{fam:<28} graphs: {', '.join(graphs):<22} {what}")
+        return 0
+    if args.family is None or args.agents is None:
+        procutil.fail_usage("generate needs a FAMILY and -n N (zswarm generate --list shows the families)")
+    try:
+        text, sc = generate.generate(
+            args.family,
+            args.agents,
+            args.seed,
+            graph=args.graph,
+            in_degree=args.in_degree,
+            max_angle=args.max_angle,
+            spread=args.spread,
+            duration=args.duration,
+            name=args.name,
+        )
+    except ValueError as exc:
+        procutil.fail_usage(f"generate: {exc}")
+    procutil.write_output(text, args.output, f": {sc.name}, {len(sc.ids)} agents, {sc.duration:g} s")
+    return 0

@@ -7,8 +7,15 @@ Edges are directed ``(j, i)``: agent ``j`` sends to agent ``i`` and ``j`` is an
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from zswarm.reader import ScenarioError, _Ctx
+
+if TYPE_CHECKING:
+    from zswarm.agent_config import AgentSpec
 
 
 class GraphError(ValueError):
@@ -178,3 +185,78 @@ def _path(adj: Mapping[int, Sequence[int]], a: int, b: int) -> list[int]:
         out.append(node)
         node = prev[node]
     return out[::-1]
+
+
+# --------------------------------------------------------------------------- the scenario's graph
+# §4's oriented tree ([graph] or derived) and De Carli's sensing graph, read for the loader.
+
+
+def _tree(c: _Ctx, d: Any, agents: list[AgentSpec], seen: dict[int, str]) -> tuple[tuple[tuple[int, int], ...], str]:
+    """The oriented tree of §4: ``[graph] edges = [[head, tail], ...]`` or derived from neighbours.
+
+    Derived orientation (when ``[graph]`` is absent): each undirected edge
+    ``{a, b}`` listed in ``agents[].neighbors`` gets head ``min(a, b)``; edges
+    are indexed in ascending ``(head, tail)`` order.  Either way the result
+    goes to ``summary.json``.
+    """
+    ids = {a.id for a in agents}
+    if d is not None:
+        g = c.table(d, "graph", {"edges"}, {"edges"})
+        raw = g["edges"]
+        if not isinstance(raw, list) or not raw:
+            raise c.err("graph.edges", "must be a list of [head, tail] pairs", raw)
+        pairs = []
+        for n, e in enumerate(raw):
+            if not isinstance(e, list) or len(e) != 2:
+                raise c.err(f"graph.edges[{n}]", "must be a [head, tail] pair", e)
+            h, t = (c.integer(x, f"graph.edges[{n}]") for x in e)
+            for x in (h, t):
+                if x not in ids:
+                    raise c.err(f"graph.edges[{n}]", f"unknown agent {x}", e)
+            pairs.append((h, t))
+        fld, how = "graph.edges", "graph.edges"
+    else:
+        und = set()
+        for a in agents:
+            for j in a.neighbors:
+                if j not in ids:
+                    raise c.err(f"{seen[a.id]}.neighbors", f"unknown agent {j}", list(a.neighbors))
+                und.add((min(a.id, j), max(a.id, j)))
+        pairs = sorted(und)
+        fld, how = "agents[].neighbors", "derived: head = smaller id, edges in ascending (head, tail) order"
+    try:
+        check_tree(sorted(ids), pairs, fld)
+    except GraphError as exc:
+        raise ScenarioError(f"{c.path}: {exc}") from None
+    return tuple(pairs), how
+
+
+def _sensing(c: _Ctx, doc: Mapping[str, Any], algo: str, agents: list[AgentSpec], seen: Mapping[int, str]) -> list[AgentSpec]:
+    """A directed sensing graph (De Carli et al. §II): ``agents[].neighbors`` lists the robots
+    each one senses; communication is its undirected counterpart, so every agent's
+    neighbours become the robots it senses and those that sense it (``senses`` keeps the
+    first).  Every robot needs a sensing edge, and the undirected graph must be connected."""
+    if "graph" in doc:
+        raise c.err("graph", f"{algo} takes its directed sensing graph from agents[].neighbors (the robots each one senses), not [graph]")
+    ids = {a.id for a in agents}
+    sensed_by: dict[int, set[int]] = {a.id: set() for a in agents}
+    for a in agents:
+        for j in a.neighbors:
+            if j not in ids:
+                raise c.err(f"{seen[a.id]}.neighbors", f"unknown agent {j}", list(a.neighbors))
+            if j == a.id:
+                raise c.err(f"{seen[a.id]}.neighbors", f"agent {a.id} cannot sense itself", list(a.neighbors))
+            sensed_by[j].add(a.id)
+    for a in agents:
+        if not a.neighbors and not sensed_by[a.id]:
+            raise c.err(f"{seen[a.id]}.neighbors", f"robot {a.id} has no sensing edge: it senses no robot and no robot senses it", [])
+    comm = {a.id: set(a.neighbors) | sensed_by[a.id] for a in agents}
+    start = agents[0].id
+    reached, todo = {start}, [start]
+    while todo:
+        for j in comm[todo.pop()] - reached:
+            reached.add(j)
+            todo.append(j)
+    if reached != ids:
+        raise c.err("agents[].neighbors", f"the sensing graph's undirected version is disconnected: {sorted(reached)} do not reach {sorted(ids - reached)}")
+    return [replace(a, senses=a.neighbors, neighbors=tuple(sorted(comm[a.id])), k_neighbors=(1.0,) * len(comm[a.id])) for a in agents]

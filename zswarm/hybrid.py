@@ -360,3 +360,58 @@ class VelocityFreeParams:
 # ξ_k(0) of the tree edges an agent heads ([agents.estimate] xi = {k = ξ_k(0)}; 0 unless stated):
 # every hybrid scheme's initial state besides its estimates (SPEC.initial).
 XI_INITIAL = InitialField("edges", MappingProxyType({}), "ξ_k(0) of the edges k this agent heads (Remark 4.4)", symbol="ξ")
+
+
+# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+
+
+def design_command(args: Any) -> int:
+    """``zswarm design-hybrid``: print (or check) a design of Prop. 4.2 for A and Ξ."""
+    import json
+
+    import numpy as np
+
+    from zswarm import hybrid, procutil
+
+    vals = [procutil.number_arg(x, "--A") for x in args.A.split(",")]
+    if len(vals) == 3:
+        A = np.diag(vals)
+    elif len(vals) == 9:
+        A = np.array(vals).reshape(3, 3)
+    else:
+        procutil.fail_usage(f"--A: give 3 eigenvalues or 9 entries (got {len(vals)} numbers)")
+    Xi = [procutil.number_arg(x, "--xi") for x in args.xi.split(",")]
+    gamma = None if args.gamma is None else procutil.number_arg(args.gamma, "--gamma")
+    delta = None if args.delta is None else procutil.number_arg(args.delta, "--delta")
+    try:
+        if args.u is not None:
+            u = [procutil.number_arg(x, "--u") for x in args.u.split(",")]
+            if len(u) != 3:
+                procutil.fail_usage(f"--u: give 3 numbers (got {len(u)})")
+            base = hybrid.design(A, Xi, gamma, delta)
+            d = hybrid.check_parameters(A, np.array(u), base.gamma, base.delta, Xi)
+        else:
+            d = hybrid.design(A, Xi, gamma, delta)
+    except hybrid.DesignError as exc:
+        procutil.fail_usage(f"--{exc.field.lower()}: {exc.problem}")
+    if args.json:
+        print(json.dumps(d.as_dict(), indent=2))
+        return 0
+    lam = d.eigenvalues
+    case_text = {1: "λ1 = λ2", 2: "λ2 ≥ λ1λ3/(λ3−λ1)", 3: "λ1 < λ2 < λ1λ3/(λ3−λ1)"}[d.case]
+    print(
+        f"A: eigenvalues λ = {lam[0]:g}, {lam[1]:g}, {lam[2]:g}; Prop. 4.2 case {d.case} ({case_text}; λ1λ3/(λ3−λ1) = {lam[0] * lam[2] / (lam[2] - lam[0]):.6g})"
+    )
+    print(f"u       = [{', '.join(f'{x:.4f}' for x in d.u)}]   (α = [{', '.join(f'{a:.4f}' for a in d.alpha)}] on the eigenvectors of A)")
+    print(f"Δ*      = {d.Delta_star:.6g}")
+    print(f"γ       = {d.gamma:.6g}   (bound: γ < 4Δ*/π² = {d.gamma_max:.6g})")
+    print(f"δ       = {d.delta:.6g}   (bound: 0 < δ < (4Δ*/π² − γ) ξ_L²/2 = {d.delta_max:.6g}, ξ_L = {max(abs(x) for x in Xi):.6g})")
+    print(f"Ξ       = {{{', '.join(f'{x:.6g}' for x in Xi)}}}")
+    gaps = ", ".join(f"{g:.4g}" for g in d.gaps)
+    print(f"Condition 4.1: U(R̄,0) − min_Ξ U(R̄,ξ) at R̄ = Ra(π, q_β), β = 1,2,3: {gaps}  (> δ: {'holds' if d.condition_holds else 'FAILS'})")
+    print(
+        "Condition 5.1 (the velocity-free law's (Q̃_i, ζ_i), §5.4) is the same condition on the same potential (4.23): "
+        f"with δ_Q̃ = {d.delta:.6g} and Π = Ξ it {'holds' if d.condition_holds else 'FAILS'} (Remark 5.2); "
+        "[algorithm.params] delta_Q, Pi are checked against these bounds too"
+    )
+    return 0 if d.condition_holds else 1

@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from zswarm.reader import _Ctx
+
 JITTER_KINDS = ("normal", "exponential")
 
 
@@ -237,3 +239,48 @@ class LinkCounter:
             q = np.percentile(np.array(self.latency), [50, 99])
             d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
         return d
+
+
+# --------------------------------------------------------------------------- the scenario's [links]
+# (read here, beside LinkSpec: the loader asks this module for its part of the file)
+
+
+_LINK_FIELDS = ("delay_ms", "jitter_ms", "jitter", "reorder", "drop", "ge_p_gb", "ge_p_bg", "ge_loss_good", "ge_loss_bad")
+
+
+def _link_spec(c: _Ctx, d: Any, f: str, base: LinkSpec, extra: set[str] = frozenset()) -> LinkSpec:  # type: ignore[assignment]
+    d = c.table(d, f, set(_LINK_FIELDS) | extra)
+    kw: dict[str, Any] = {}
+    for k in _LINK_FIELDS:
+        if k not in d:
+            kw[k] = getattr(base, k)
+        elif k == "jitter":
+            kw[k] = c.string(d[k], f"{f}.jitter")
+            if kw[k] not in JITTER_KINDS:
+                raise c.err(f"{f}.jitter", f"must be one of {', '.join(JITTER_KINDS)}", d[k])
+        elif k == "reorder":
+            if not isinstance(d[k], bool):
+                raise c.err(f"{f}.reorder", "must be true or false", d[k])
+            kw[k] = d[k]
+        else:
+            kw[k] = c.num(d[k], f"{f}.{k}")
+    spec = LinkSpec(**kw)
+    for fld, problem in spec.check():
+        raise c.err(f"{f}.{fld}", problem)
+    return spec
+
+
+def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, LinkSpec, LinkSpec, dict[str, LinkSpec]]:
+    """``[links]``: defaults of the agent→agent edges; ``[links.sensors]``: defaults of the
+    world→agent sensor links (zero unless set: on-board sensors); ``[links.commands]``:
+    defaults of the agent→world command links (zero unless set); ``[links.per_link."j->i"]``,
+    ``"world->i"`` and ``"i->world"``: one link each, on top of its kind's defaults."""
+    edges = _link_spec(c, d, "links", LinkSpec(), {"per_link", "sensors", "commands"})
+    sensors = _link_spec(c, d.get("sensors", {}), "links.sensors", LinkSpec())
+    commands = _link_spec(c, d.get("commands", {}), "links.commands", LinkSpec())
+    over: dict[str, LinkSpec] = {}
+    per = c.table(d.get("per_link", {}), "links.per_link", names)
+    for name, sub in per.items():
+        base = sensors if name.startswith("world->") else commands if name.endswith("->world") else edges
+        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', base)
+    return edges, sensors, commands, over

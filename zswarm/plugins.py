@@ -20,3 +20,23 @@ def registered(group: str, own_prefix: str) -> Mapping[str, str]:
     for ep in sorted(eps, key=lambda ep: not ep.value.startswith(own_prefix)):
         out.setdefault(ep.name, ep.value.split(":")[0])
     return MappingProxyType(out)
+
+
+# zswarm sim hosts the agent and world programs' own classes in one process, found here like an
+# algorithm: by name in the entry-point group PROCESS_GROUP (agent/ and world/ register theirs
+# in pyproject.toml), so that nothing under zswarm/ imports those programs.
+PROCESS_GROUP = "zswarm.processes"
+OWN_PROCESSES = {"agent": "agent.", "world": "world."}
+
+
+def process_class(name: str) -> type:
+    """The class of the process ``name`` ("agent": AgentNode, "world": World)."""
+    import importlib
+
+    target = registered(PROCESS_GROUP, OWN_PROCESSES[name]).get(name)
+    if target is None:
+        raise RuntimeError(f"no {name!r} process registered in the entry points {PROCESS_GROUP!r} (zswarm is not installed: pip install -e .)")
+    ep = next(e for e in importlib.metadata.entry_points(group=PROCESS_GROUP) if e.name == name and e.value.split(":")[0] == target)
+    cls = ep.load()
+    assert isinstance(cls, type)
+    return cls

@@ -14,8 +14,10 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, NoReturn
 
+from zswarm.files import RecordingError
 from zswarm.scenario import Override, Scenario, ScenarioError, load
 from zswarm.text import one_line
 
@@ -69,8 +71,6 @@ WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM, 
 def write_problem(exc: BaseException) -> str | None:
     """``path: problem`` for an error writing results (an OSError of WRITE_ERRNOS, or the
     recording's RecordingError, which names its file), else None."""
-    from zswarm.record import RecordingError
-
     if isinstance(exc, RecordingError):
         return str(exc)
     if isinstance(exc, OSError) and exc.errno in WRITE_ERRNOS:
@@ -326,3 +326,51 @@ def positive_float(s: str) -> float:
     if not v > 0:
         raise argparse.ArgumentTypeError(f"must be > 0 (got {s})")
     return v
+
+
+# --------------------------------------------------------------------------- the commands' shared helpers
+# (each command's run function lives with its module: zswarm.sim.command, zswarm.sweep.command, ...)
+
+
+def load_args(args: Any) -> Any:
+    """The scenario of ``args.topology`` with the ``--set`` overrides (exit 2 on any error)."""
+    from zswarm.scenario import ScenarioError, fault_override, parse_override
+
+    try:
+        overrides = [parse_override(o) for o in args.overrides] + [fault_override(f) for f in getattr(args, "faults", [])]
+    except ScenarioError as exc:
+        fail_usage(str(exc))
+    return load_or_exit(args.topology, overrides)
+
+
+def write_output(text: str, output: Path | None, what: str) -> None:
+    """``text`` to standard output, or to ``output`` (its folder made) with "wrote FILE<what>" on stderr."""
+    if output is None:
+        sys.stdout.write(text)
+        return
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(text, encoding="utf-8")
+    print(f"wrote {output}{what}", file=sys.stderr)
+
+
+def warn_notes(sc: object) -> None:
+    for w in getattr(sc, "warnings", ()):
+        print(f"{getattr(sc, 'path', '')}: note: {w}", file=sys.stderr)
+
+
+def number_arg(s: str, flag: str) -> float:
+    """A number or an expression such as ``0.08pi`` / ``0.08*pi`` / ``pi/2``."""
+    import math
+    import re
+
+    from zswarm.expr import ExprError, parse
+
+    text = s.strip()
+    text = re.sub(r"^([0-9.eE+-]+)\s*pi$", r"\1*pi", text)
+    try:
+        x = float(parse(text)(0.0))
+    except ExprError as exc:
+        fail_usage(f"{flag}: {exc} (got {s!r})")
+    if not math.isfinite(x):
+        fail_usage(f"{flag}: must be finite (got {s!r})")
+    return x

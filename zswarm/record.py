@@ -50,6 +50,7 @@ from mcap.reader import NonSeekingReader
 
 from zswarm import keys, wire
 from zswarm.bus import Bus
+from zswarm.files import RecordingError
 from zswarm.scenario import Scenario
 from zswarm.viz import object_schema
 
@@ -330,7 +331,7 @@ class RawOut(_McapOut):
         # recording made from it has its indexes.  (What else grew in the 1-hour soak,
         # bench/soak.py, was Zenoh's receive batches held by samples waiting for the
         # recorder's poll, see ZenohBus.subscribe_polled, and the free memory glibc kept
-        # after a catch-up, which cli.cmd_record gives back with procutil.trim_heap.)
+        # after a catch-up, which zswarm.recorder.command gives back with procutil.trim_heap.)
         opts = MCAPWriteOptions(compression=MCAPCompression.Lz4, chunk_size=4 << 20, profile="", emit_chunk_indexes=False, emit_message_indexes=False)
         self.path = path
         self._errors0 = WRITE_ERRORS.count
@@ -364,7 +365,6 @@ class RawOut(_McapOut):
 
     def alive(self, event: dict[str, Any], t: int) -> None:
         self.message(ALIVE_CHANNEL, msgpack.packb(event), t)
-
 
 
 def _open_mcap(path: Path, ctx: Any, opts: Any) -> Any:
@@ -440,10 +440,6 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
     tmp.replace(out)
     raw.unlink()
     return vo.malformed
-
-
-class RecordingError(Exception):
-    """A recording that cannot be read or written as a whole (message names the file)."""
 
 
 class EmptyRecording(RecordingError):

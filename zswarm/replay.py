@@ -15,6 +15,7 @@ as fast as the output takes them):
 
 from __future__ import annotations
 
+import argparse
 import logging
 import math
 import threading
@@ -22,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from zswarm import keys, wire
+from zswarm import keys, procutil, wire
 from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, decode, read
 from zswarm.scenario import Scenario
 
@@ -126,3 +127,44 @@ def run_replay(
     finally:
         if out is not None:
             out.close()
+
+
+# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+
+
+def command(args: argparse.Namespace) -> int:
+    from zswarm import replay
+    from zswarm.record import ensure_recording
+
+    sc = procutil.load_or_exit(str(args.results / "scenario.toml")) if (args.results / "scenario.toml").exists() else None
+    rec_path = ensure_recording(args.results, sc)
+    if not rec_path.exists():
+        procutil.fail_usage(f"{rec_path}: no recording there")
+    zenoh_out = bool(args.connect or args.listen or args.config)
+    if args.live is None and not zenoh_out:
+        procutil.fail_usage("replay needs --live [HOST:PORT] or a Zenoh endpoint (--connect/--listen/--config)")
+    log = procutil.setup_logging("replay")
+    stop = procutil.stop_on_signals()
+    run = None
+    if zenoh_out:
+        run = keys.check_run_id(args.run_id or replay.recorded_run_id(rec_path) or "default")
+    bus = None
+    try:
+        if zenoh_out:
+            from zswarm.bus import ZenohBus
+
+            bus = ZenohBus(procutil.zenoh_conf(args))
+            if args.wait_for_recorder:
+                up = threading.Event()
+                bus.watch_alive(keys.alive(run, "recorder", 0), lambda _k, alive: up.set() if alive else None)  # type: ignore[arg-type]
+                log.info("waiting for a recorder of run %r", run)
+                while not up.wait(0.2):
+                    if stop.is_set():
+                        return 130
+        counts = replay.run_replay(args.results, sc, args.speed, args.live, bus, run, stop, hold=args.hold)
+        log.info("replayed %d messages and %d liveliness events%s", counts["messages"], counts["alive_events"], f" onto run {run!r}" if run else "")
+    finally:
+        if bus is not None:
+            time.sleep(0.5)  # let the last samples leave before the session closes
+            bus.close()
+    return 130 if stop.is_set() else 0

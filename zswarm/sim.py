@@ -7,14 +7,14 @@ gives bit-identical results.  Runs as fast as the CPU allows.
 
 from __future__ import annotations
 
+import argparse
 import heapq
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from agent.runtime import AgentNode
-from world.node import World
-from zswarm import keys, wire
+from zswarm import keys, plugins, procutil, wire
 from zswarm.bus import MemoryBus
 from zswarm.record import Recorder
 from zswarm.scenario import Scenario, fault_actions
@@ -80,6 +80,7 @@ def simulate(
         scenario=scenario,
         defer=DEFER_MESSAGES if record else 0,
     )
+    World, AgentNode = plugins.process_class("world"), plugins.process_class("agent")  # noqa: N806 - classes
     world = World(scenario, bus, run, seed, now=lambda: t_now[0])
     # Each agent on a session of its own: a kill closes it (its subscriptions and token go,
     # as with a killed process's Zenoh session); a restart is a new session and node.
@@ -175,3 +176,47 @@ def simulate(
     if times is not None:
         times.update(run_s=t_run - t_start, record_s=time.perf_counter() - t_run)
     return rec_path if record else recorder.messages
+
+
+# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+
+
+def command(args: argparse.Namespace) -> int:
+
+    from zswarm import report
+    from zswarm.launch import results_dir
+    from zswarm.sim import LEAN_SKIP, simulate
+
+    sc = procutil.load_args(args)
+    procutil.warn_notes(sc)
+    duration = sc.duration if args.duration is None else args.duration
+    seed = sc.seed if args.seed is None else args.seed
+    out = results_dir(args.out, sc.name)
+    (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
+    tty = sys.stderr.isatty()
+
+    def progress(t: float) -> None:
+        if tty:
+            print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
+
+    t0 = time.perf_counter()
+    kept: list[tuple[str, bytes, int]] = []
+    times: dict[str, float] = {}
+    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times)
+    wall = time.perf_counter() - t0
+    if tty and not args.quiet:
+        print(file=sys.stderr)
+    messages = recorded if isinstance(recorded, list) else (kept or None)
+    summary = report.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages, not_recorded=LEAN_SKIP if args.lean else ())
+    summary["wall_time_s"] = wall
+    summary["wall_time_run_s"] = times["run_s"]
+    summary["wall_time_recording_s"] = times["record_s"]
+    summary["wall_time_report_s"] = time.perf_counter() - t0 - wall
+    report.write_summary(out / "summary.json", summary)
+    if not args.quiet:
+        print(report.table(summary))
+        print(
+            f"simulated {duration:g} s in {times['run_s']:.1f} s of wall time ({duration / max(times['run_s'], 1e-9):.1f}x real time), "
+            f"then the recording in {times['record_s']:.1f} s and the report in {summary['wall_time_report_s']:.1f} s; results: {out}"
+        )
+    return 0 if summary["completed"] else 1

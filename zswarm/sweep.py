@@ -16,6 +16,7 @@ agent→agent edges and of the sensor links.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import itertools
@@ -605,3 +606,86 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
 
 def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in name)
+
+
+# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+
+
+def command(args: argparse.Namespace) -> int:
+    import os
+    import threading
+
+    from zswarm import sweep
+    from zswarm.launch import results_dir
+    from zswarm.scenario import ScenarioError, parse_override
+
+    thresholds = (0.01, 0.1)
+    if args.thresholds is not None:
+        parts = args.thresholds.split(",")
+        if len(parts) != 2:
+            procutil.fail_usage(f"--thresholds: give ATT,POS, e.g. 0.01,0.1 (got {args.thresholds!r})")
+        a, p_ = (procutil.number_arg(x, "--thresholds") for x in parts)
+        if not (a > 0 and p_ > 0):
+            procutil.fail_usage(f"--thresholds: both must be > 0 (got {args.thresholds!r})")
+        thresholds = (a, p_)
+    try:
+        sets = [parse_override(o) for o in args.overrides]
+        varies = [sweep.parse_vary(v) for v in args.vary]
+    except ScenarioError as exc:
+        procutil.fail_usage(str(exc))
+    seen: set[str] = set()
+    for v in varies:
+        if v.field in seen:
+            procutil.fail_usage(f"--vary {v.field}: field: given twice")
+        seen.add(v.field)
+        if v.field in {o.field for o in sets}:
+            procutil.fail_usage(f"--vary {v.field}: field: also fixed by --set")
+    sc = procutil.load_or_exit(args.topology, sets)
+    duration = sc.duration if args.duration is None else args.duration
+    seed = sc.seed if args.seed is None else args.seed
+    try:
+        jobs = sweep.plan(args.topology, sc, sets, varies, args.repeats, seed)
+    except ScenarioError as exc:
+        procutil.fail_usage(str(exc))
+    out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("sweeps"))
+    out.mkdir(parents=True, exist_ok=True)
+    spec = sweep.definition(
+        args.topology,
+        sc,
+        {
+            "vary": {v.field: list(v.values) for v in varies},
+            "set": [o.flag for o in sets],
+            "repeats": args.repeats,
+            "engine": args.engine,
+            "duration_s": duration,
+            "seed": seed,
+            "thresholds": list(thresholds),
+        },
+    )
+    spec_path = out / "sweep.json"
+    if spec_path.exists():
+        old = json.loads(spec_path.read_text())
+        diff = sorted(k for k in set(old) | set(spec) if k != "topology" and old.get(k) != spec.get(k))
+        if diff:
+            procutil.fail_usage(f"--out {out}: holds a different sweep (differs in: {', '.join(diff)}); use another --out to start a new one")
+    else:
+        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+    n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine == "sim" else 1)
+    timeout = args.timeout or (max(120.0, 10.0 * duration) if args.engine == "sim" else duration + 180.0)
+    stop = threading.Event()
+    procutil.stop_on_signals_into(stop)
+    n_points = len(jobs) // args.repeats
+    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {n_jobs} at a time; {out}", file=sys.stderr)
+    t0 = time.monotonic()
+    ok, _failed, interrupted = sweep.run_sweep(
+        args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
+    )
+    wall = time.monotonic() - t0
+    rows = sweep.load_rows(out / "sweep.csv")
+    if interrupted:
+        print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
+        return 130
+    plots = sweep.plot_sweep(out, rows, [v.field for v in varies], duration)
+    n_failed = sum(1 for r in rows if r["status"] == "failed")
+    print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")
+    return 0 if n_failed == 0 else 1

@@ -43,7 +43,7 @@ import numpy as np
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
 from zswarm import hybrid
-from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, InitialField, Initial, Part, Publish, StalePolicy, View
+from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Ra, Vec3, exp, hat, log, psi
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)

@@ -24,7 +24,6 @@ Leaders (agents 1, 2) do not run the observer: (R̂_l, p̂_l) = (R_l, p_l).
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from typing import Any
 
 from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate

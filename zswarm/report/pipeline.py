@@ -22,8 +22,7 @@ import numpy as np
 
 from zswarm import files
 from zswarm.record import ensure_recording
-from zswarm.report import faults, family
-from zswarm.report import text
+from zswarm.report import family, faults, text
 from zswarm.report.base import THRESHOLDS
 from zswarm.report.recording import Recording, errors, load_recording, truth_gaps
 from zswarm.report.series import final
