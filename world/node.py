@@ -6,6 +6,7 @@ Engine-agnostic: ``zswarm sim`` calls :meth:`World.sample` at virtual times;
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
@@ -19,6 +20,7 @@ from zswarm.bus import Bus
 from zswarm.scenario import PLANT_INPUTS, Scenario
 
 
+@functools.lru_cache(maxsize=1024)  # per command message: the parse once per key (the agents' few)
 def _cmd_agent(key: str) -> int | None:
     """The agent id of a ``zswarm/<run>/cmd/<i>`` key (None: not one)."""
     k = keys.parse(key)
