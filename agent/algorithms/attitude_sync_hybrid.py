@@ -153,7 +153,7 @@ SPEC = AlgorithmSpec(
     graph="tree",
     report="sync",
     params=hybrid.HybridParams,
-    initial=POSE_ESTIMATE | {"xi": hybrid.XI_INITIAL},
+    initial={**POSE_ESTIMATE, "xi": hybrid.XI_INITIAL},
     # Hold: ξ_k changes slowly between jumps, and a tail without its head's ξ_k
     # would otherwise drop the edge from its torque.
     stale=StalePolicy(0.2, "hold"),

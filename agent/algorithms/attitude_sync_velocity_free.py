@@ -236,8 +236,8 @@ SPEC = AlgorithmSpec(
     graph="tree",
     report="sync",
     params=hybrid.VelocityFreeParams,
-    initial=POSE_ESTIMATE
-    | {
+    initial={
+        **POSE_ESTIMATE,
         "xi": hybrid.XI_INITIAL,
         "Q": InitialField("rotation", IDENTITY, "Q_i(0), the auxiliary attitude (5.20)"),
         "zeta": InitialField("number", 0.0, "ζ_i(0) (5.22)"),

@@ -161,5 +161,5 @@ SPEC = replace(
     gains={"k_R": None, "k_xi": None},
     parts=(Part("observer", inputs, step),),
     params=hybrid.HybridParams,
-    initial=POSE_ESTIMATE | {"xi": hybrid.XI_INITIAL},
+    initial={**POSE_ESTIMATE, "xi": hybrid.XI_INITIAL},
 )
