@@ -360,7 +360,7 @@ class TickView:
         self.sense_t = self._node.clock.local(sense["t"])
         self.dt = 0.0
         self._cache = {}
-        self.stale_read = set()
+        self.stale_read.clear()
 
     @property
     def align(self) -> np.ndarray:
@@ -720,7 +720,7 @@ class AgentNode:
         """Count the in-neighbours the last step's view read stale (stats ``stale_terms``)."""
         for j in self.view.stale_read:
             self.stale_terms[j] = self.stale_terms.get(j, 0) + 1
-        self.view.stale_read = set()
+        self.view.stale_read.clear()
 
     def _step_part(self, ps: _PartState, dt: float) -> Any:
         """Step one part by ``dt`` on the view as it stands; its outputs (None: it had no inputs)."""

@@ -152,7 +152,7 @@ class Params(Protocol):
         ...
 
     def check_agents(self, r: Reader, fld: str, ids: tuple[int, ...]) -> None:
-        """Checks against the scenario's agents (ids in the agents' order); raise ``r.err``."""
+        """Optional: checks against the scenario's agents (ids in the agents' order); raise ``r.err``."""
         ...
 
     def gains(self, ids: tuple[int, ...]) -> Mapping[str, Any]:
@@ -380,8 +380,13 @@ def family_module(name: str) -> str | None:
     """The module path of the report family ``name`` (registered, or a module path that can be
     imported), without importing it; None when there is none."""
     target = plugins.registered(REPORT_FAMILY_GROUP, BUILTIN_FAMILIES).get(name, name)
+    return target if _find_spec(target) is not None else None
+
+
+def _find_spec(target: str) -> Any:
+    """importlib's spec of module ``target``, or None (not found, or not a module name)."""
     try:
-        return target if importlib.util.find_spec(target) is not None else None
+        return importlib.util.find_spec(target)
     except (ImportError, ValueError):
         return None
 
@@ -402,19 +407,13 @@ def resolve(name: str, near: str | Path | None = None) -> tuple[ModuleType, str 
     """
     added: str | None = None
     target = registered().get(name, name)
-    try:
-        spec = importlib.util.find_spec(target)
-    except (ImportError, ValueError):
-        spec = None
+    spec = _find_spec(target)
     if spec is None and near is not None:
         d = str(Path(near).resolve().parent)
         if d not in sys.path:
             sys.path.insert(0, d)
             added = d
-        try:
-            spec = importlib.util.find_spec(target)
-        except (ImportError, ValueError):
-            spec = None
+        spec = _find_spec(target)
     if spec is None:
         known = ", ".join(builtin()) or f"none: zswarm is not installed (pip install -e .), its entry points of {ENTRY_POINT_GROUP!r} are missing"
         raise AlgorithmError(f"unknown algorithm: no built-in, entry point or importable module {name!r} (built-in: {known}; or a module path like mylab.my_observer)")

@@ -264,6 +264,11 @@ def angle_set(r: Any, v: Any, fld: str, example: str) -> tuple[float, ...]:
     return tuple(float(r.expr(x, f"{fld}[{n}]")(0.0)) if isinstance(x, str) else r.num(x, f"{fld}[{n}]") for n, x in enumerate(v))
 
 
+def _set_P(p: HybridParams | VelocityFreeParams) -> dict[str, Any]:
+    """The Gains values of Prop. 4.2's set P (A as a 3x3 matrix)."""
+    return {"A": np.array(p.A, dtype=float).reshape(3, 3), "u": np.array(p.u), "gamma": p.gamma, "delta": p.delta, "Xi": p.Xi}
+
+
 @dataclass(frozen=True, slots=True)
 class ContinuousParams:
     """A of the continuous observer (4.8) and law (5.13) (Assumption 4.4: symmetric, three
@@ -276,9 +281,6 @@ class ContinuousParams:
     def load(cls, r: Any, d: Any, fld: str = _PARAMS_FIELD) -> ContinuousParams:
         d = r.table(d if d is not None else {}, fld, {"A"}, {"A"})
         return cls(tuple(_read_A(r, d, fld).ravel().tolist()))
-
-    def check_agents(self, r: Any, fld: str, ids: tuple[int, ...]) -> None:
-        pass
 
     def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
         return {"A": np.array(self.A, dtype=float).reshape(3, 3)}
@@ -316,11 +318,8 @@ class HybridParams:
     def load(cls, r: Any, d: Any, fld: str = _PARAMS_FIELD) -> HybridParams:
         return cls(*cls._read(r, d, fld, set(cls.FIELDS))[3])
 
-    def check_agents(self, r: Any, fld: str, ids: tuple[int, ...]) -> None:
-        pass
-
     def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
-        return {"A": np.array(self.A, dtype=float).reshape(3, 3), "u": np.array(self.u), "gamma": self.gamma, "delta": self.delta, "Xi": self.Xi}
+        return _set_P(self)
 
 
 @dataclass(frozen=True, slots=True)
@@ -350,11 +349,8 @@ class VelocityFreeParams:
             raise r.err(f"{fld}.{name}", exc.problem.replace("δ", "δ_Q̃").replace("Ξ", "Π")) from None
         return cls(*base, delta_Q, Pi)
 
-    def check_agents(self, r: Any, fld: str, ids: tuple[int, ...]) -> None:
-        pass
-
     def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
-        return HybridParams.gains(self, ids) | {"delta_Q": self.delta_Q, "Pi": self.Pi}  # type: ignore[arg-type]
+        return _set_P(self) | {"delta_Q": self.delta_Q, "Pi": self.Pi}
 
 
 # ξ_k(0) of the tree edges an agent heads ([agents.estimate] xi = {k = ξ_k(0)}; 0 unless stated):

@@ -347,7 +347,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         if agents[-1].id in seen:
             raise c.err(f"{f}.id", f"duplicate id (also {seen[agents[-1].id]})", agents[-1].id)
         seen[agents[-1].id] = f
-    if params is not None:
+    if params is not None and hasattr(params, "check_agents"):
         _user_code(c, "algorithm.params", lambda: params.check_agents(c, "algorithm.params", tuple(a.id for a in agents)))
     ids = sorted(seen)
     if ids != list(range(1, len(ids) + 1)):

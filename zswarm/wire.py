@@ -17,6 +17,7 @@ from typing import Any, Literal, TypeGuard
 import msgpack
 import numpy as np
 
+from zswarm import keys
 from zswarm.so3 import _rotation_ok, rotations_ok
 
 VERSION = 3  # 2: edge messages carry the fields their algorithm declares (open schema); 3: inc, bounds
@@ -568,9 +569,7 @@ def ctl_mac(secret: bytes, m: Mapping[str, Any]) -> str:
 def encode_ctl(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> bytes:
     """A run-control message, signed (``mac``) with the run's secret when there is one
     (keys.run_secret)."""
-    from zswarm.keys import run_secret
-
-    secret = run_secret()
+    secret = keys.run_secret()
     if secret is not None:
         fields["mac"] = ctl_mac(secret, {"type": mtype, "src": src, "seq": seq, "inc": inc, "t": float(t), **fields})
     return encode(mtype, src, seq, t, inc=inc, **fields)
@@ -592,9 +591,7 @@ def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
 def check_signature(m: Mapping[str, Any]) -> None:
     """With the run's secret (keys.run_secret), a run-control message must carry its
     signature (:func:`ctl_mac`); raises MessageError otherwise."""
-    from zswarm.keys import run_secret
-
-    secret = run_secret()
+    secret = keys.run_secret()
     if secret is not None:
         import hmac
 
@@ -626,8 +623,6 @@ def check_stream(stream: str, m: Mapping[str, Any]) -> None:
     peer holding agent 4's certificate put ``src = 3`` in ``est/4`` and the report filed it
     as agent 3's estimate).
     """
-    from zswarm import keys
-
     k = keys.parse_stream(stream)
     if k is None or k.kind not in ("est", "cmd", "edge", "stats", "truth", "sense", "ctl"):
         raise MessageError(f"{stream!r} is not a zswarm stream (or not a process id in the key)")

@@ -48,9 +48,6 @@ class Params:
         d = r.table(d if d is not None else {}, fld, {"v_max"}, {"v_max"})
         return cls(r.num(d["v_max"], f"{fld}.v_max", positive=True))
 
-    def check_agents(self, r: Reader, fld: str, ids: tuple[int, ...]) -> None:
-        pass
-
     def gains(self, ids: tuple[int, ...]) -> dict[str, Any]:
         return {"v_max": self.v_max}
 

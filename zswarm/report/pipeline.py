@@ -87,7 +87,8 @@ def summarize(
     not_recorded: Sequence[str] = (),
 ) -> dict[str, Any]:
     """The summary.json content (see README, "Results folder"); ``m``: the family's metrics
-    (:func:`zswarm.report.family.Family.metrics` of this recording)."""
+    of this recording (``family.of(sc).metrics(sc, rec)``, as :func:`make_report` computes
+    them once; None is a family's "no metrics", e.g. §4 with an agent that sent nothing)."""
     t_end = duration
     agents: dict[str, Any] = {}
     links: dict[str, dict[str, Any]] = {}
@@ -141,8 +142,6 @@ def summarize(
         if len(by_inc[link]) > 1:
             links[link]["sent_by_incarnation"] = {str(i): k for i, k in sorted(by_inc[link].items())}
     fam = family.of(sc)
-    if m is None:
-        m = fam.metrics(sc, rec)
     extra = fam.summary(sc, rec, m, agents, duration)
     recording = recording_section(sc, rec, duration, not_recorded)
     problems = run_problems(sc, rec, agents, recording, duration, exit_codes)

@@ -7,6 +7,6 @@ module states it so that the name resolves like any other family's.
 
 from __future__ import annotations
 
-from zswarm.report.base import convergence, headline, metrics, plot, series, series_from_files, summary, table_lines, write
+from zswarm.report.base import convergence, finals, headline, metrics, plot, series, series_from_files, summary, table_lines, write
 
-__all__ = ["convergence", "headline", "metrics", "plot", "series", "series_from_files", "summary", "table_lines", "write"]
+__all__ = ["convergence", "finals", "headline", "metrics", "plot", "series", "series_from_files", "summary", "table_lines", "write"]
