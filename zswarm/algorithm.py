@@ -35,15 +35,17 @@ import importlib
 import importlib.metadata
 import importlib.util
 import sys
+import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, ModuleType
-from typing import Any, ClassVar, Protocol
+from typing import Annotated, Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
 from zswarm import plugins
+from zswarm.schema import Table, bounds
 from zswarm.so3 import rotations_ok
 from zswarm.wire import ROT_TOL
 
@@ -88,18 +90,19 @@ class Field:
             raise AlgorithmError(f"a rotation field has shape (3, 3), not {self.shape}")
 
 
-@dataclass(frozen=True, slots=True)
-class StalePolicy:
+Stale = Literal["hold", "drop"]
+STALE_POLICIES: tuple[str, ...] = typing.get_args(Stale)
+
+
+class StalePolicy(Table, frozen=True, kw_only=False):
     """What an agent does with a neighbour's message older than ``max_age`` seconds
     (its stamp against the agent's clock): ``"hold"`` uses it as if fresh,
     ``"drop"`` leaves that neighbour's terms out of the step until a fresher one
-    arrives.  Either way such terms are counted (``stale_terms`` in the stats)."""
+    arrives.  Either way such terms are counted (``stale_terms`` in the stats).
+    The algorithm's SPEC states its default; a scenario's ``[algorithm.stale]`` overrides it."""
 
-    max_age: float = 0.2  # s
-    policy: str = "hold"
-
-
-STALE_POLICIES = ("hold", "drop")
+    max_age: Annotated[float, bounds(positive=True)] = 0.2  # s
+    policy: Stale = "hold"
 
 
 @dataclass(frozen=True, slots=True)

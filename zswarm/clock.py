@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Annotated, Any, Protocol
 
+import msgspec
 import numpy as np
 
 from zswarm.reader import _Ctx
+from zswarm.schema import Table, bounds
 
 # An agent's own clock reads (1 + drift)·t + offset and stamps its messages (t_local): past
 # ±1e10 s a double resolves it to no better than 2 µs, and 2e12 put every message beyond the
@@ -23,29 +24,23 @@ from zswarm.reader import _Ctx
 MAX_CLOCK_OFFSET_S = 1e10
 
 
-@dataclass(frozen=True, slots=True)
-class ClockSpec:
-    """An agent's clock: tick rate on its own clock, tick jitter, drift and offset."""
+class ClockSpec(Table, frozen=True, kw_only=True):
+    """An agent's clock: tick rate on its own clock, tick jitter, drift and offset; the
+    scenario's ``[clock]`` and an agent's ``[agents.clock]``, as the file declares them."""
 
-    rate: float = 100.0  # Hz
-    jitter: float = 0.0  # s, standard deviation of each tick's wake-up time
-    drift_ppm: float = 0.0  # own clock runs (1 + drift_ppm·1e-6) times world time
-    offset: float = 0.0  # s, own clock reading at world time 0
+    rate: Annotated[float, bounds(positive=True, maxv=10000.0)] = 100.0  # Hz
+    jitter: Annotated[float, bounds(nonneg=True)] = 0.0  # s, standard deviation of each tick's wake-up time
+    drift_ppm: Annotated[float, bounds(within=1e5, within_open=True, unit=" ppm")] = 0.0  # own clock runs (1 + drift_ppm·1e-6) times world time
+    offset: Annotated[float, bounds(within=MAX_CLOCK_OFFSET_S, unit=" s", why="the own clock's resolution stays under 2 µs")] = 0.0  # s, own clock reading at world time 0
 
 
 def _clock(c: _Ctx, d: Any, f: str, base: ClockSpec) -> ClockSpec:
-    d = c.table(d, f, {"rate", "jitter", "drift_ppm", "offset"})
-    rate = c.num(d.get("rate", base.rate), f"{f}.rate", positive=True, maxv=10000.0)
-    jitter = c.num(d.get("jitter", base.jitter), f"{f}.jitter", nonneg=True)
-    if jitter >= 0.5 / rate:
-        raise c.err(f"{f}.jitter", f"must be < half the period ({0.5 / rate:g} s)", jitter)
-    drift = c.num(d.get("drift_ppm", base.drift_ppm), f"{f}.drift_ppm")
-    if abs(drift) >= 1e5:
-        raise c.err(f"{f}.drift_ppm", "must be within ±100000 ppm", drift)
-    offset = c.num(d.get("offset", base.offset), f"{f}.offset")
-    if abs(offset) > MAX_CLOCK_OFFSET_S:
-        raise c.err(f"{f}.offset", f"must be within ±{MAX_CLOCK_OFFSET_S:g} s (the own clock's resolution stays under 2 µs)", offset)
-    return ClockSpec(rate, jitter, drift, offset)
+    """``[clock]`` (``base``: the defaults) or an agent's ``[agents.clock]`` (``base``: the scenario's)."""
+    spec = c.typed(d, f, ClockSpec, msgspec.structs.asdict(base))
+    # A bound that depends on another field: jitter under half the period.
+    if spec.jitter >= 0.5 / spec.rate:
+        raise c.err(f"{f}.jitter", f"must be < half the period ({0.5 / spec.rate:g} s)", spec.jitter)
+    return spec
 
 
 class Clock(Protocol):

@@ -28,13 +28,16 @@ import math
 import zlib
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any, Literal
 
+import msgspec
 import numpy as np
 
 from zswarm.reader import _Ctx
+from zswarm.schema import Table, bounds
 
 JITTER_KINDS = ("normal", "exponential")
+_PROBABILITY = bounds(minv=0.0, maxv=1.0, problem_text="must be a probability in [0, 1]", got_float=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,42 +248,47 @@ class LinkCounter:
 # (read here, beside LinkSpec: the loader asks this module for its part of the file)
 
 
-_LINK_FIELDS = ("delay_ms", "jitter_ms", "jitter", "reorder", "drop", "ge_p_gb", "ge_p_bg", "ge_loss_good", "ge_loss_bad")
+class LinkTable(Table, frozen=True, kw_only=True):
+    """A link's model as the scenario file states it (``[links]``, ``[links.sensors]``,
+    ``[links.commands]``, ``[links.per_link."j->i"]``): :class:`LinkSpec` less its cuts,
+    which come from ``[[faults]]``."""
+
+    delay_ms: Annotated[float, bounds(nonneg=True, got_float=True)] = 0.0
+    jitter_ms: Annotated[float, bounds(nonneg=True, got_float=True)] = 0.0
+    jitter: Literal["normal", "exponential"] = "normal"
+    reorder: bool = False
+    drop: Annotated[float, _PROBABILITY] = 0.0
+    ge_p_gb: Annotated[float, _PROBABILITY] = 0.0
+    ge_p_bg: Annotated[float, _PROBABILITY] = 1.0
+    ge_loss_good: Annotated[float, _PROBABILITY] = 0.0
+    ge_loss_bad: Annotated[float, _PROBABILITY] = 1.0
 
 
-def _link_spec(c: _Ctx, d: Any, f: str, base: LinkSpec, extra: set[str] = frozenset()) -> LinkSpec:  # type: ignore[assignment]
-    d = c.table(d, f, set(_LINK_FIELDS) | extra)
-    kw: dict[str, Any] = {}
-    for k in _LINK_FIELDS:
-        if k not in d:
-            kw[k] = getattr(base, k)
-        elif k == "jitter":
-            kw[k] = c.string(d[k], f"{f}.jitter")
-            if kw[k] not in JITTER_KINDS:
-                raise c.err(f"{f}.jitter", f"must be one of {', '.join(JITTER_KINDS)}", d[k])
-        elif k == "reorder":
-            if not isinstance(d[k], bool):
-                raise c.err(f"{f}.reorder", "must be true or false", d[k])
-            kw[k] = d[k]
-        else:
-            kw[k] = c.num(d[k], f"{f}.{k}")
-    spec = LinkSpec(**kw)
-    for fld, problem in spec.check():
+class LinksTable(LinkTable, frozen=True, kw_only=True):
+    """``[links]``: the agent→agent edges' model, and the tables of the other kinds and of single links."""
+
+    sensors: LinkTable = LinkTable()
+    commands: LinkTable = LinkTable()
+    per_link: dict[str, Any] = msgspec.field(default_factory=dict)  # link name -> a LinkTable over its kind's; names checked against the scenario's links
+
+
+def _spec(c: _Ctx, t: LinkTable, f: str) -> LinkSpec:
+    spec = LinkSpec(**{k: getattr(t, k) for k in LinkTable.__struct_fields__})
+    for fld, problem in spec.check():  # what a type cannot say: ge_p_bg > 0 when ge_p_gb > 0
         raise c.err(f"{f}.{fld}", problem)
     return spec
 
 
-def _links(c: _Ctx, d: Any, names: set[str]) -> tuple[LinkSpec, LinkSpec, LinkSpec, dict[str, LinkSpec]]:
+def _links(c: _Ctx, t: LinksTable, names: set[str]) -> tuple[LinkSpec, LinkSpec, LinkSpec, dict[str, LinkSpec]]:
     """``[links]``: defaults of the agent→agent edges; ``[links.sensors]``: defaults of the
     world→agent sensor links (zero unless set: on-board sensors); ``[links.commands]``:
     defaults of the agent→world command links (zero unless set); ``[links.per_link."j->i"]``,
     ``"world->i"`` and ``"i->world"``: one link each, on top of its kind's defaults."""
-    edges = _link_spec(c, d, "links", LinkSpec(), {"per_link", "sensors", "commands"})
-    sensors = _link_spec(c, d.get("sensors", {}), "links.sensors", LinkSpec())
-    commands = _link_spec(c, d.get("commands", {}), "links.commands", LinkSpec())
+    edges, sensors, commands = _spec(c, t, "links"), _spec(c, t.sensors, "links.sensors"), _spec(c, t.commands, "links.commands")
     over: dict[str, LinkSpec] = {}
-    per = c.table(d.get("per_link", {}), "links.per_link", names)
+    per = c.table(t.per_link, "links.per_link", names)
     for name, sub in per.items():
         base = sensors if name.startswith("world->") else commands if name.endswith("->world") else edges
-        over[name] = _link_spec(c, sub, f'links.per_link."{name}"', base)
+        f = f'links.per_link."{name}"'
+        over[name] = _spec(c, c.typed(sub, f, LinkTable, {k: getattr(base, k) for k in LinkTable.__struct_fields__}), f)
     return edges, sensors, commands, over

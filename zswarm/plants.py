@@ -1,21 +1,27 @@
-"""The world's plants as a scenario configures them (``[world] plant``, ``[world.commands]``,
-``[world] sensors``, an agent's inertia ``J``); world/plant.py implements them."""
+"""The world as a scenario configures it: ``[world]`` (its step, sensor rate, plant, sensors,
+``[world.commands]``, ``[world.formation]``), ``[noise]``, an agent's inertia ``J``; the
+types of those tables (zswarm.schema), and the checks a type cannot make; world/plant.py
+implements the plants."""
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Mapping
-from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
+from typing import Annotated, Any, Literal
 
+import msgspec
 import numpy as np
 
 from zswarm.algorithm import AlgorithmSpec
 from zswarm.reader import _Ctx
+from zswarm.schema import Table, bounds
+from zswarm.wire import MAX_ABS
 
 # The world's plants and command policy (world/plant.py); imported lazily there to keep
 # the loader free of the world package's numerics.
-PLANTS = ("prescribed", "rigid_body", "kinematic")
+Plant = Literal["prescribed", "rigid_body", "kinematic"]
+PLANTS: tuple[str, ...] = typing.get_args(Plant)
 
 
 PLANT_INPUTS: Mapping[str, Mapping[str, tuple[int, ...]]] = MappingProxyType(
@@ -23,45 +29,75 @@ PLANT_INPUTS: Mapping[str, Mapping[str, tuple[int, ...]]] = MappingProxyType(
 )
 
 
-COMMAND_POLICIES = ("zero", "hold")
+Policy = Literal["zero", "hold"]
+COMMAND_POLICIES: tuple[str, ...] = typing.get_args(Policy)
 
 
-@dataclass(frozen=True, slots=True)
-class CommandPolicy:
+class CommandPolicy(Table, frozen=True, kw_only=False):
     """``[world.commands]``: how old a command may be, and what happens past that age (world/plant.py)."""
 
-    max_age: float = 0.5  # s
-    policy: str = "zero"
+    max_age: Annotated[float, bounds(positive=True)] = 0.5  # s
+    policy: Policy = "zero"
 
 
-def _plant(c: _Ctx, w: dict[str, Any], info: AlgorithmSpec, algo: str, formation: bool) -> tuple[str, CommandPolicy, frozenset[str] | None]:
+# A truth step under 1 µs is a million steps per simulated second (1e-300 never ended).
+MIN_WORLD_STEP_S = 1e-6
+# Noise added to a measured value: 10 σ within the wire's ±MAX_ABS (a sample beyond it is
+# dropped as malformed: gyro_var = 1e30 gave 0 steps and a run that read completed).
+MAX_NOISE_VAR = (0.1 * MAX_ABS) ** 2
+_ADDED_NOISE = bounds(nonneg=True, maxv=MAX_NOISE_VAR, why=f"10 standard deviations within the wire's ±{MAX_ABS:g}")
+
+
+class FormationTable(Table, frozen=True, kw_only=True):
+    """``[world.formation]``: p_i(t) = R(t)^T p_i(0), R(t) = Ra(rate·t, axis) (§3.3.4, §4.5); an
+    axis and an expression, read by hand (zswarm.reader)."""
+
+    axis: Any
+    rate: Any
+
+
+class WorldTable(Table, frozen=True, kw_only=True):
+    """``[world]``: the truth's step and sensor rate, the plant, the sensors fitted."""
+
+    step: Annotated[float, bounds(positive=True, maxv=0.001, minv=MIN_WORLD_STEP_S)] = 0.001  # s
+    sensor_rate: Annotated[float, bounds(positive=True)] = 200.0  # Hz, <= 1/step (checked by the loader)
+    formation: FormationTable | None = None
+    plant: Plant | None = None  # None: the plant that reads what the algorithm sends
+    sensors: Any = None  # a list of sensor names (zswarm.algorithm.SENSORS), checked in _plant
+    commands: dict[str, Any] = msgspec.field(default_factory=dict)  # a CommandPolicy, read once the plant is known to take commands
+
+
+class NoiseTable(Table, frozen=True, kw_only=True):
+    """``[noise]``: variances as the papers state them (attitude: R_i exp([n_R]^x), §5.6;
+    rel_pos: ⁱp_ij + n per axis, m², De Carli et al. (2))."""
+
+    gyro_var: Annotated[float, _ADDED_NOISE] = 0.0
+    bearing_var: Annotated[float, bounds(nonneg=True)] = 0.0
+    velocity_var: Annotated[float, _ADDED_NOISE] = 0.0
+    rel_att_var: Annotated[float, bounds(nonneg=True)] = 0.0
+    attitude_var: Annotated[float, bounds(nonneg=True)] = 0.0
+    rel_pos_var: Annotated[float, _ADDED_NOISE] = 0.0
+
+
+def _plant(c: _Ctx, w: WorldTable, info: AlgorithmSpec, algo: str) -> tuple[str, CommandPolicy, frozenset[str] | None]:
     """``[world] plant``, ``[world.commands]`` and ``[world] sensors``, checked against what the
     algorithm sends (SPEC.command) and measures (SPEC.sensors)."""
     from zswarm.algorithm import SENSORS
 
     sends = {k: f.shape for k, f in info.command.items()}
-    default = next((p for p in PLANTS if sends and dict(PLANT_INPUTS[p]) == sends), "prescribed")
-    plant = c.string(w.get("plant", default), "world.plant")
-    if plant not in PLANTS:
-        raise c.err("world.plant", f"must be one of {', '.join(PLANTS)}", plant)
+    plant: str = w.plant or next((p for p in PLANTS if sends and dict(PLANT_INPUTS[p]) == sends), "prescribed")
     reads = dict(PLANT_INPUTS[plant])
     if sends and sends != reads:
         raise c.err("world.plant", f"{algo} sends {sends or 'nothing'} on cmd/<i>, but the {plant!r} plant reads {reads or 'nothing'}", plant)
-    if plant != "prescribed" and formation:
+    if plant != "prescribed" and w.formation is not None:
         raise c.err("world.formation", f"a formation is a prescribed motion; the {plant!r} plant moves by its own dynamics")
-    cm = c.table(w.get("commands", {}), "world.commands", {"max_age", "policy"})
+    cm = c.table(w.commands, "world.commands", set(CommandPolicy.__struct_fields__))
     if cm and plant == "prescribed":
         raise c.err("world.commands", "the prescribed plant takes no commands")
-    base = CommandPolicy()
-    policy = CommandPolicy(
-        c.num(cm.get("max_age", base.max_age), "world.commands.max_age", positive=True),
-        c.string(cm.get("policy", base.policy), "world.commands.policy"),
-    )
-    if policy.policy not in COMMAND_POLICIES:
-        raise c.err("world.commands.policy", f"must be one of {', '.join(COMMAND_POLICIES)}", policy.policy)
+    policy = c.typed(cm, "world.commands", CommandPolicy)
     fitted = None
-    if "sensors" in w:
-        raw = w["sensors"]
+    if w.sensors is not None:
+        raw = w.sensors
         if not isinstance(raw, list) or not all(isinstance(x, str) for x in raw):
             raise c.err("world.sensors", f"must be a list of sensor names ({', '.join(SENSORS)})", raw)
         for x in raw:

@@ -12,16 +12,18 @@ command-line override is at fault).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from zswarm import so3
 from zswarm.expr import Expr, ExprError, parse
+from zswarm.schema import Bounds, convert
 from zswarm.text import shown, toml_key
+
+T = TypeVar("T")
 
 
 class ScenarioError(ValueError):
@@ -60,20 +62,16 @@ class _Ctx:
         return d
 
     def num(self, v: Any, fld: str, *, positive: bool = False, nonneg: bool = False, maxv: float | None = None, minv: float | None = None) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.err(fld, "must be a number", v)
-        x = float(v)
-        if not math.isfinite(x):
-            raise self.err(fld, "must be finite", v)
-        if positive and x <= 0:
-            raise self.err(fld, "must be > 0", v)
-        if nonneg and x < 0:
-            raise self.err(fld, "must be >= 0", v)
-        if maxv is not None and x > maxv:
-            raise self.err(fld, f"must be <= {maxv:g}", v)
-        if minv is not None and x < minv:
-            raise self.err(fld, f"must be >= {minv:g}", v)
-        return x
+        """A finite number within the bounds, worded as the schema words them (zswarm.schema.Bounds)."""
+        problem = Bounds(positive=positive, nonneg=nonneg, maxv=maxv, minv=minv).problem(v)
+        if problem is not None:
+            raise self.err(fld, problem, v)
+        return float(v)
+
+    def typed(self, d: Any, fld: str, typ: type[T], defaults: Mapping[str, Any] | None = None) -> T:
+        """Table ``d`` as its declared type (zswarm.schema.convert): unknown keys, types and
+        bounds checked by msgspec, every problem worded ``file: field: problem (got X)``."""
+        return convert(self, d, fld, typ, defaults)
 
     def integer(self, v: Any, fld: str) -> int:
         if isinstance(v, bool) or not isinstance(v, int):

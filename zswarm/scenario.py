@@ -1,4 +1,5 @@
-"""Scenario files: TOML -> frozen dataclasses, validated.
+"""Scenario files: TOML -> the typed schema (:class:`ScenarioFile`, each table of the type
+its subsystem declares: zswarm.schema) -> a frozen :class:`Scenario`, validated.
 
 Every error reads ``file: field: problem (got X)``.  See ``topologies/`` for
 examples and the README for the full format.
@@ -39,26 +40,29 @@ overridden field names the flag instead of the file.
 
 from __future__ import annotations
 
+import functools
 import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType, ModuleType
-from typing import Any
+from typing import Annotated, Any
+
+import msgspec
 
 from zswarm.agent_config import AgentSpec, Estimate, _agent
-from zswarm.algorithm import STALE_POLICIES, AlgorithmError, AlgorithmSpec, StalePolicy, resolve
+from zswarm.algorithm import AlgorithmError, AlgorithmSpec, StalePolicy, resolve
 from zswarm.clock import ClockSpec, _clock
 from zswarm.faults import APPEND_FAULT, FAULT_KINDS, Fault, _faults, fault_actions, fault_override, parse_fault
 from zswarm.graph import GraphError, _sensing, _tree, check_leader_follower
-from zswarm.links import LinkSpec, _links
+from zswarm.links import LinkSpec, LinksTable, _links
 from zswarm.motion_checks import _check_finite_over_run, _snapshots
 from zswarm.overrides import Override, _apply, parse_field, parse_override, parse_value, render
-from zswarm.plants import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy, _plant
+from zswarm.plants import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy, NoiseTable, WorldTable, _plant
 from zswarm.reader import ScenarioError, _Ctx, _user_code
+from zswarm.schema import Table, bounds
 from zswarm.text import shown
-from zswarm.wire import MAX_ABS
 
 # Re-exported: the scenario's parts live with their subsystems; importers may keep asking here.
 __all__ = [
@@ -234,10 +238,53 @@ def load(path: str | Path, overrides: Sequence[Override] = ()) -> Scenario:
     return loads(text, p, overrides)
 
 
-# Bounds that keep a run finite: 1e6 s is 11.6 days of world time (an hour's soak is 3600 s),
-# and a truth step under 1 µs is a million steps per simulated second (1e-300 never ended).
+# A bound that keeps a run finite: 1e6 s is 11.6 days of world time (an hour's soak is 3600 s).
 MAX_DURATION_S = 1e6
-MIN_WORLD_STEP_S = 1e-6
+SAFE_NAME = re.compile(r"[\w.\-]{1,100}")
+MAX_NAME = 100
+
+
+class Header(Table, frozen=True, kw_only=True):
+    """``[scenario]``."""
+
+    name: str
+    description: str = ""
+    duration: Annotated[float, bounds(positive=True, maxv=MAX_DURATION_S)]  # s (1e300 was accepted and the world ran until killed)
+    seed: int = 0
+
+
+class AlgorithmTable(Table, frozen=True, kw_only=True):
+    """``[algorithm]``: its gains, params and stale policy are read once the algorithm is known
+    (their fields and defaults are its SPEC's)."""
+
+    name: str
+    gains: dict[str, Any] = msgspec.field(default_factory=dict)  # as _gains_type(SPEC.gains)
+    params: Any = None  # read by SPEC.params
+    stale: dict[str, Any] = msgspec.field(default_factory=dict)  # a StalePolicy over SPEC.stale
+
+
+class ScenarioFile(Table, frozen=True, kw_only=True):
+    """A scenario file: each table of the type its subsystem declares.  The agents, faults and
+    graph are read by hand (rotations, expressions, the papers' graph assumptions)."""
+
+    agents: Any
+    algorithm: AlgorithmTable
+    scenario: Header
+    world: WorldTable = WorldTable()
+    noise: NoiseTable = NoiseTable()
+    clock: dict[str, Any] = msgspec.field(default_factory=dict)  # a ClockSpec, read with the check a type cannot make (zswarm.clock._clock)
+    graph: Any = None
+    links: LinksTable = LinksTable()
+    faults: Any = msgspec.field(default_factory=list)
+
+
+@functools.cache
+def _gains_type(declared: tuple[tuple[str, float | None], ...]) -> type[Table]:
+    """``[algorithm.gains]`` of an algorithm whose SPEC.gains are ``declared``: each a number
+    > 0, required when its default is None."""
+    fields = [(k, Annotated[float, bounds(positive=True)]) if d is None else (k, Annotated[float, bounds(positive=True)], d) for k, d in declared]
+    gains: type[Table] = msgspec.defstruct("Gains", fields, bases=(Table,), frozen=True, kw_only=True)  # type: ignore[assignment]  # a Table: its base
+    return gains
 
 
 def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ()) -> Scenario:
@@ -266,20 +313,15 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         text = render(doc, path, overrides)
     c = _Ctx(path, {o.field: o.label for o in overrides})
 
-    c.table(doc, "", {"scenario", "algorithm", "world", "noise", "clock", "graph", "links", "agents", "faults"}, {"scenario", "algorithm", "agents"})
-    sc = c.table(doc["scenario"], "scenario", {"name", "description", "duration", "seed"}, {"name", "duration"})
-    name = c.string(sc["name"], "scenario.name")
+    sf = c.typed(doc, "", ScenarioFile)
+    name = sf.scenario.name
     # The results folder is runs/<name>-<stamp>: "тест ☃/../../x" wrote outside runs/ and a NUL
     # was a traceback.  A file name of letters (any script), digits, '.', '_', '-'.
     if not SAFE_NAME.fullmatch(name) or name.startswith("."):
         raise c.err("scenario.name", f"must be a file name of at most {MAX_NAME} letters, digits, '.', '_' or '-', not starting with '.' (it names the results folder)", name)
-    description = c.string(sc.get("description", ""), "scenario.description")
-    # At most MAX_DURATION_S: 1e300 was accepted and the world ran until killed.
-    duration = c.num(sc["duration"], "scenario.duration", positive=True, maxv=MAX_DURATION_S)
-    seed = c.integer(sc.get("seed", 0), "scenario.seed")
+    description, duration, seed = sf.scenario.description, sf.scenario.duration, sf.scenario.seed
 
-    al = c.table(doc["algorithm"], "algorithm", {"name", "gains", "params", "stale"}, {"name"})
-    algo = c.string(al["name"], "algorithm.name")
+    algo = sf.algorithm.name
     near = path if Path(path).is_file() else None
     try:
         module, module_dir = resolve(algo, near)
@@ -292,51 +334,25 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
             out = leader_module.SPEC.edge_out.get(fname)
             if not fspec.optional and (out is None or out.shape != fspec.shape):
                 raise c.err("algorithm.name", f"its leader algorithm {info.leader!r} does not write the edge field {fname!r} {fspec.shape} it reads", algo)
-    g = c.table(al.get("gains", {}), "algorithm.gains", set(info.gains))
-    gains: dict[str, float] = {}
-    for k, default in info.gains.items():
-        if k not in g:
-            if default is None:
-                raise c.err(f"algorithm.gains.{k}", "missing")
-            gains[k] = default
-        else:
-            gains[k] = c.num(g[k], f"algorithm.gains.{k}", positive=True)
-    params = _params(c, al.get("params"), info)
-    st = c.table(al.get("stale", {}), "algorithm.stale", {"max_age", "policy"})
-    stale = StalePolicy(
-        c.num(st.get("max_age", info.stale.max_age), "algorithm.stale.max_age", positive=True),
-        c.string(st.get("policy", info.stale.policy), "algorithm.stale.policy"),
-    )
-    if stale.policy not in STALE_POLICIES:
-        raise c.err("algorithm.stale.policy", f"must be one of {', '.join(STALE_POLICIES)}", stale.policy)
+    gains = msgspec.structs.asdict(c.typed(sf.algorithm.gains, "algorithm.gains", _gains_type(tuple(info.gains.items()))))
+    params = _params(c, sf.algorithm.params, info)
+    stale = c.typed(sf.algorithm.stale, "algorithm.stale", StalePolicy, msgspec.structs.asdict(info.stale))
 
-    w = c.table(doc.get("world", {}), "world", {"step", "sensor_rate", "formation", "plant", "sensors", "commands"})
-    step = c.num(w.get("step", 0.001), "world.step", positive=True, maxv=0.001, minv=MIN_WORLD_STEP_S)
-    sensor_rate = c.num(w.get("sensor_rate", 200.0), "world.sensor_rate", positive=True, maxv=1.0 / step)
+    w = sf.world
+    step = w.step
+    # A bound that depends on another field: at most one sample per truth step.
+    sensor_rate = c.num(w.sensor_rate, "world.sensor_rate", maxv=1.0 / step)
     formation = None
-    if "formation" in w:
-        fm = c.table(w["formation"], "world.formation", {"axis", "rate"}, {"axis", "rate"})
-        ax = c.axis(fm["axis"], "world.formation.axis")
-        rate = float(c.expr(fm["rate"], "world.formation.rate")(0.0))
+    if w.formation is not None:
+        ax = c.axis(w.formation.axis, "world.formation.axis")
+        rate = float(c.expr(w.formation.rate, "world.formation.rate")(0.0))
         formation = Formation((float(ax[0]), float(ax[1]), float(ax[2])), rate)
-    plant, commands, fitted = _plant(c, w, info, algo, formation is not None)
+    plant, commands, fitted = _plant(c, w, info, algo)
+    nz = sf.noise
 
-    nz = c.table(doc.get("noise", {}), "noise", {"gyro_var", "bearing_var", "velocity_var", "rel_att_var", "attitude_var", "rel_pos_var"})
-    gyro_var = c.num(nz.get("gyro_var", 0.0), "noise.gyro_var", nonneg=True)
-    bearing_var = c.num(nz.get("bearing_var", 0.0), "noise.bearing_var", nonneg=True)
-    velocity_var = c.num(nz.get("velocity_var", 0.0), "noise.velocity_var", nonneg=True)
-    rel_att_var = c.num(nz.get("rel_att_var", 0.0), "noise.rel_att_var", nonneg=True)
-    attitude_var = c.num(nz.get("attitude_var", 0.0), "noise.attitude_var", nonneg=True)
-    rel_pos_var = c.num(nz.get("rel_pos_var", 0.0), "noise.rel_pos_var", nonneg=True)
-    # Noise added to a measured value: 10 σ within the wire's ±MAX_ABS (a sample beyond it is
-    # dropped as malformed: gyro_var = 1e30 gave 0 steps and a run that read completed).
-    for fld_, v_ in (("gyro_var", gyro_var), ("velocity_var", velocity_var), ("rel_pos_var", rel_pos_var)):
-        if v_ > MAX_NOISE_VAR:
-            raise c.err(f"noise.{fld_}", f"must be <= {MAX_NOISE_VAR:g} (10 standard deviations within the wire's ±{MAX_ABS:g})", v_)
+    default_clock = _clock(c, sf.clock, "clock", ClockSpec())
 
-    default_clock = _clock(c, doc.get("clock", {}), "clock", ClockSpec())
-
-    raw_agents = doc["agents"]
+    raw_agents = sf.agents
     if not isinstance(raw_agents, list) or not raw_agents:
         raise c.err("agents", "must be a non-empty array of tables ([[agents]])", raw_agents)
     agents: list[AgentSpec] = []
@@ -383,7 +399,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
     elif info.graph == "sensing":
         agents = _sensing(c, doc, algo, agents, seen)
     else:
-        oriented, oriented_from = _tree(c, doc.get("graph"), agents, seen)
+        oriented, oriented_from = _tree(c, sf.graph, agents, seen)
         nbrs = {a.id: tuple(sorted({t for h, t in oriented if h == a.id} | {h for h, t in oriented if t == a.id})) for a in agents}
         out = []
         for a in agents:
@@ -406,8 +422,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         agents = out
 
     link_names = {f"world->{a.id}" for a in agents} | {f"{j}->{a.id}" for a in agents for j in a.neighbors} | ({f"{a.id}->world" for a in agents} if info.command else set())
-    links, sensor_links, command_links, link_overrides = _links(c, doc.get("links", {}), link_names)
-    faults = _faults(c, doc.get("faults", []), duration, {a.id for a in agents}, link_names)
+    links, sensor_links, command_links, link_overrides = _links(c, sf.links, link_names)
+    faults = _faults(c, sf.faults, duration, {a.id for a in agents}, link_names)
 
     return Scenario(
         path=path,
@@ -419,12 +435,12 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         gains=MappingProxyType(gains),
         step=step,
         sensor_rate=sensor_rate,
-        gyro_var=gyro_var,
-        bearing_var=bearing_var,
+        gyro_var=nz.gyro_var,
+        bearing_var=nz.bearing_var,
         agents=tuple(agents),
         text=text,
-        velocity_var=velocity_var,
-        rel_att_var=rel_att_var,
+        velocity_var=nz.velocity_var,
+        rel_att_var=nz.rel_att_var,
         formation=formation,
         params=params,
         oriented=oriented,
@@ -437,19 +453,14 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         plant=plant,
         commands=commands,
         command_links=command_links,
-        attitude_var=attitude_var,
-        rel_pos_var=rel_pos_var,
+        attitude_var=nz.attitude_var,
+        rel_pos_var=nz.rel_pos_var,
         sensors_fitted=fitted,
         module=module,
         leader_module=leader_module,
         module_dir=module_dir,
         faults=faults,
     )
-
-
-MAX_NOISE_VAR = (0.1 * MAX_ABS) ** 2
-SAFE_NAME = re.compile(r"[\w.\-]{1,100}")
-MAX_NAME = 100
 
 
 def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Any:

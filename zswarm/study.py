@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from zswarm import report
@@ -28,7 +29,7 @@ def refine(sc: Scenario, agent_rate: float = 1000.0, sensor_rate: float = 2000.0
     """The same scenario with every agent ticking at ``agent_rate`` and sensors at ``sensor_rate``;
     parts with rates of their own (De Carli's 200/100/50 Hz) speed up with the agent's clock."""
     scale = agent_rate / max(a.clock.rate for a in sc.agents)
-    agents = tuple(dataclasses.replace(a, clock=dataclasses.replace(a.clock, rate=agent_rate)) for a in sc.agents)
+    agents = tuple(dataclasses.replace(a, clock=msgspec.structs.replace(a.clock, rate=agent_rate)) for a in sc.agents)
     return dataclasses.replace(sc, agents=agents, sensor_rate=sensor_rate, step=min(sc.step, 1.0 / sensor_rate), part_rate_scale=sc.part_rate_scale * scale)
 
 

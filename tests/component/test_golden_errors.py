@@ -9,7 +9,7 @@ an agent's [agents.clock]) is set to each of a list of bad values, both in the f
 ``--set``; every table gets an unknown key, loses each required key and is replaced by a
 non-table.  The message each gives (or "ok" when the value is accepted) is compared with
 tests/data/golden_errors.json, written by ``ZSWARM_GOLDEN_WRITE=1 pytest
-tests/component/test_golden_errors.py`` on the commit before the schema (d75b7e0's parent).
+tests/component/test_golden_errors.py`` on the hand-written loader, before the schema (e07275c).
 """
 
 from __future__ import annotations
