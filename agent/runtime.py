@@ -245,7 +245,7 @@ class Inbox:
 
     def samples(self, name: str, j: int | None = None) -> list[tuple[float, np.ndarray]]:
         """``(acquisition world time, value)`` of a field of recent sensor packets ("gyro",
-        "vel"), or with ``j``, of a per-neighbour field's entry for j (``rel_att``)."""
+        "velocity"), or with ``j``, of a per-neighbour field's entry for j (``rel_att``)."""
         if j is None:
             series = self._series.get(name)
             return list(series) if series is not None else []
@@ -253,7 +253,7 @@ class Inbox:
 
     def vectors(self, key: int | str) -> list[tuple[float, np.ndarray, np.ndarray]]:
         """``(acquisition world time, body-frame vector, gyro)`` of recent sensor packets: the
-        bearing toward agent ``key`` (int) or the packet field ``key`` ("vel_body")."""
+        bearing toward agent ``key`` (int) or the packet field ``key`` ("velocity_body")."""
         if isinstance(key, int):
             return [(p["t"], p["bearings"][key], p["gyro"]) for p in self.packets if key in p.get("bearings", ())]
         return [(p["t"], p[key], p["gyro"]) for p in self.packets if key in p]
@@ -403,7 +403,7 @@ class TickView:
         return all(inbox.get(link) is not None for link in self._links.values())
 
     def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
-        """Recent samples of a rate ("gyro", "vel") on this agent's clock; once per tick."""
+        """Recent samples of a rate ("gyro", "velocity") on this agent's clock; once per tick."""
         key = ("s", name)
         if key not in self._cache:
             samples = self._node.inbox.samples(name)

@@ -149,15 +149,15 @@ class World:
             if "rel_att" in want:
                 m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
             if V is not None and "velocity" in want:
-                m["vel"] = sensors.velocity(V[a], self.velocity_std, rng)
+                m["velocity"] = sensors.velocity(V[a], self.velocity_std, rng)
             if "velocity_body" in want:
-                m["vel_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
+                m["velocity_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
             # Own attitude: R_i exp([n_R]^x) (§5.6; exact for the thesis' leaders, who
             # know their pose).  Drawn last: earlier scenarios keep their measurements.
             if "attitude" in want:
-                m["R"] = sensors.attitude(R[a], self.attitude_std, rng)
+                m["attitude"] = sensors.attitude(R[a], self.attitude_std, rng)
             if "position" in want:
-                m["p"] = p[a]
+                m["position"] = p[a]
             if "rel_pos" in want:
                 # toward the robots i senses (Scenario.sensed): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}

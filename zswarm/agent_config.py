@@ -14,6 +14,7 @@ import numpy as np
 from zswarm.algorithm import AlgorithmSpec, InitialField
 from zswarm.clock import ClockSpec, _clock
 from zswarm.expr import Expr
+from zswarm.graph import SHAPES
 from zswarm.plants import _inertia
 from zswarm.reader import _Ctx, _user_code
 from zswarm.text import toml_key
@@ -68,7 +69,7 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
         d,
         f,
         {"id", "role", "p", "R", "omega", "v", "gyro_bias", "neighbors", "k_neighbors", "gains", "estimate", "clock"} | ({"J"} if rigid else set()) | {n for n, fi in info.initial.items() if fi.table == "agent"},
-        ({"id", "omega"} if rigid else {"id", "p"} if kin else {"id", "p", "omega"}) | ({"role"} if info.graph == "leader_follower" else set()),
+        ({"id", "omega"} if rigid else {"id", "p"} if kin else {"id", "p", "omega"}) | ({"role"} if SHAPES[info.graph].roles else set()),
     )
     if kin:
         for key in ("omega", "v"):
@@ -81,8 +82,8 @@ def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpe
     role = c.string(d.get("role", "follower"), f"{f}.role")
     if role not in ("leader", "follower"):
         raise c.err(f"{f}.role", "must be 'leader' or 'follower'", role)
-    if info.graph == "tree" and role != "follower":
-        raise c.err(f"{f}.role", "the §4 observers have no leaders: every agent estimates its attitude (up to a common rotation)", role)
+    if SHAPES[info.graph].leaderless and role != "follower":
+        raise c.err(f"{f}.role", SHAPES[info.graph].leaderless, role)
     if role == "leader" and not leaders:
         raise c.err(f"{f}.role", "this algorithm has no leader role (its SPEC.leader is None)", role)
     p = c.vec3(d.get("p", [0, 0, 0]), f"{f}.p")

@@ -54,17 +54,18 @@ BUILTIN_PACKAGE = "agent.algorithms."  # where zswarm's own algorithms live (reg
 REPORT_FAMILY_GROUP = "zswarm.report_families"
 BUILTIN_FAMILIES = "zswarm.report.families."  # zswarm's own report families (registered in pyproject.toml)
 
-# The sensor fields the world can measure, and the sensor-packet key each one fills.
+# The sensors the world can fit, each with what it measures: an algorithm declares them by
+# name (SPEC.sensors) and reads each under the same name in its sensor packet (View.sense).
 SENSORS: Mapping[str, str] = MappingProxyType(
     {
-        "gyro": "gyro",  # body-frame ω_i + bias + noise
-        "bearings": "bearings",  # {j: b_ij^i} toward every graph neighbour
-        "rel_att": "rel_att",  # {j: R_ij = R_i^T R_j} for every graph neighbour
-        "velocity": "vel",  # inertial v_i
-        "velocity_body": "vel_body",  # body-frame v_i^i
-        "attitude": "R",  # own attitude R_i
-        "position": "p",  # own position p_i
-        "rel_pos": "rel_pos",  # {j: ⁱp_ij = R_i^T (p_j − p_i)} toward the robots i senses, agents[].neighbors (De Carli et al. (2))
+        "gyro": "body-frame ω_i + bias + noise",
+        "bearings": "{j: b_ij^i} toward every graph neighbour",
+        "rel_att": "{j: R_ij = R_i^T R_j} for every graph neighbour",
+        "velocity": "inertial v_i",
+        "velocity_body": "body-frame v_i^i",
+        "attitude": "own attitude R_i",
+        "position": "own position p_i",
+        "rel_pos": "{j: ⁱp_ij = R_i^T (p_j − p_i)} toward the robots i senses, agents[].neighbors (De Carli et al. (2))",
     }
 )
 GRAPHS = ("any", "leader_follower", "tree", "sensing")
@@ -323,7 +324,7 @@ class View(Protocol):
     # transit (both measured), plus half a period; period/2 in sim; 0 on a catch-up step, whose command is not sent)
     dt: float  # the step being taken (0 when the view is begun, before any part steps)
     first: bool  # the step from the initial estimate (t = 0) to the first measurement: prediction only, no neighbours
-    sense: Mapping[str, Any]  # newest sensor packet at or before t (fields by SENSORS' keys)
+    sense: Mapping[str, Any]  # newest sensor packet at or before t (fields named as SENSORS)
     sense_t: float  # its acquisition time on this clock
     sense_t_world: float  # the same in world time (the packet's stamp)
     align: np.ndarray  # rotates a body-frame vector sampled at sense_t to the body frame at t (gyro; I when t == sense_t)
@@ -340,7 +341,7 @@ class View(Protocol):
         ...
 
     def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
-        """Mean over [t0, t1] of a sensed rate ("gyro", "vel"): :func:`zswarm.timing.interval_mean_rate`."""
+        """Mean over [t0, t1] of a sensed rate ("gyro", "velocity"): :func:`zswarm.timing.interval_mean_rate`."""
         ...
 
     def body_rate(self, t0: float, t1: float) -> np.ndarray:
@@ -354,7 +355,7 @@ class View(Protocol):
         ...
 
     def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
-        """Samples ``(time on this clock, value)`` of the sensor field ``name`` ("R", "gyro", ...)
+        """Samples ``(time on this clock, value)`` of the sensor field ``name`` ("attitude", "gyro", ...)
         acquired in ``(t0, t1]``, with the newest one at or before t0 first when there is one."""
         ...
 
@@ -365,7 +366,7 @@ class View(Protocol):
 
     def body_vector(self, key: int | str, t_world: float, unit: bool = True) -> np.ndarray | None:
         """A body-frame vector at world time t_world from the sensor history: the bearing
-        toward agent ``key`` (int) or a sensed vector field ("vel_body"):
+        toward agent ``key`` (int) or a sensed vector field ("velocity_body"):
         :func:`zswarm.timing.body_vector_at`."""
         ...
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import procutil
+from zswarm.graph import SHAPES
 from zswarm.scenario import Scenario, ScenarioError, loads
 
 HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}
@@ -194,14 +195,14 @@ def _agents(fam: Family, rng: np.random.Generator, n: int, graph: str, in_degree
     extra: dict[str, Any] = {}
     agents: list[dict[str, Any]] = [{"id": i} for i in range(1, n + 1)]
     edges: list[list[int]] = []
-    if fam.graph == "tree":
+    if SHAPES[fam.graph].oriented:
         edges = _tree_edges(rng, n, graph)
         extra["graph"] = {"edges": edges}
     for k, a in enumerate(agents):
         i = k + 1
         if not rigid:
             a["p"] = [_r(x) for x in P[k]]
-        if fam.graph == "leader_follower":
+        if SHAPES[fam.graph].roles:
             a["role"] = "leader" if i <= 2 else "follower"
             if i > 2:
                 a["neighbors"] = sorted(int(j) for j in rng.choice(np.arange(1, i), size=min(in_degree, i - 1), replace=False))

@@ -7,7 +7,8 @@ Edges are directed ``(j, i)``: agent ``j`` sends to agent ``i`` and ``j`` is an
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -16,6 +17,25 @@ from zswarm.reader import ScenarioError, _Ctx
 
 if TYPE_CHECKING:
     from zswarm.agent_config import AgentSpec
+
+
+@dataclass(frozen=True, slots=True)
+class Shape:
+    """What an algorithm's graph (``SPEC.graph``) asks of a scenario's agents."""
+
+    roles: bool = False  # every agent states its role, leader or follower (Assumptions 3.2/3.4)
+    leaderless: str = ""  # why no agent may be a leader; "": one may, when the algorithm has a leader role
+    oriented: bool = False  # the edges are the oriented tree of [graph] (Assumption 4.2), edge k the k-th
+
+
+SHAPES: Mapping[str, Shape] = MappingProxyType(
+    {
+        "any": Shape(),
+        "leader_follower": Shape(roles=True),
+        "tree": Shape(leaderless="the §4 observers have no leaders: every agent estimates its attitude (up to a common rotation)", oriented=True),
+        "sensing": Shape(),  # De Carli et al.: directed sensing (agents[].neighbors), undirected communication
+    }
+)
 
 
 class GraphError(ValueError):

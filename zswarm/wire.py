@@ -20,7 +20,7 @@ import numpy as np
 from zswarm import keys
 from zswarm.so3 import _rotation_ok, rotations_ok
 
-VERSION = 3  # 2: edge messages carry the fields their algorithm declares (open schema); 3: inc, bounds
+VERSION = 4  # 2: edge messages carry the fields their algorithm declares (open schema); 3: inc, bounds; 4: sense fields named as the sensors (velocity, velocity_body, attitude, position)
 
 
 class MessageError(ValueError):
@@ -55,10 +55,11 @@ MAX_STR = 4096
 # {int: float}, "jumps" for [[edge k, t, ξ before, ξ after], ...], "counters" (a map of names to
 # numbers, strings, booleans, None, lists and maps of those: bounded, see _counters)
 SCHEMAS: Mapping[str, Mapping[str, Any]] = {
-    # world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij,
-    # inertial velocity v_i (vel), body-frame velocity v_i^i (vel_body); a leader's own R, p;
-    # body-frame relative positions ⁱp_ij (rel_pos, De Carli et al. (2))
-    "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "vel": (3,), "vel_body": (3,), "R": (3, 3), "p": (3,), "rel_pos": "vecmap"},
+    # world -> agent i, each field named as the sensor is (zswarm.algorithm.SENSORS): gyro,
+    # body-frame bearings b_ij^i, relative attitudes R_ij, inertial velocity v_i, body-frame
+    # velocity v_i^i, own attitude R_i and position p_i, body-frame relative positions ⁱp_ij
+    # (rel_pos, De Carli et al. (2))
+    "sense": {"gyro": (3,), "bearings": "vecmap", "rel_att": "matmap", "velocity": (3,), "velocity_body": (3,), "attitude": (3, 3), "position": (3,), "rel_pos": "vecmap"},
     # agent j -> agent i along edge j->i: the sender's clock, then the fields its
     # algorithm writes on out-edges (SPEC.edge_out: numbers or float64 arrays by
     # name; OPEN below), validated by the receiver against its SPEC.edge_in
@@ -85,7 +86,7 @@ _F8 = np.dtype("<f8")
 ENVELOPE = ("v", "type", "src", "seq", "inc", "t")
 assert not any(k in ENVELOPE for schema in SCHEMAS.values() for k in schema), "a field shadows the envelope"
 OPTIONAL = {
-    "sense": {"gyro", "bearings", "rel_att", "vel", "vel_body", "R", "p", "rel_pos"},
+    "sense": {"gyro", "bearings", "rel_att", "velocity", "velocity_body", "attitude", "position", "rel_pos"},
     "est": {"R_hat", "p_hat", "extra", "xi", "jumps", "agent_jumps"},
     "truth": {"tau", "u"},
     "start": {"mac"},
@@ -722,7 +723,7 @@ def _unit(vecs: dict[int, np.ndarray], k: str) -> None:
 
 # The fields that hold rotations and unit bearings, per type, in the order they are checked
 # (by _semantic here, and on the values it gathers by message()'s _build).
-_ROTATION_FIELDS: Mapping[str, tuple[str, ...]] = {"sense": ("R", "rel_att"), "est": ("R_hat",), "truth": ("R",)}
+_ROTATION_FIELDS: Mapping[str, tuple[str, ...]] = {"sense": ("attitude", "rel_att"), "est": ("R_hat",), "truth": ("R",)}
 _UNIT_FIELDS: Mapping[str, tuple[str, ...]] = {"sense": ("bearings",)}
 
 

@@ -209,7 +209,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 
 def inputs(view: View, gains: Gains) -> Inputs | None:
-    samples = view.series("R", view.t - view.dt, view.t)
+    samples = view.series("attitude", view.t - view.dt, view.t)
     if not samples:
         return None
     rel = tuple((t - view.t, R) for t, R in samples)

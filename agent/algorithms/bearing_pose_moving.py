@@ -57,7 +57,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
 def inputs(view: View, gains: Gains) -> Inputs:
     """ω_i and v_i: the measured rates' means over the step; the neighbours' data at the tick."""
     t0 = view.t - view.dt
-    return Inputs(view.body_rate(t0, view.t), view.mean_rate("vel", t0, view.t), neighbor_data(view))
+    return Inputs(view.body_rate(t0, view.t), view.mean_rate("velocity", t0, view.t), neighbor_data(view))
 
 
 SPEC = replace(

@@ -127,7 +127,7 @@ def edge_messages(view: View, R_hat: Mat3, p_hat: Vec3) -> dict[int, dict[str, A
     """
     out: dict[int, dict[str, Any]] = {}
     bearings = view.sense.get("bearings", {})
-    vel = view.sense.get("vel")
+    vel = view.sense.get("velocity")
     for i in view.out_neighbors:
         b = bearings.get(i)
         if b is None:

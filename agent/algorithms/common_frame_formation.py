@@ -213,7 +213,7 @@ def _nbr_motion(f: Mapping[str, Any], a: float, period: float) -> tuple[np.ndarr
 
 def _own(view: View) -> tuple[np.ndarray, float]:
     s = view.sense
-    v = np.asarray(s.get("vel_body", np.zeros(3)), dtype=float)
+    v = np.asarray(s.get("velocity_body", np.zeros(3)), dtype=float)
     g = s.get("gyro")
     return v, float(g[2]) if g is not None else 0.0
 

@@ -31,7 +31,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 
 def publish(state: State, outputs: Any, view: View) -> Publish | None:
     s = view.sense
-    R, p = s.get("R"), s.get("p")
+    R, p = s.get("attitude"), s.get("position")
     if R is None or p is None:
         return None
     bearings = s.get("bearings", {})
@@ -41,8 +41,8 @@ def publish(state: State, outputs: Any, view: View) -> Publish | None:
         if b is None:
             continue
         edges[i] = {"R_hat": R, "p_hat": p, "b": b}
-        if "vel" in s:
-            edges[i]["vel"] = s["vel"]
+        if "velocity" in s:
+            edges[i]["vel"] = s["velocity"]
     return Publish(edges, {"R_hat": R, "p_hat": p}, t=view.sense_t_world)
 
 

@@ -200,7 +200,7 @@ def edge_messages(view: View, R_hat: Mat3, p_hat: Vec3, xi: Mapping[int, float])
     the receiver bring p̂_i to its tick)."""
     s = view.sense
     bearings = s.get("bearings", {})
-    vel = R_hat @ (view.align @ s["vel_body"]) if "vel_body" in s else None
+    vel = R_hat @ (view.align @ s["velocity_body"]) if "velocity_body" in s else None
     out: dict[int, dict[str, Any]] = {}
     for i in view.out_neighbors:
         fields: dict[str, Any] = {"R_hat": R_hat, "p_hat": p_hat, "w": s["gyro"]}

@@ -85,8 +85,8 @@ def inputs(view: View, gains: Gains) -> Inputs:
     newest sample instead runs ahead of a rotating formation's velocity by
     v̇·dt/2 ≈ 7 mm/s in §4.5, a ≈ 0.05–0.09 m bias on p̃."""
     omega = view.body_rate(view.t - view.dt, view.t)
-    v = view.body_vector("vel_body", view.t_world - view.dt / 2, unit=False)
-    v = view.align @ view.sense["vel_body"] if v is None else exp(-(view.dt / 2) * omega) @ v
+    v = view.body_vector("velocity_body", view.t_world - view.dt / 2, unit=False)
+    v = view.align @ view.sense["velocity_body"] if v is None else exp(-(view.dt / 2) * omega) @ v
     return Inputs(omega, v, edge_data(view, need_xi=True))
 
 

@@ -81,7 +81,7 @@ def initial_state(init: Initial, gains: Gains) -> State:
 def inputs(view: View, gains: Gains) -> Inputs:
     """g_ij = R_i b_ij^i from the newest sensor packet (attitude and bearing sampled
     together); p̂_j from j's newest message (None: not heard yet, left out)."""
-    R = view.sense["R"]
+    R = view.sense["attitude"]
     bearings = view.sense["bearings"]
     nbrs = []
     for j in view.neighbors:
@@ -104,7 +104,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
 
 
 def publish(state: State, outputs: Outputs | None, view: View) -> Publish:
-    estimate: dict[str, Any] = {"R_hat": view.sense["R"], "p_hat": state.p_hat}
+    estimate: dict[str, Any] = {"R_hat": view.sense["attitude"], "p_hat": state.p_hat}
     if outputs is not None:
         estimate["residual"] = outputs.residual
     return Publish({i: {"p_hat": state.p_hat} for i in view.out_neighbors}, estimate)

@@ -14,7 +14,7 @@ R2 = so3.exp(np.array([0.3, -1.2, 2.0]))
 v = np.array([1.0, 2.0, 3.0])
 u = v / np.linalg.norm(v)  # a bearing
 CASES = {
-    "sense": dict(gyro=v, bearings={1: u, 7: -u}, rel_att={2: R2, 4: R2.T}, vel=v, vel_body=-v, R=R2, p=v),
+    "sense": dict(gyro=v, bearings={1: u, 7: -u}, rel_att={2: R2, 4: R2.T}, velocity=v, velocity_body=-v, attitude=R2, position=v),
     "edge": dict(t_local=1.5, R_hat=R, p_hat=v, b=v, w=-v, xi=0.25),
     "est": dict(t_local=1.5, R_hat=R, p_hat=v, extra={"sigma": v, "U": 0.5}, xi={1: 0.25, 3: -0.5}, jumps=[(1, 0.01, 0.0, 0.25)], agent_jumps=[(3, 0.01, 0.0, 2.8)]),
     "cmd": dict(t_local=1.5, tau=-v),
@@ -203,7 +203,7 @@ def _same_outcome(mtype, payload):
     [
         ("sense", CASES["sense"]),
         ("sense", dict(gyro=v, bearings={})),
-        ("sense", dict(gyro=v, rel_pos={3: v}, vel=v, vel_body=v, R=R, p=v)),
+        ("sense", dict(gyro=v, rel_pos={3: v}, velocity=v, velocity_body=v, attitude=R, position=v)),
         ("edge", dict(t_local=1.5, R_hat=R, p_hat=v, b=v)),
         ("edge", dict(b=v, p_hat=v, t_local=1, R_hat=R, vel=-v, s=2)),  # another order, an int, every optional field
         ("edge", dict(t_local=1.5, R_hat=R, p_hat=v, b=v, unexpected=v)),  # a field the receiver does not read
@@ -226,14 +226,14 @@ def test_fast_decoder_is_decode_on_foreign_and_broken_payloads():
         ok + b"\x00",  # trailing bytes
         ok[:-3],  # cut short
         _raw(),  # an edge message, on the sensor key
-        msgpack.packb({"v": 3, "type": "sense", "src": True, "seq": 0, "inc": 0, "t": 0.0}),
-        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": float("nan")}),
-        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": None}),
-        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "bearings": {True: [[3], v.tobytes()]}}),
-        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": [[3], v.tobytes()[:16]]}),
-        msgpack.packb({"v": 3, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": [(3,), v.tobytes(), 1]}),
+        msgpack.packb({"v": wire.VERSION, "type": "sense", "src": True, "seq": 0, "inc": 0, "t": 0.0}),
+        msgpack.packb({"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": float("nan")}),
+        msgpack.packb({"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": None}),
+        msgpack.packb({"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "bearings": {True: [[3], v.tobytes()]}}),
+        msgpack.packb({"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": [[3], v.tobytes()[:16]]}),
+        msgpack.packb({"v": wire.VERSION, "type": "sense", "src": 0, "seq": 0, "inc": 0, "t": 0.0, "gyro": [(3,), v.tobytes(), 1]}),
         # the same key twice: msgpack keeps the last, and so must the fast path
-        b"\x87" + b"".join(msgpack.packb(x) for x in ("v", 3, "type", "sense", "src", 0, "seq", 0, "inc", 0, "t", 0.0, "src", 7)),
+        b"\x87" + b"".join(msgpack.packb(x) for x in ("v", wire.VERSION, "type", "sense", "src", 0, "seq", 0, "inc", 0, "t", 0.0, "src", 7)),
     ]
     for p in cases:
         _same_outcome("sense", p)
@@ -291,7 +291,7 @@ T3 = np.stack([R, R2, R2.T])
         ("sense", dict(bearings={1: u, 2: -u, 3: u}, gyro=v)),  # another order than the schema's
         ("sense", dict(gyro=v, bearings={1: v})),  # not a unit bearing
         ("sense", dict(gyro=v, rel_att={2: 1.01 * R})),  # not a rotation
-        ("sense", dict(gyro=v, R=np.eye(3)[:, [1, 0, 2]])),  # det −1
+        ("sense", dict(gyro=v, attitude=np.eye(3)[:, [1, 0, 2]])),  # det −1
         ("sense", dict(gyro=np.array([1.0, 2.0]))),  # wrong shape
         ("sense", dict(gyro=np.array([1, 2, 3]))),  # integers: converted as encode does
         ("sense", dict(gyro=v, bearings={-1: u})),  # a negative id
@@ -347,7 +347,7 @@ def test_message_property(g, bearings, t, rots, wobble):
         unit = {j: b / nb * (1.0 + wobble) if b.shape == (3,) and np.isfinite(nb := np.linalg.norm(b)) and nb > 0 else b for j, b in bearings.items()}
     cases = [
         ("sense", dict(gyro=g, bearings=unit)),
-        ("sense", dict(gyro=g, rel_att={j + 10: Rs[j % n] for j in range(3)}, R=Rs[0])),
+        ("sense", dict(gyro=g, rel_att={j + 10: Rs[j % n] for j in range(3)}, attitude=Rs[0])),
         ("edge", dict(t_local=t, R_hat=Rs[0], p_hat=g, b=v)),
         ("est", dict(t_local=t, R_hat=Rs[-1], p_hat=g, extra={"x": g})),
         ("truth", dict(ids=list(range(1, n + 1)), R=Rs, p=np.zeros((n, 3)), w=np.zeros((n, 3)))),
@@ -368,11 +368,11 @@ def test_message_property(g, bearings, t, rots, wobble):
     ],
 )
 def test_stats_counters_are_bounded(counters, match):
-    payload = msgpack.packb({"v": 3, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters}, use_bin_type=True)
+    payload = msgpack.packb({"v": wire.VERSION, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters}, use_bin_type=True)
     with pytest.raises(wire.MessageError, match=match):
         wire.decode(payload)
     with pytest.raises(wire.MessageError, match=match):
-        wire.from_json({"v": 3, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters})
+        wire.from_json({"v": wire.VERSION, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters})
 
 
 def test_real_counters_pass():
@@ -440,8 +440,8 @@ def _a(x):
         (_env(gyro=_a([1e200, 0, 0])), "gyro: values beyond"),
         (_env(gyro=_a(BIG)), "gyro: values beyond"),
         (_env(t=1e13), "t: expected a finite number within"),
-        (_env(R=_a(NOT_ROT)), "R: not a rotation"),
-        (_env(R=_a(REFLECT)), "R: not a rotation"),
+        (_env(attitude=_a(NOT_ROT)), "attitude: not a rotation"),
+        (_env(attitude=_a(REFLECT)), "attitude: not a rotation"),
         (_env(rel_att={2: _a(np.eye(3)), 5: _a(2 * np.eye(3))}), "rel_att: not a rotation"),
         (_env(bearings={2: _a([0.0, 0.0, 10.0])}), "bearings: not a unit vector"),
         (_env(bearings={-1: _a([0.0, 0.0, 1.0])}), "bearings: expected a map of at most 4096 ids"),
@@ -476,9 +476,9 @@ def test_wire_bounds_pass_what_the_papers_produce():
     """The bounds' edges: a rotation off by 1e-7 (beyond anything a run accumulates, see
     ROT_TOL) and values of 1e12 still decode."""
     R_ok = np.diag([1.0, 1.0, 1.0 + 1e-7 / 2])  # |R^T R − I| = 1e-7
-    m = wire.decode(_env(R=_a(R_ok), gyro=_a([1e12, -1e12, 0.0]), bearings={7: _a([0.0, 0.6, 0.8])}))
+    m = wire.decode(_env(attitude=_a(R_ok), gyro=_a([1e12, -1e12, 0.0]), bearings={7: _a([0.0, 0.6, 0.8])}))
     assert m["gyro"][0] == 1e12 and set(m["bearings"]) == {7}
-    _same_outcome("sense", _env(R=_a(R_ok), gyro=_a([1e12, -1e12, 0.0])))
+    _same_outcome("sense", _env(attitude=_a(R_ok), gyro=_a([1e12, -1e12, 0.0])))
 
 
 def test_an_edge_rotation_field_is_checked_by_the_receiver():
