@@ -51,11 +51,10 @@ def run(sc: Scenario, out_dir: Path) -> Series:
     out_dir.mkdir(parents=True, exist_ok=True)
     msgs = simulate(sc, out_dir, sc.duration, sc.seed, lean=True, record=False)
     assert isinstance(msgs, list)
-    s = report.make_report(out_dir, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
-    rec = report.load_recording(msgs)
+    parts = report.make_report_parts(out_dir, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
     fam = family.of(sc)
-    t, att, pos = fam.series(sc, report.errors(rec), fam.metrics(sc, rec), sc.duration)
-    fa, fp = fam.finals(s)
+    t, att, pos = fam.series(sc, parts.errors, parts.metrics, sc.duration)
+    fa, fp = fam.finals(parts.summary)
     return Series(t, att, pos, float(fa), None if fp is None or not np.isfinite(pos).any() else float(fp))
 
 

@@ -16,7 +16,7 @@ import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -297,6 +297,33 @@ def make_report(
     write errors.csv, summary.json, the family's CSVs and the plots; return the summary.
     ``not_recorded``: channel prefixes the recorder left out on purpose (``sense``,
     ``edge``, ``cmd``: lean)."""
+    return make_report_parts(out_dir, sc, engine, duration, time_scale, seed, exit_codes, plots, thresholds, messages, not_recorded).summary
+
+
+class ReportParts(NamedTuple):
+    """What :func:`make_report` read and computed on the way to the summary."""
+
+    summary: dict[str, Any]
+    rec: Recording
+    errors: dict[int, np.ndarray]
+    metrics: Any  # the family's (family.metrics)
+
+
+def make_report_parts(
+    out_dir: Path,
+    sc: Scenario,
+    engine: str,
+    duration: float,
+    time_scale: float,
+    seed: int,
+    exit_codes: dict[str, int | None] | None = None,
+    plots: bool = True,
+    thresholds: tuple[float, float] = THRESHOLDS,
+    messages: Iterable[tuple[str, bytes, int]] | None = None,
+    not_recorded: Sequence[str] = (),
+) -> ReportParts:
+    """:func:`make_report`, returning the recording, errors and metrics with the summary
+    (zswarm study takes its series from them instead of reading the run again)."""
     rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
     errs = errors(rec)
     fam = family.of(sc)
@@ -310,7 +337,7 @@ def make_report(
     write_summary(out_dir / "summary.json", summary)
     if plots:
         fam.plot(out_dir / "plots", sc, errs, m, rec)
-    return summary
+    return ReportParts(summary, rec, errs, m)
 
 
 def strict_json(obj: Any) -> Any:
