@@ -280,26 +280,6 @@ def write_errors_csv(path: Path, errs: dict[int, np.ndarray]) -> None:
             w.writerow([f"{t:.6f}", i, f"{ea:.6e}", f"{ep:.6e}", f"{ed:.6e}"])
 
 
-def make_report(
-    out_dir: Path,
-    sc: Scenario,
-    engine: str,
-    duration: float,
-    time_scale: float,
-    seed: int,
-    exit_codes: dict[str, int | None] | None = None,
-    plots: bool = True,
-    thresholds: tuple[float, float] = THRESHOLDS,
-    messages: Iterable[tuple[str, bytes, int]] | None = None,
-    not_recorded: Sequence[str] = (),
-) -> dict[str, Any]:
-    """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
-    write errors.csv, summary.json, the family's CSVs and the plots; return the summary.
-    ``not_recorded``: channel prefixes the recorder left out on purpose (``sense``,
-    ``edge``, ``cmd``: lean)."""
-    return make_report_parts(out_dir, sc, engine, duration, time_scale, seed, exit_codes, plots, thresholds, messages, not_recorded).summary
-
-
 class ReportParts(NamedTuple):
     """What :func:`make_report` read and computed on the way to the summary."""
 
@@ -322,8 +302,11 @@ def make_report_parts(
     messages: Iterable[tuple[str, bytes, int]] | None = None,
     not_recorded: Sequence[str] = (),
 ) -> ReportParts:
-    """:func:`make_report`, returning the recording, errors and metrics with the summary
-    (zswarm study takes its series from them instead of reading the run again)."""
+    """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
+    write errors.csv, summary.json, the family's CSVs and the plots; return the summary with
+    the recording, errors and metrics it was computed from (zswarm study takes its series
+    from them instead of reading the run again).  ``not_recorded``: channel prefixes the
+    recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean)."""
     rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
     errs = errors(rec)
     fam = family.of(sc)
@@ -338,6 +321,11 @@ def make_report_parts(
     if plots:
         fam.plot(out_dir / "plots", sc, errs, m, rec)
     return ReportParts(summary, rec, errs, m)
+
+
+def make_report(*args: Any, **kwargs: Any) -> dict[str, Any]:
+    """:func:`make_report_parts`' summary (the same arguments)."""
+    return make_report_parts(*args, **kwargs).summary
 
 
 def strict_json(obj: Any) -> Any:
