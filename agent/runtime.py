@@ -473,6 +473,35 @@ class _PartState:
         self.min_gap = 1.0 / self.rate - 0.5 / clock_rate if self.rate is not None else 0.0
 
 
+def setup(scenario: Scenario, agent_id: int, seed: int) -> tuple[ModuleType, Any, dict[int, tuple[int, bool]], Initial]:
+    """What agent ``agent_id`` runs: its algorithm module, its Gains (its gains, and the
+    scenario's params onto the Gains fields of the same names), its tree edges (§4: neighbour
+    j -> (edge index k, whether it heads k and owns ξ_k)) and its :class:`Initial`; shared by
+    :class:`AgentNode` and the batched engine (agent/batched.py)."""
+    spec = scenario.agent(agent_id)
+    algo: ModuleType = scenario.module_for(spec.role)
+    aspec: AlgorithmSpec = algo.SPEC
+    values: dict[str, Any] = dict(spec.gains)
+    if scenario.params is not None:  # [algorithm.params]: onto the Gains fields of the same names
+        values.update(scenario.params.gains(scenario.ids))
+    gains = make_gains(algo, values)
+    tree_edges: dict[int, tuple[int, bool]] = {}
+    for k, (h, t) in enumerate(scenario.oriented, start=1):
+        if agent_id in (h, t):
+            tree_edges[t if h == agent_id else h] = (k, h == agent_id)
+    est = spec.estimate
+    init = Initial(
+        agent_id,
+        MappingProxyType({name: initial_value(f, est.get(name, f.default)) for name, f in aspec.initial.items()}),
+        est.stated,
+        tree_edges,
+        {a.id: {n: a.estimate[n] for n in a.estimate.stated} for a in scenario.agents},
+        seed,
+        np.array(spec.p),
+    )
+    return algo, gains, tree_edges, init
+
+
 class AgentNode:
     """One agent: subscribes to its sensor key and in-edges, steps its algorithm on its own clock."""
 
@@ -484,27 +513,8 @@ class AgentNode:
         self.id = agent_id
         self.spec = scenario.agent(agent_id)
         self.run = run
-        self.algo: ModuleType = scenario.module_for(self.spec.role)
+        self.algo, self.gains, self.tree_edges, init = setup(scenario, agent_id, seed)
         self.aspec: AlgorithmSpec = self.algo.SPEC
-        values: dict[str, Any] = dict(self.spec.gains)
-        if scenario.params is not None:  # [algorithm.params]: onto the Gains fields of the same names
-            values.update(scenario.params.gains(scenario.ids))
-        self.gains = make_gains(self.algo, values)
-        # Tree edges (§4): neighbour j -> (edge index k, whether this agent heads k and owns ξ_k).
-        self.tree_edges: dict[int, tuple[int, bool]] = {}
-        for k, (h, t) in enumerate(scenario.oriented, start=1):
-            if agent_id in (h, t):
-                self.tree_edges[t if h == agent_id else h] = (k, h == agent_id)
-        est = self.spec.estimate
-        init = Initial(
-            agent_id,
-            MappingProxyType({name: initial_value(f, est.get(name, f.default)) for name, f in self.aspec.initial.items()}),
-            est.stated,
-            self.tree_edges,
-            {a.id: {n: a.estimate[n] for n in a.estimate.stated} for a in scenario.agents},
-            seed,
-            np.array(self.spec.p),
-        )
         self.state = self.algo.initial_state(init, self.gains)
         self.parts = [_PartState(p, self.spec.clock.rate, scenario.part_rate_scale) for p in self.aspec.parts]
         self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published

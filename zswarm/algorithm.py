@@ -213,6 +213,9 @@ class AlgorithmSpec:
     initial: Mapping[str, InitialField] = field(default_factory=lambda: POSE_ESTIMATE)  # the initial-state values an agent may be given, by name
     stale: StalePolicy = StalePolicy(0.2, "drop")
     leader: str | None = None  # the algorithm agents with role "leader" run (None: no leaders)
+    # Its inputs, step and publish broadcast over a leading draw axis (every measurement, message
+    # and state value a stack of M draws), so the batched engine (agent/batched.py) may run it.
+    batched: bool = False
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
     # The report family that turns a run of this algorithm into figures (zswarm.report.family):
     # a name registered in the entry-point group REPORT_FAMILY_GROUP ("leader_follower", "tree",

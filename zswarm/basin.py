@@ -54,6 +54,9 @@ from zswarm.report.series import leave_time, settle_time
 from zswarm.scenario import Override, Scenario, load, parse_override
 from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 
+# Draws stepped together at most (a chunk: one task of the pool; resume reruns a whole chunk).
+# Past ~1000 the per-call cost of numpy is paid off (agent/batched.py's benchmark).
+MAX_CHUNK = 1000
 COLUMNS = ("draw", "kind", "synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
 
 
@@ -134,6 +137,49 @@ def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: fl
     }
 
 
+def run_chunk(topology: str, seed: int, draws: list[int], duration: float, threshold: float, near: float | None = None) -> list[dict[str, Any]]:
+    """Draws on the batched lockstep engine (agent/batched.py: every draw of the chunk stepped
+    together, the same algorithm modules as sim); their rows of basin.csv."""
+    from zswarm import plugins
+
+    t0 = time.monotonic()
+    batched = plugins.engine("batched")
+    base = load(topology)
+    scs = [load(topology, draw_overrides(base, seed, d, near)) for d in draws]
+    fam = family.of(base)
+    res = batched.run(scs, duration, base.seed, fam.basin_grid_s)
+    wall = round((time.monotonic() - t0) / len(draws), 3)
+    rows = []
+    for n, d in enumerate(draws):
+        t, mx = res.t, res.max_rel[n]
+        rows.append(
+            {
+                "draw": d,
+                "kind": _kind(d, near),
+                "synchronized": settle_time(t, mx, threshold) is not None,
+                "left_s": leave_time(t, mx),
+                "settle_01_s": settle_time(t, mx, 0.1),
+                "settle_s": settle_time(t, mx, threshold),
+                "final_max": float(mx[-1]),
+                "initial_max": float(mx[0]),
+                "jumps": int(res.jumps[n]),
+                "agent_jumps": int(res.agent_jumps[n]),
+                "wall_s": wall,
+                "status": "ok",
+                "error": "",
+            }
+        )
+    return rows
+
+
+def engine_problem(sc: Scenario) -> str | None:
+    """Why ``sc``'s draws cannot run on the batched engine (None: they can)."""
+    from zswarm import plugins
+
+    why: str | None = plugins.engine("batched").problem(sc)
+    return why
+
+
 def _kind(draw: int, near: float | None) -> str:
     return "scenario" if draw == 0 else "uniform" if near is None else "near"
 
@@ -165,9 +211,13 @@ def run_basin(
     stop: Callable[[], bool],
     progress: Callable[[str], None],
     near: float | None = None,
+    batched: bool = False,
+    chunk: int | None = None,
 ) -> tuple[list[dict[str, str]], bool]:
     """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
-    whether it was interrupted."""
+    whether it was interrupted.  ``batched``: in chunks of ``chunk`` draws on the batched engine
+    (default: the draws to do shared out among the jobs, at most MAX_CHUNK each), each chunk's
+    rows written as it finishes (a resume reruns the unfinished chunks)."""
     path = out / "basin.csv"
     done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
     todo = [d for d in range(draws) if d not in done]
@@ -184,13 +234,17 @@ def run_basin(
             f.flush()
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_worker_init) as pool:
-            pending = {}
-            it = iter(todo)
+            pending: dict[Any, list[int]] = {}
+            size = 1
+            if batched:
+                size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / jobs)))
+            chunks = iter([todo[k : k + size] for k in range(0, len(todo), size)])
 
             def submit() -> None:
-                d = next(it, None)
-                if d is not None:
-                    pending[pool.submit(run_draw, topology, seed, d, duration, threshold, near)] = d
+                ds = next(chunks, None)
+                if ds is not None:
+                    fut = pool.submit(run_chunk, topology, seed, ds, duration, threshold, near) if batched else pool.submit(run_draw, topology, seed, ds[0], duration, threshold, near)
+                    pending[fut] = ds
 
             for _ in range(jobs):
                 submit()
@@ -202,14 +256,22 @@ def run_basin(
                     break
                 finished, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
                 for fut in finished:
-                    d = pending.pop(fut)
+                    ds = pending.pop(fut)
                     try:
-                        row = fut.result()
-                    except Exception as exc:  # a failed draw is recorded, not fatal
-                        row = {"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]}
-                    w.writerow({k: _fmt(row.get(k)) for k in columns})
+                        got = fut.result()
+                        rows_ = got if isinstance(got, list) else [got]
+                    except Exception as exc:  # a failed draw (chunk) is recorded, not fatal
+                        rows_ = [{"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]} for d in ds]
+                    for row in rows_:
+                        w.writerow({k: _fmt(row.get(k)) for k in columns})
                     f.flush()
-                    progress(f"draw {d}: {row.get('status')}, settles at {_fmt(row.get('settle_s')) or 'never'} ({row.get('wall_s')} s)")
+                    if len(rows_) == 1:
+                        row = rows_[0]
+                        progress(f"draw {row['draw']}: {row.get('status')}, settles at {_fmt(row.get('settle_s')) or 'never'} ({row.get('wall_s')} s)")
+                    else:
+                        ok = [r for r in rows_ if r.get("status") == "ok"]
+                        n_sync = sum(1 for r in ok if r.get("synchronized"))
+                        progress(f"draws {ds[0]}-{ds[-1]}: {len(ok)} ok, {n_sync} synchronized ({_fmt(rows_[0].get('wall_s'))} s a draw)")
                     submit()
             if interrupted:  # the draws under way are lost (they rerun on resume), not waited for
                 for proc in list((getattr(pool, "_processes", None) or {}).values()):  # the executor's own workers
@@ -509,10 +571,16 @@ def command(args: argparse.Namespace) -> int:
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
     jobs = args.jobs or (os.cpu_count() or 1)
-    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) on sim, {jobs} at a time; {out}", file=sys.stderr)
+    why = basin.engine_problem(sc)
+    if args.engine == "batched" and why is not None:
+        procutil.fail_usage(f"{args.topology}: --engine batched: the batched engine cannot run it: {why}")
+    batched = args.engine != "sim" and why is None
+    how = "on the batched engine (draws stepped together)" if batched else "on sim" + (f" (not batched: {why})" if args.engine == "auto" else "")
+    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) {how}, {jobs} at a time; {out}", file=sys.stderr)
     t0 = time.monotonic()
     rows, interrupted = basin.run_basin(
-        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near
+        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near,
+        batched=batched, chunk=args.chunk,
     )
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)

@@ -130,6 +130,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(shows an almost-global law's slow escape from the undesired set)",
     )
     b.add_argument("--out", type=Path, default=None, help="folder (default basins/<scenario>-<timestamp>/); the same folder resumes")
+    b.add_argument(
+        "--engine",
+        choices=("auto", "batched", "sim"),
+        default="auto",
+        help="batched: the draws stepped together on arrays (the same algorithm modules; draw by draw the same numbers as sim); "
+        "sim: each draw on zswarm sim; auto (default): batched where the scenario allows it (lockstep clocks, perfect links, no noise or faults), else sim",
+    )
+    b.add_argument("--chunk", type=procutil.positive_int, default=None, help="draws stepped together per task of the batched engine (default: the draws shared out among the jobs, at most 1000)")
 
     bc = sub.add_parser(
         "basin-compare",

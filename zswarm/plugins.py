@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 import importlib.metadata
 from collections.abc import Mapping
-from types import MappingProxyType
+from types import MappingProxyType, ModuleType
 
 
 def _ranked(group: str, own_prefix: str) -> list[importlib.metadata.EntryPoint]:
@@ -32,7 +32,18 @@ def registered(group: str, own_prefix: str) -> Mapping[str, str]:
 # algorithm: by name in the entry-point group PROCESS_GROUP (agent/ and world/ register theirs
 # in pyproject.toml), so that nothing under zswarm/ imports those programs.
 PROCESS_GROUP = "zswarm.processes"
-OWN_PROCESSES = {"agent": "agent.", "world": "world."}
+OWN_PROCESSES = {"agent": "agent.", "world": "world.", "batched": "agent."}
+
+
+def engine(name: str) -> ModuleType:
+    """The module registered as ``name`` in PROCESS_GROUP ("batched": the batched lockstep
+    engine, agent/batched.py)."""
+    ep = next((e for e in _ranked(PROCESS_GROUP, OWN_PROCESSES[name]) if e.name == name), None)
+    if ep is None:
+        raise RuntimeError(f"no {name!r} engine registered in the entry points {PROCESS_GROUP!r} (zswarm is not installed: pip install -e .)")
+    mod = ep.load()
+    assert isinstance(mod, ModuleType)
+    return mod
 
 
 def process_class(name: str) -> type:

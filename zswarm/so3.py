@@ -63,16 +63,26 @@ def Pa(C: Mat3) -> Mat3:
 
 
 def psi(C: Mat3) -> Vec3:
-    """``psi(C) = vee(Pa(C))`` (thesis eq. (2.5))."""
+    """``psi(C) = vee(Pa(C))`` (thesis eq. (2.5)); a stack (..., 3, 3) gives (..., 3)."""
+    if C.ndim > 2:
+        return 0.5 * np.stack((C[..., 2, 1] - C[..., 1, 2], C[..., 0, 2] - C[..., 2, 0], C[..., 1, 0] - C[..., 0, 1]), axis=-1)
     return 0.5 * np.array((C[2, 1] - C[1, 2], C[0, 2] - C[2, 0], C[1, 0] - C[0, 1]))
+
+
+def T(R: Mat3) -> Mat3:
+    """The transpose of a matrix or of each of a stack (..., 3, 3)."""
+    return np.swapaxes(R, -1, -2)
 
 
 def exp(w: Vec3) -> Mat3:
     """Exponential map ``exp([w]^x)`` by Rodrigues' formula.
 
     Uses the Taylor expansions of ``sin(t)/t`` and ``(1-cos t)/t^2`` below
-    ``t = 1e-4`` rad, where the closed forms lose digits to cancellation.
+    ``t = 1e-4`` rad, where the closed forms lose digits to cancellation.  A stack
+    (..., 3) gives (..., 3, 3) (:func:`exp_batch`, the same formula).
     """
+    if type(w) is np.ndarray and w.ndim > 1:
+        return exp_batch(w.reshape(-1, 3)).reshape(w.shape[:-1] + (3, 3))
     x, y, z = w.tolist() if type(w) is np.ndarray else (float(w[0]), float(w[1]), float(w[2]))
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
@@ -116,8 +126,11 @@ def log(R: Mat3) -> Vec3:
     """Logarithm map: the rotation vector ``w`` with ``exp(w) = R``, ``|w| <= pi``.
 
     Near ``theta = pi`` the antisymmetric part vanishes, so the axis is taken
-    from the symmetric part ``(R + I)/2 = v v^T`` instead.
+    from the symmetric part ``(R + I)/2 = v v^T`` instead.  A stack (..., 3, 3) gives
+    (..., 3) (:func:`log_batch`, the same branches).
     """
+    if R.ndim > 2:
+        return log_batch(R.reshape(-1, 3, 3)).reshape(R.shape[:-2] + (3,))
     c = (float(np.trace(R)) - 1.0) * 0.5
     s = psi(R)  # = sin(theta) * v
     # atan2, not acos: near theta = pi, acos(c) loses half the digits (an error
@@ -134,6 +147,21 @@ def log(R: Mat3) -> Vec3:
     if float(v @ s) < 0.0:  # pick the sign consistent with the small skew part
         v = -v
     return theta * v
+
+
+def log_batch(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`log` of each of a stack (n, 3, 3) -> (n, 3): its branches, element by element."""
+    c = (np.trace(R, axis1=1, axis2=2) - 1.0) * 0.5
+    s = psi(R)
+    theta = np.arctan2(np.sqrt(np.einsum("ij,ij->i", s, s)), c)
+    small = theta < 1e-6
+    mid = ~small & (theta < math.pi - 1e-4)
+    out = np.empty_like(s)
+    out[small] = s[small] * (1.0 + theta[small, None] ** 2 / 6.0)
+    out[mid] = s[mid] * (theta[mid] / np.sin(theta[mid]))[:, None]
+    for n in np.flatnonzero(~small & ~mid):  # near π: rare, each as log does it
+        out[n] = log(R[n])
+    return out
 
 
 def Ra(theta: float, v: Vec3) -> Mat3:

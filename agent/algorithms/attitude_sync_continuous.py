@@ -97,5 +97,6 @@ SPEC = AlgorithmSpec(
     report="sync",
     params=hybrid.ContinuousParams,
     stale=StalePolicy(0.2, "hold"),
+    batched=True,
     sensor_use={"gyro": "ω_i, the damping −k_ω ω_i", "rel_att": "R_ij, the coupling"},
 )

@@ -32,7 +32,20 @@ from typing import Any
 
 import numpy as np
 
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, coupling, flow_xi, jump, measured_edges, predict, published_xi, tail_xi
+from agent.algorithms.attitude_sync_terms import (
+    COMMAND,
+    EDGE_FIELDS,
+    Edge,
+    Terms,
+    coupling,
+    flow_xi,
+    jump,
+    measured_edges,
+    number,
+    predict,
+    published_xi,
+    tail_xi,
+)
 from zswarm import hybrid
 from zswarm.algorithm import POSE_ESTIMATE, AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
@@ -90,7 +103,12 @@ def flow_and_jump(
         c1 = coefs[e.k] = t.abc
         x = flow_xi(coef_prev.get(e.k, c1), c1, x, dt, g.k_xi, g.gamma)
         new = jump(g.A, g.u, g.gamma, g.delta, g.Xi, e.R_bar, x, t)
-        if new is not None:
+        if isinstance(new, np.ndarray):  # M draws: NaN where a draw flows
+            hit = np.isfinite(new)
+            if hit.any():
+                jumps.append((e.k, x, new))
+                x = np.where(hit, new, x)
+        elif new is not None:
             jumps.append((e.k, x, new))
             x = new
         xi[e.k] = x
@@ -124,7 +142,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     tau = -gains.k_omega * inputs.omega + gains.k_R * sigma
     U = sum(terms[e.k].U(xi[e.k], gains.gamma) for e in inputs.edges if e.head)
     R_prev = {e.k: e.R_bar for e in inputs.edges}
-    return State(xi, state.xi_in, coefs, R_prev), Outputs(tau, sigma, tuple(jumps), float(U))
+    return State(xi, state.xi_in, coefs, R_prev), Outputs(tau, sigma, tuple(jumps), number(U))
 
 
 def initial_state(init: Initial, gains: Gains) -> State:
@@ -158,4 +176,5 @@ SPEC = AlgorithmSpec(
     # would otherwise drop the edge from its torque.
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"gyro": "ω_i, the damping −k_ω ω_i", "rel_att": "R_ij, the coupling and the jump logic"},
+    batched=True,
 )

@@ -52,7 +52,7 @@ k_ω ``k_omega``, Q̃_i ``Q_tilde``, ζ_i ``zeta``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from zswarm.algorithm import Field, View
-from zswarm.so3 import Mat3, Vec3, exp, hat, log, psi
+from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,9 +99,24 @@ def measured_edges(view: View, need_xi: bool) -> tuple[Edge, ...]:
         if need_xi and not head:
             m = view.neighbor(j)
             if m is not None and "xi" in m.fields:
-                xi = float(m.fields["xi"])
-        out.append(Edge(k, head, R_ij.T if head else R_ij, xi))
+                xi = number(m.fields["xi"])
+        out.append(Edge(k, head, T(R_ij) if head else R_ij, xi))
     return tuple(out)
+
+
+def number(x: Any) -> Any:
+    """A float, or a stack of M draws' values (the batched engine): as it is."""
+    return x if isinstance(x, np.ndarray) else float(x)
+
+
+def _trig(x: Any) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
+    """sin and cos for a float (math: a tenth of numpy's cost on one number) or a stack of draws."""
+    return (np.sin, np.cos) if isinstance(x, np.ndarray) else (math.sin, math.cos)
+
+
+def _times(R: Mat3, v: Vec3) -> Vec3:
+    """``R v`` for one matrix, or for stacks (M, 3, 3) and (M, 3)."""
+    return R @ v if R.ndim == 2 else (R @ v[..., None])[..., 0]
 
 
 class Terms:
@@ -112,6 +127,8 @@ class Terms:
     ``tr(A R̄ Ra(ξ,u)) = t0 + sin ξ t1 + (1 − cos ξ) t2`` (ψ and tr are linear), so U,
     ∇_ξ U (Prop. 4.1), the gradient g and the ξ-rate coefficients cost a few flops per ξ:
     the jump test, the coupling and the ξ sub-steps all read one Terms per edge and step.
+    With R̄ a stack (M, 3, 3) of M draws every term has the leading draw axis, and so do
+    ξ and what the methods return.
     """
 
     __slots__ = ("p0", "p1", "p2", "t0", "t1", "t2", "abc", "K", "K2", "trA")
@@ -122,22 +139,32 @@ class Terms:
         MK = M @ K
         MK2 = MK @ K
         self.p0, self.p1, self.p2 = psi(M), psi(MK), psi(MK2)
-        self.t0, self.t1, self.t2 = float(M.trace()), float(MK.trace()), float(MK2.trace())
-        self.abc = (float(u @ self.p0), float(u @ self.p1), float(u @ self.p2))
+        if R_bar.ndim == 2:
+            self.t0, self.t1, self.t2 = float(M.trace()), float(MK.trace()), float(MK2.trace())
+            self.abc = (float(u @ self.p0), float(u @ self.p1), float(u @ self.p2))
+        else:
+            self.t0, self.t1, self.t2 = (np.trace(X, axis1=-2, axis2=-1) for X in (M, MK, MK2))
+            self.abc = (self.p0 @ u, self.p1 @ u, self.p2 @ u)
         self.K, self.K2, self.trA = K, K2, trA
 
     def U(self, xi: float, gamma: float) -> float:
         """``U(R̄, ξ) = tr(A) − tr(A R̄ Ra(ξ,u)) + (γ/2) ξ²`` (4.23)."""
-        s, c = math.sin(xi), 1.0 - math.cos(xi)
+        sin, cos = _trig(xi)
+        s, c = sin(xi), 1.0 - cos(xi)
         return self.trA - (self.t0 + s * self.t1 + c * self.t2) + 0.5 * gamma * xi * xi
 
     def grad_xi(self, xi: float, gamma: float) -> float:
         """``∇_ξ U = γ ξ + 2 u^T ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1)."""
         a, b, c = self.abc
-        return gamma * xi + 2.0 * (a + b * math.sin(xi) + c * (1.0 - math.cos(xi)))
+        sin, cos = _trig(xi)
+        return gamma * xi + 2.0 * (a + b * sin(xi) + c * (1.0 - cos(xi)))
 
     def g(self, xi: float) -> Vec3:
         """``g = Ra(ξ,u) ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1)."""
+        if isinstance(xi, np.ndarray):
+            s, c = np.sin(xi)[:, None], 1.0 - np.cos(xi)[:, None]
+            p = self.p0 + s * self.p1 + c * self.p2
+            return p + s * (p @ self.K.T) + c * (p @ self.K2.T)
         s, c = math.sin(xi), 1.0 - math.cos(xi)
         p = self.p0 + s * self.p1 + c * self.p2
         return p + s * (self.K @ p) + c * (self.K2 @ p)
@@ -158,25 +185,26 @@ def _geometry(A: Mat3, u: Vec3) -> tuple[Mat3, Mat3, float]:
 
 def tail_xi(edges: tuple[Edge, ...], xi_in: Mapping[int, float]) -> dict[int, float]:
     """ξ_k of the edges this agent is the tail of: as received, or ξ_k(0) until the head's first message."""
-    return {e.k: (e.xi if e.xi is not None else float(xi_in.get(e.k, 0.0))) for e in edges if not e.head}
+    return {e.k: (e.xi if e.xi is not None else number(xi_in.get(e.k, 0.0))) for e in edges if not e.head}
 
 
 def coupling(edges: tuple[Edge, ...], xi: Mapping[int, float], A: Mat3, u: Vec3, terms: Mapping[int, Terms] | None = None) -> Vec3:
     """``σ_i`` of (5.6)/(5.16) in the form of (5.19): ``Σ_tail R̄_k g_k − Σ_head g_k``; ``xi[k]``
     for every edge of i (``terms[k]``: the edge's :class:`Terms`, if already built)."""
-    s = np.zeros(3)
+    s = np.zeros(edges[0].R_bar.shape[:-1] if edges else 3)
     for e in edges:
         t = terms[e.k] if terms is not None else Terms(A, u, e.R_bar)
         g = t.g(xi[e.k])
-        s = s - g if e.head else s + e.R_bar @ g
+        s = s - g if e.head else s + _times(e.R_bar, g)
     return s
 
 
 def continuous_coupling(edges: tuple[Edge, ...], A: Mat3) -> Vec3:
-    """``σ_i = −Σ_{j∈N_i} ψ(A R_j^T R_i)`` of (5.24) (``R_j^T R_i`` is R̄_k at a head, R̄_k^T at a tail)."""
-    s = np.zeros(3)
+    """``σ_i = −Σ_{j∈N_i} ψ(A R_j^T R_i)`` of (5.24) (``R_j^T R_i`` is R̄_k at a head, R̄_k^T at a
+    tail).  Broadcasts: with every R̄_k a stack (M, 3, 3) of M draws, σ_i is (M, 3)."""
+    s = np.zeros(edges[0].R_bar.shape[:-1] if edges else 3)
     for e in edges:
-        s = s - psi(A @ (e.R_bar if e.head else e.R_bar.T))
+        s = s - psi(A @ (e.R_bar if e.head else T(e.R_bar)))
     return s
 
 
@@ -202,6 +230,7 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
     O(|ΔR̄|²) of the geodesic): Heun's method in sub-steps of at most XI_SUBSTEP_S."""
     if dt <= 0:
         return xi
+    sin, cos = _trig(xi)
     n = max(1, math.ceil(dt / XI_SUBSTEP_S - 1e-9))
     h = dt / n
     a0, b0, q0 = c0
@@ -211,19 +240,25 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
     f = 0.0
     for m in range(n):
         if m == 0:
-            f = -kg * xi - two_k * (a0 + b0 * math.sin(xi) + q0 * (1.0 - math.cos(xi)))
+            f = -kg * xi - two_k * (a0 + b0 * sin(xi) + q0 * (1.0 - cos(xi)))
         s1 = (m + 1) / n
         x1 = xi + h * f
-        f1 = -kg * x1 - two_k * ((a0 + s1 * da) + (b0 + s1 * db) * math.sin(x1) + (q0 + s1 * dq) * (1.0 - math.cos(x1)))
+        f1 = -kg * x1 - two_k * ((a0 + s1 * da) + (b0 + s1 * db) * sin(x1) + (q0 + s1 * dq) * (1.0 - cos(x1)))
         xi = xi + 0.5 * h * (f + f1)
-        f = -kg * xi - two_k * ((a0 + s1 * da) + (b0 + s1 * db) * math.sin(xi) + (q0 + s1 * dq) * (1.0 - math.cos(xi)))
+        f = -kg * xi - two_k * ((a0 + s1 * da) + (b0 + s1 * db) * sin(xi) + (q0 + s1 * dq) * (1.0 - cos(xi)))
     return xi
 
 
 def jump(A: Mat3, u: Vec3, gamma: float, delta: float, S: tuple[float, ...], R_bar: Mat3, x: float, terms: Terms | None = None) -> float | None:
     """The jump map of (5.7)/(5.12): ``argmin_{x'∈S} U(R̄, x')`` (the first of equal minima)
-    when ``U(R̄, x) − min_S U ≥ δ``, else None (flow)."""
+    when ``U(R̄, x) − min_S U ≥ δ``, else None (flow).  With x a stack of M draws: an array
+    of the draws' ξ⁺, NaN where a draw flows."""
     t = terms if terms is not None else Terms(A, u, R_bar)
+    if isinstance(x, np.ndarray):
+        Us = np.array([t.U(np.full_like(x, y), gamma) for y in S])  # (|S|, M)
+        first = np.argmin(Us, axis=0)  # the first of equal minima, as the loop below
+        u_best = Us[first, np.arange(len(x))]
+        return np.where(t.U(x, gamma) - u_best >= delta, np.asarray(S, dtype=float)[first], np.nan)
     best, u_best = S[0], t.U(S[0], gamma)
     for y in S[1:]:
         v = t.U(y, gamma)
@@ -236,10 +271,11 @@ def jump(A: Mat3, u: Vec3, gamma: float, delta: float, S: tuple[float, ...], R_b
 
 def predict(R_prev: Mat3 | None, R_now: Mat3, dt: float, lead: float) -> Mat3:
     """R̄ ``lead`` seconds after its newest measurement, on the geodesic through the last two
-    (``dt`` apart): ``R̄ exp((lead/dt) log(R̄_prev^T R̄))`` (first order in the rate)."""
+    (``dt`` apart): ``R̄ exp((lead/dt) log(R̄_prev^T R̄))`` (first order in the rate).
+    Broadcasts over stacks (M, 3, 3)."""
     if R_prev is None or dt <= 0 or lead <= 0:
         return R_now
-    return R_now @ exp((lead / dt) * log(R_prev.T @ R_now))
+    return R_now @ exp((lead / dt) * log(T(R_prev) @ R_now))
 
 
 def published_xi(view: View, xi: Mapping[int, float]) -> dict[int, dict[str, Any]]:

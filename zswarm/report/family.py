@@ -65,6 +65,7 @@ class Family:
     table_lines: Callable[[dict[str, Any]], list[str]]
     basin_start: Callable[[Scenario], list[tuple[str, Any]]] | None = None
     basin_series: Callable[..., Any] | None = None
+    basin_grid_s: float = base.GRID_S  # the grid step of basin_series (a family's BASIN_GRID_S)
 
 
 _cache: dict[str, Family] = {}
@@ -82,7 +83,7 @@ def resolve(name: str) -> Family:
     bad = [f for f, fn in fns.items() if fn is not None and not callable(fn)]
     if bad:
         raise ValueError(f"report family {name!r} ({target}): {', '.join(bad)} must be functions")
-    _cache[name] = Family(name, **fns)
+    _cache[name] = Family(name, **fns, basin_grid_s=float(getattr(module, "BASIN_GRID_S", base.GRID_S)))
     return _cache[name]
 
 

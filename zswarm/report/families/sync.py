@@ -33,6 +33,7 @@ from zswarm.report.series import norm_I as _norm_I
 from zswarm.scenario import Scenario
 
 GRID_S = 0.01
+BASIN_GRID_S = GRID_S  # basin_series' grid (the batched engine measures on it too)
 SYNC_THRESHOLDS = (0.1, 0.01)  # READING-NOTES' figures: below 0.1 from t ≈ 58.5 s, below 0.01 from ≈ 102 s (hybrid)
 
 

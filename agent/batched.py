@@ -1,0 +1,291 @@
+"""The batched lockstep engine: M draws of one scenario stepped together (issue 31).
+
+``zswarm sim`` runs one draw as processes exchanging messages; a Monte-Carlo basin or sweep
+runs thousands of draws that share one schedule (the same clocks, sensor grid and graph;
+only the agents' starts differ).  Here those draws are stepped *together*: every state and
+measurement carries a leading draw axis, the world's plant integrates all M·n bodies at
+once (world/plant.py's RigidBodyPlant, the same scheme and step), and each agent's law is
+the **same algorithm module** as on ``sim``: its ``inputs``, ``step`` and ``publish`` are
+called once per agent and tick on arrays of M draws (the laws broadcast over a leading
+axis: agent/algorithms/attitude_sync_terms.py, zswarm/so3.py).
+
+What ``sim`` does at a tick is reproduced, in its order: at a time where the world samples
+and agents tick, the world first (it integrates up to t under the torques held since the
+last ticks, then measures), then the agents by id, each seeing the edge messages of the
+agents before it at this tick and of those after it at the last; a command acts from its
+tick on (zero-order hold); an agent's first tick (t = 0) tests a hybrid scheme's jump sets
+and sends no command; a step's command is evaluated half a period ahead (View.command_lead).
+So a draw here and the same draw on ``sim`` differ by round-off only (the batched linear
+algebra sums in another order), which the dynamics then carries: tests/component/test_batched.py.
+
+Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
+its ticks on the sensor grid, perfect links, no faults, noise-free sensors of the kinds
+implemented here (gyro, rel_att), the rigid-body plant, and an algorithm whose SPEC says its
+functions broadcast (``batched=True``).  :func:`problem` says which of these a scenario
+lacks; the commands then run it on ``sim`` per draw.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from agent.runtime import setup
+from world.plant import RigidBodyPlant
+from zswarm.algorithm import jumps as has_jumps
+from zswarm.scenario import Scenario
+
+SENSORS = frozenset({"gyro", "rel_att"})  # what the batched world measures so far
+
+
+class Unsupported(ValueError):
+    """A scenario (or a request of its algorithm) that lockstep cannot reproduce."""
+
+
+def problem(sc: Scenario) -> str | None:
+    """Why ``sc`` cannot run on the batched engine (None: it can)."""
+    spec = sc.info
+    if not getattr(spec, "batched", False):
+        return f"{sc.algorithm}'s functions are not declared to broadcast over draws (SPEC.batched)"
+    if sc.leader_module is not None:
+        return "leaders run another algorithm"
+    if sc.plant != "rigid_body":
+        return f"the {sc.plant!r} plant (the batched engine has the rigid-body plant of (5.1) so far)"
+    need = frozenset().union(*(sc.sensors_of(i) for i in sc.ids))
+    if need - SENSORS:
+        return f"the sensor(s) {', '.join(sorted(need - SENSORS))} (the batched world measures {', '.join(sorted(SENSORS))})"
+    if any(getattr(sc, f) > 0 for f in ("gyro_var", "bearing_var", "velocity_var", "rel_att_var", "attitude_var", "rel_pos_var")):
+        return "sensor noise (each draw of sim draws its own; not batched yet)"
+    if len(spec.parts) != 1 or spec.parts[0].rate is not None:
+        return "an algorithm of several parts or with a part rate of its own"
+    clocks = {a.clock for a in sc.agents}
+    if len(clocks) != 1:
+        return "agents on different clocks"
+    (c,) = clocks
+    if c.jitter or c.drift_ppm or c.offset:
+        return "clock jitter, drift or offset"
+    ratio = sc.sensor_rate / c.rate
+    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+        return f"agent ticks off the sensor grid ({c.rate:g} Hz against {sc.sensor_rate:g} Hz)"
+    if sc.links_active or any(s.active for s in sc.link_overrides.values()) or sc.command_links.active:
+        return "emulated links (delay, jitter, loss)"
+    if sc.faults:
+        return "faults"
+    if sc.part_rate_scale != 1.0:
+        return "scaled part rates"
+    return None
+
+
+@dataclass(frozen=True, slots=True)
+class _Msg:
+    """An in-neighbour's newest message (zswarm.algorithm.NeighborMsg), fields batched."""
+
+    fields: Mapping[str, Any]
+    t: float
+    t_world: float
+    age: float
+
+
+class BatchedView:
+    """zswarm.algorithm.View for M draws of one agent: every measurement and message has a
+    leading draw axis.  Steps end at sensor packets (lockstep), so the history
+    interpolators are never needed; they say so if an algorithm asks."""
+
+    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]]) -> None:
+        a = sc.agent(i)
+        self.id = i
+        self.role = a.role
+        self.neighbors = a.neighbors
+        self.senses = sc.sensed(i)
+        self.k_neighbors = a.k_neighbors
+        self.out_neighbors = sc.out_neighbors(i)
+        self.tree_edges = tree_edges
+        self.moving = sc.moving
+        self.period = 1.0 / a.clock.rate
+        self.t = self.t_world = self.dt = 0.0
+        self.command_lead = 0.5 * self.period
+        self.first = False
+        self.sense: Mapping[str, Any] = {}
+        self.sense_t = self.sense_t_world = 0.0
+        self.align = np.eye(3)
+        self.stale_read: set[int] = set()
+        self._inbox = inbox
+
+    def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
+        self.t = self.t_world = self.sense_t = self.sense_t_world = t
+        self.sense, self.first = sense, first
+
+    def neighbor(self, j: int) -> _Msg | None:
+        m = None if self.first else self._inbox.get(j)
+        if m is None or m[1] > self.t:
+            return None
+        return _Msg(m[0], m[1], m[1], self.t - m[1])  # fresh: a lockstep message is at most a period old
+
+    def heard_all(self) -> bool:
+        return all(j in self._inbox for j in self.neighbors)
+
+    def _history(self, *_: Any, **__: Any) -> Any:
+        raise Unsupported("the batched engine steps at sensor packets: no sensor history to interpolate")
+
+    mean_rate = body_rate = rotation = series = relative_attitude = body_vector = _history
+
+
+def stack(values: Sequence[Any]) -> Any:
+    """Per-draw values (states, initial values) as one value with a leading draw axis:
+    dataclasses field by field, mappings key by key, numbers and arrays stacked."""
+    v0 = values[0]
+    if dataclasses.is_dataclass(v0) and not isinstance(v0, type):
+        return type(v0)(**{f.name: stack([getattr(v, f.name) for v in values]) for f in dataclasses.fields(v0)})
+    if isinstance(v0, Mapping):
+        keys = list(v0)
+        if any(list(v) != keys for v in values):
+            raise Unsupported("draws whose states hold different keys")
+        return {k: stack([v[k] for v in values]) for k in keys}
+    if v0 is None:
+        if any(v is not None for v in values):
+            raise Unsupported("draws whose states differ in what is set")
+        return None
+    if isinstance(v0, tuple) and not isinstance(v0, np.ndarray):
+        if any(len(v) != len(v0) for v in values):
+            raise Unsupported("draws whose states differ in length")
+        return tuple(stack(list(col)) for col in zip(*values, strict=True))
+    return np.stack([np.asarray(v, dtype=float) for v in values])
+
+
+@dataclass
+class Result:
+    """What a basin or a sweep reads of M draws: the truth's max_k |R̄_k|_I on the report's
+    grid (as zswarm.report.families.sync measures it on a sim recording) and the jumps."""
+
+    t: np.ndarray  # (T,) world times of the grid
+    max_rel: np.ndarray  # (M, T)
+    jumps: np.ndarray  # (M,) ξ_k jumps of every edge
+    agent_jumps: np.ndarray  # (M,) jumps of the agents' own hybrid variables
+    steps: int  # agent steps taken (per draw)
+
+
+class _Torques:
+    """The plant's command source: the torques the agents' last ticks sent, held (ZOH)."""
+
+    def __init__(self, n_bodies: int) -> None:
+        self.u = np.zeros((n_bodies, 3))
+
+    def inputs_at(self, s: float, h: float) -> np.ndarray:
+        return self.u
+
+
+def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, progress: Callable[[float], None] | None = None) -> Result:
+    """Step the draws (scenarios that differ only in their agents' starts) together for
+    ``duration`` s of world time; the truth's max_k |R̄_k|_I on a grid of ``grid_s`` (the
+    report family's, zswarm.report.family.Family.basin_grid_s)."""
+    sc = draws[0]
+    why = problem(sc)
+    if why is not None:
+        raise Unsupported(f"{sc.name}: the batched engine cannot run it: {why}")
+    M, ids = len(draws), sc.ids
+    n = len(ids)
+    for d in draws[1:]:
+        if d.ids != ids or d.oriented != sc.oriented or dict(d.gains) != dict(sc.gains) or d.module is not sc.module:
+            raise Unsupported("draws that differ in more than their agents' starts")
+    col = {i: a for a, i in enumerate(ids)}
+    R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
+    w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
+    J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
+    torques = _Torques(M * n)
+    plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
+    bias = np.array([a.gyro_bias for a in sc.agents])
+
+    modules: dict[int, ModuleType] = {}
+    gains: dict[int, Any] = {}
+    views: dict[int, BatchedView] = {}
+    states: dict[int, Any] = {}
+    inboxes: dict[int, dict[int, tuple[dict[str, Any], float]]] = {i: {} for i in ids}
+    for i in ids:
+        per = [setup(d, i, seed) for d in draws]
+        modules[i], gains[i], tree_edges, _ = per[0]
+        states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
+        views[i] = BatchedView(sc, i, tree_edges, inboxes[i])
+    hybrid = has_jumps(sc.info)
+    part = sc.info.parts[0]
+    nbrs = {i: sc.graph_neighbors(i) for i in ids}
+
+    sample_dt = 1.0 / sc.sensor_rate
+    tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
+    grid_every = max(1, round(grid_s * sc.sensor_rate))
+    n_samples = math.floor(duration * sc.sensor_rate + 1e-9) + 1
+    grid_t, grid_v = [], []
+    jumps = np.zeros(M, dtype=np.int64)
+    agent_jumps = np.zeros(M, dtype=np.int64)
+    started = False
+    last = 0.0
+    steps = 0
+    edges = list(sc.oriented)
+    h_idx = np.array([col[h] for h, _ in edges], dtype=int)
+    t_idx = np.array([col[t] for _, t in edges], dtype=int)
+    for k in range(n_samples):
+        t = k * sample_dt  # as World.next_time computes it
+        plant.advance_to(t)
+        R = plant.R.reshape(M, n, 3, 3)
+        if k % grid_every == 0 and edges:
+            Rb = np.einsum("mnji,mnjk->mnik", R[:, t_idx], R[:, h_idx])  # R̄_k = R_t^T R_h
+            tr = np.trace(Rb, axis1=-2, axis2=-1)
+            grid_t.append(t)
+            grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
+        if k % tick_every:
+            continue
+        W = plant.omega_now().reshape(M, n, 3)
+        RT = np.swapaxes(R, -1, -2)
+        for i in ids:
+            a = col[i]
+            sense: dict[str, Any] = {"t": t}
+            want = sc.sensors_of(i)
+            if "gyro" in want:
+                sense["gyro"] = W[:, a] + bias[a]
+            if "rel_att" in want:
+                sense["rel_att"] = {j: RT[:, a] @ R[:, col[j]] for j in nbrs[i]}
+            v, mod, g = views[i], modules[i], gains[i]
+            outputs = None
+            if not started:
+                v.begin(t, sense, first=True)
+                if hybrid:
+                    v.dt = 0.0
+                    outputs = _step(part, states, i, v, g, 0.0, jumps, agent_jumps)
+                outputs = None  # the first tick's outputs are not sent (AgentNode._advance)
+            else:
+                v.begin(t, sense, first=False)
+                v.command_lead = 0.5 * v.period
+                v.dt = t - last
+                outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
+            pub = mod.publish(states[i], outputs, v)
+            if pub.command is not None and "tau" in pub.command:
+                torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
+            t_stamp = t if pub.t is None else pub.t
+            for j, fields in pub.edges.items():
+                inboxes[j][i] = (dict(fields), t_stamp)
+        if started:
+            steps += 1
+        started, last = True, t
+        if progress is not None and k % int(sc.sensor_rate) == 0:
+            progress(t)
+    # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
+    t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
+    assert len(t_grid) == len(grid_t)
+    return Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps)
+
+
+def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray) -> Any:
+    inputs = part.inputs(view, gains)
+    if inputs is None:
+        return None
+    states[i], outputs = part.step(states[i], inputs, dt, gains)
+    for _k, _before, after in getattr(outputs, "jumps", ()):
+        jumps += np.isfinite(np.asarray(after, dtype=float)).reshape(jumps.shape) if np.ndim(after) else 1
+    for _before, after in getattr(outputs, "agent_jumps", ()):
+        agent_jumps += np.isfinite(np.asarray(after, dtype=float)).reshape(agent_jumps.shape) if np.ndim(after) else 1
+    return outputs
