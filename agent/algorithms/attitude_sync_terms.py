@@ -242,10 +242,11 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
         if m == 0:
             f = -kg * xi - two_k * (a0 + b0 * sin(xi) + q0 * (1.0 - cos(xi)))
         s1 = (m + 1) / n
+        a1, b1, q1 = a0 + s1 * da, b0 + s1 * db, q0 + s1 * dq  # at the sub-step's end (both evaluations there)
         x1 = xi + h * f
-        f1 = -kg * x1 - two_k * ((a0 + s1 * da) + (b0 + s1 * db) * sin(x1) + (q0 + s1 * dq) * (1.0 - cos(x1)))
+        f1 = -kg * x1 - two_k * (a1 + b1 * sin(x1) + q1 * (1.0 - cos(x1)))
         xi = xi + 0.5 * h * (f + f1)
-        f = -kg * xi - two_k * ((a0 + s1 * da) + (b0 + s1 * db) * sin(xi) + (q0 + s1 * dq) * (1.0 - cos(xi)))
+        f = -kg * xi - two_k * (a1 + b1 * sin(xi) + q1 * (1.0 - cos(xi)))
     return xi
 
 
