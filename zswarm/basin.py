@@ -36,22 +36,21 @@ import csv
 import hashlib
 import json
 import math
-import multiprocessing
 import re
-import signal
 import sys
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from zswarm import cluster as zswarm_cluster
 from zswarm import procutil, report
 from zswarm.report import family
 from zswarm.report.series import leave_time, settle_time
-from zswarm.scenario import Override, Scenario, load, parse_override
+from zswarm.scenario import Override, Scenario, load, loads, parse_override
 from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 
 # Draws stepped together at most (a chunk: one task of the pool; resume reruns a whole chunk).
@@ -107,13 +106,23 @@ def draw_overrides(sc: Scenario, seed: int, draw: int, near: float | None = None
     return out
 
 
-def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: float, near: float | None = None) -> dict[str, Any]:
+Source = str | tuple[str, str]  # a scenario file's path, or (its text, its path) for a worker on another host
+
+
+def _load(topology: Source, overrides: list[Override] | None = None) -> Scenario:
+    if isinstance(topology, tuple):
+        text, path = topology
+        return loads(text, path, overrides or ())
+    return load(topology, overrides or ())
+
+
+def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold: float, near: float | None = None) -> dict[str, Any]:
     """One draw on ``sim``, in memory; its row of basin.csv."""
     from zswarm.sim import simulate
 
     t0 = time.monotonic()
-    base = load(topology)
-    sc = load(topology, draw_overrides(base, seed, draw, near))
+    base = _load(topology)
+    sc = _load(topology, draw_overrides(base, seed, draw, near))
     msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
     rec = report.load_recording(msgs)  # type: ignore[arg-type]
     fam = family.of(sc)
@@ -137,15 +146,15 @@ def run_draw(topology: str, seed: int, draw: int, duration: float, threshold: fl
     }
 
 
-def run_chunk(topology: str, seed: int, draws: list[int], duration: float, threshold: float, near: float | None = None) -> list[dict[str, Any]]:
+def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, threshold: float, near: float | None = None) -> list[dict[str, Any]]:
     """Draws on the batched lockstep engine (agent/batched.py: every draw of the chunk stepped
     together, the same algorithm modules as sim); their rows of basin.csv."""
     from zswarm import plugins
 
     t0 = time.monotonic()
     batched = plugins.engine("batched")
-    base = load(topology)
-    scs = [load(topology, draw_overrides(base, seed, d, near)) for d in draws]
+    base = _load(topology)
+    scs = [_load(topology, draw_overrides(base, seed, d, near)) for d in draws]
     fam = family.of(base)
     res = batched.run(scs, duration, base.seed, fam.basin_grid_s)
     wall = round((time.monotonic() - t0) / len(draws), 3)
@@ -193,13 +202,6 @@ def read_rows(path: Path) -> list[dict[str, str]]:
     return sorted(last.values(), key=lambda r: int(r["draw"]))
 
 
-def _worker_init() -> None:
-    """Draws run in workers that leave signals to the parent: Ctrl-C reaches the whole
-    process group, and the parent, not each worker, decides what is kept (it kills them)."""
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, signal.SIG_IGN)
-
-
 def run_basin(
     topology: str,
     draws: int,
@@ -213,11 +215,14 @@ def run_basin(
     near: float | None = None,
     batched: bool = False,
     chunk: int | None = None,
+    cluster: str | None = None,
 ) -> tuple[list[dict[str, str]], bool]:
     """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
     whether it was interrupted.  ``batched``: in chunks of ``chunk`` draws on the batched engine
     (default: the draws to do shared out among the jobs, at most MAX_CHUNK each), each chunk's
-    rows written as it finishes (a resume reruns the unfinished chunks)."""
+    rows written as it finishes (a resume reruns the unfinished chunks).  ``cluster``: on the
+    Dask cluster whose scheduler is there (zswarm.cluster), as many at a time as it has worker
+    threads; the same rows as locally (the draws are seeded by their number)."""
     path = out / "basin.csv"
     done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
     todo = [d for d in range(draws) if d not in done]
@@ -232,8 +237,10 @@ def run_basin(
         if new:
             w.writeheader()
             f.flush()
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_worker_init) as pool:
+        with zswarm_cluster.executor(jobs, cluster) as runner:
+            pool, jobs = runner.pool, runner.slots
+            source: Source = topology if cluster is None else (Path(topology).read_text(encoding="utf-8"), topology)
+            progress(f"running on {runner.where}")
             pending: dict[Any, list[int]] = {}
             size = 1
             if batched:
@@ -243,7 +250,7 @@ def run_basin(
             def submit() -> None:
                 ds = next(chunks, None)
                 if ds is not None:
-                    fut = pool.submit(run_chunk, topology, seed, ds, duration, threshold, near) if batched else pool.submit(run_draw, topology, seed, ds[0], duration, threshold, near)
+                    fut = pool.submit(run_chunk, source, seed, ds, duration, threshold, near) if batched else pool.submit(run_draw, source, seed, ds[0], duration, threshold, near)
                     pending[fut] = ds
 
             for _ in range(jobs):
@@ -274,9 +281,7 @@ def run_basin(
                         progress(f"draws {ds[0]}-{ds[-1]}: {len(ok)} ok, {n_sync} synchronized ({_fmt(rows_[0].get('wall_s'))} s a draw)")
                     submit()
             if interrupted:  # the draws under way are lost (they rerun on resume), not waited for
-                for proc in list((getattr(pool, "_processes", None) or {}).values()):  # the executor's own workers
-                    proc.kill()
-                pool.shutdown(wait=True, cancel_futures=True)
+                runner.abort()
     return read_rows(path), interrupted
 
 
@@ -576,12 +581,16 @@ def command(args: argparse.Namespace) -> int:
         procutil.fail_usage(f"{args.topology}: --engine batched: the batched engine cannot run it: {why}")
     batched = args.engine != "sim" and why is None
     how = "on the batched engine (draws stepped together)" if batched else "on sim" + (f" (not batched: {why})" if args.engine == "auto" else "")
-    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) {how}, {jobs} at a time; {out}", file=sys.stderr)
+    print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) {how}" + ("" if args.cluster else f", {jobs} at a time") + f"; {out}", file=sys.stderr)
     t0 = time.monotonic()
-    rows, interrupted = basin.run_basin(
-        str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near,
-        batched=batched, chunk=args.chunk,
-    )
+    try:
+        rows, interrupted = basin.run_basin(
+            str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near,
+            batched=batched, chunk=args.chunk, cluster=args.cluster,
+        )
+    except zswarm_cluster.ClusterError as exc:
+        print(f"zswarm basin: {exc}", file=sys.stderr)
+        return 1
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
         return 130

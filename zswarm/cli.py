@@ -95,6 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--engine", choices=("sim", "run"), default="sim", help="zswarm sim (default) or zswarm run (real processes over Zenoh)")
     sw.add_argument("--jobs", type=procutil.positive_int, default=None, help="runs at a time (default: the number of cores for sim, 1 for run)")
     sw.add_argument("--out", type=Path, default=None, help="sweep folder (default sweeps/<scenario>-<timestamp>/); the same folder resumes")
+    sw.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the runs (engine sim) on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port)")
     sw.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help="a fixed override for every run (repeatable)")
     sw.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds per run (default: the scenario's)")
     sw.add_argument("--seed", type=int, default=None, help="seed of repeat 0 (default: the scenario's); repeat r uses seed + r")
@@ -138,6 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
         "sim: each draw on zswarm sim; auto (default): batched where the scenario allows it (lockstep clocks, perfect links, no noise or faults), else sim",
     )
     b.add_argument("--chunk", type=procutil.positive_int, default=None, help="draws stepped together per task of the batched engine (default: the draws shared out among the jobs, at most 1000)")
+    b.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the draws on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port) instead of local processes")
 
     bc = sub.add_parser(
         "basin-compare",

@@ -35,6 +35,14 @@ def write_text(path: Path, text: str) -> None:
         os.fsync(f.fileno())
 
 
+def write_bytes(path: Path, data: bytes) -> None:
+    """``path.write_bytes(data)``, whole or not at all."""
+    with whole(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+
+
 def save_png(fig: object, path: Path) -> None:
     """A matplotlib figure as a PNG at ``path``, whole or not at all."""
     with whole(path) as tmp:

@@ -27,6 +27,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -35,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import procutil, report
+from zswarm import files, procutil, report
 from zswarm.report import family
-from zswarm.scenario import Override, Scenario, ScenarioError, load, parse_field, parse_override
+from zswarm.scenario import Override, Scenario, ScenarioError, load, loads, parse_field, parse_override
 from zswarm.text import shown
 
 COLUMNS_RESULT = (
@@ -325,23 +326,7 @@ def run_sweep(
     stop: Callable[[], bool] = lambda: False,
 ) -> tuple[int, int, bool]:
     """Run what is not in sweep.csv yet; return (ok, failed, interrupted)."""
-    csv_path = out / "sweep.csv"
-    done = read_done(csv_path)
-    todo = [j for j in jobs if j.run_id not in done]
-    header = ["run_id", "point", "repeat", "seed", *(_column(v) for v in varies), *COLUMNS_RESULT]
-    new_file = not csv_path.exists() or csv_path.stat().st_size == 0
-    if not new_file:
-        _repair_tail(csv_path)
-        with open(csv_path, newline="") as fh:
-            header = next(csv.reader(fh), header)  # a folder begun by an older zswarm keeps its columns
-    f = open(csv_path, "a", newline="")  # noqa: SIM115 - closed below
-    w = csv.DictWriter(f, fieldnames=header, extrasaction="ignore")
-    if new_file:
-        w.writeheader()
-        f.flush()
-    prog = Progress(len(jobs), len(jobs) - len(todo))
-    prog.failed = sum(1 for r in done.values() if r["status"] == "failed")
-    prog.update()
+    f, w, todo, prog = _open(out, jobs, varies)
     running: dict[str, tuple[Job, subprocess.Popen[bytes], float, Path]] = {}
     ok = failed = 0
     queue = list(todo)
@@ -371,8 +356,7 @@ def run_sweep(
                     _kill(proc)
                 wall = time.monotonic() - t0
                 del running[rid]
-                row: dict[str, Any] = {"run_id": job.run_id, "point": job.point, "repeat": job.repeat, "seed": job.seed}
-                row.update({_column(v): x for v, x in zip(varies, job.values, strict=True)})
+                row = _job_row(job, varies)
                 try:
                     if timed_out:
                         raise RuntimeError(f"timed out after {timeout:g} s")
@@ -402,6 +386,118 @@ def run_sweep(
     finally:
         for _job, proc, _t0, _folder in running.values():
             _kill(proc)
+        f.close()
+        prog.close()
+    return ok, failed, interrupted
+
+
+def _open(out: Path, jobs: list[Job], varies: Sequence[Vary]) -> tuple[Any, csv.DictWriter[str], list[Job], Progress]:
+    """sweep.csv opened to append (its header written when new, its own kept when resumed),
+    the jobs not in it yet, and the progress line."""
+    csv_path = out / "sweep.csv"
+    done = read_done(csv_path)
+    todo = [j for j in jobs if j.run_id not in done]
+    header = ["run_id", "point", "repeat", "seed", *(_column(v) for v in varies), *COLUMNS_RESULT]
+    new_file = not csv_path.exists() or csv_path.stat().st_size == 0
+    if not new_file:
+        _repair_tail(csv_path)
+        with open(csv_path, newline="") as fh:
+            header = next(csv.reader(fh), header)  # a folder begun by an older zswarm keeps its columns
+    f = open(csv_path, "a", newline="")  # noqa: SIM115 - the caller closes it
+    w = csv.DictWriter(f, fieldnames=header, extrasaction="ignore")
+    if new_file:
+        w.writeheader()
+        f.flush()
+    prog = Progress(len(jobs), len(jobs) - len(todo))
+    prog.failed = sum(1 for r in done.values() if r["status"] == "failed")
+    prog.update()
+    return f, w, todo, prog
+
+
+def _job_row(job: Job, varies: Sequence[Vary]) -> dict[str, Any]:
+    row: dict[str, Any] = {"run_id": job.run_id, "point": job.point, "repeat": job.repeat, "seed": job.seed}
+    row.update({_column(v): x for v, x in zip(varies, job.values, strict=True)})
+    return row
+
+
+def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[float, float]) -> tuple[dict[str, Any], list[str] | None, dict[str, bytes]]:
+    """One run of a sweep on sim in this process (a cluster's worker): what ``zswarm sim
+    --no-recording --lean --no-plots`` computes and writes, then its sweep.csv columns.
+    Returns those, the run's problems when it did not complete (None when it did), and the
+    files it wrote (summary.json, errors.csv, the family's CSVs) for the sweep's folder."""
+    from zswarm.sim import LEAN_SKIP, simulate
+
+    sc = loads(text, path, job.overrides)
+    with tempfile.TemporaryDirectory(prefix="zswarm-sweep-") as d:
+        folder = Path(d)
+        (folder / "scenario.toml").write_text(sc.text, encoding="utf-8")
+        msgs = simulate(sc, folder, duration, job.seed, lean=True, record=False)
+        summary = report.make_report(folder, sc, "sim", duration, 0.0, job.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)  # type: ignore[arg-type]
+        row = summarize_run(folder, sc, duration, thresholds)
+        problems = None if summary["completed"] else [str(p) for p in summary.get("problems", [])]
+        written = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    return row, problems, written
+
+
+def run_sweep_cluster(
+    topology: str,
+    jobs: list[Job],
+    varies: Sequence[Vary],
+    out: Path,
+    duration: float,
+    thresholds: tuple[float, float],
+    cluster: str,
+    stop: Callable[[], bool] = lambda: False,
+) -> tuple[int, int, bool]:
+    """:func:`run_sweep` on the Dask cluster whose scheduler is at ``cluster`` (engine sim, each
+    run in a worker's process: :func:`run_job`); each run's files are written into
+    ``out/runs/<id>/`` here.  Returns (ok, failed, interrupted)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    from zswarm import cluster as zswarm_cluster
+
+    text = Path(topology).read_text(encoding="utf-8")
+    f, w, todo, prog = _open(out, jobs, varies)
+    ok = failed = 0
+    interrupted = False
+    try:
+        with zswarm_cluster.executor(1, cluster) as runner:
+            queue = list(todo)
+            pending: dict[Any, tuple[Job, float]] = {}
+            while queue or pending:
+                if stop():
+                    interrupted = True
+                    runner.abort()
+                    break
+                while queue and len(pending) < 2 * runner.slots:  # one waiting per thread: no idle worker between runs
+                    job = queue.pop(0)
+                    pending[runner.pool.submit(run_job, text, topology, job, duration, thresholds)] = (job, time.monotonic())
+                finished, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    job, t0 = pending.pop(fut)
+                    row = _job_row(job, varies)
+                    try:
+                        results, problems, written = fut.result()
+                        folder = out / "runs" / job.run_id
+                        folder.mkdir(parents=True, exist_ok=True)
+                        for name, data in written.items():
+                            files.write_bytes(folder / name, data)
+                        row.update(results)
+                        if problems is not None:
+                            raise RuntimeError("not completed: " + "; ".join(problems))
+                        row["status"], row["error"] = "ok", ""
+                        ok += 1
+                    except Exception as exc:  # noqa: BLE001 - any failure of one run is recorded, the sweep goes on
+                        row["status"], row["error"] = "failed", f"{type(exc).__name__}: {exc}"[:400]
+                        failed += 1
+                        prog.failed += 1
+                    row["wall_s"] = round(time.monotonic() - t0, 2)
+                    w.writerow({k: _fmt(v) for k, v in row.items()})
+                    f.flush()
+                    os.fsync(f.fileno())
+                    prog.done += 1
+                    prog.update(job, row["status"])
+    finally:
         f.close()
         prog.close()
     return ok, failed, interrupted
@@ -670,16 +766,28 @@ def command(args: argparse.Namespace) -> int:
             procutil.fail_usage(f"--out {out}: holds a different sweep (differs in: {', '.join(diff)}); use another --out to start a new one")
     else:
         spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+    if args.cluster is not None and args.engine != "sim":
+        procutil.fail_usage("--cluster: the runs of a sweep on a cluster use the sim engine (zswarm run's processes stay on this host)")
     n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine == "sim" else 1)
     timeout = args.timeout or (max(120.0, 10.0 * duration) if args.engine == "sim" else duration + 180.0)
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
     n_points = len(jobs) // args.repeats
-    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {n_jobs} at a time; {out}", file=sys.stderr)
+    where = f"the Dask cluster at {args.cluster}" if args.cluster else f"{n_jobs} at a time"
+    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {where}; {out}", file=sys.stderr)
     t0 = time.monotonic()
-    ok, _failed, interrupted = sweep.run_sweep(
-        args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
-    )
+    if args.cluster is not None:
+        from zswarm.cluster import ClusterError
+
+        try:
+            ok, _failed, interrupted = sweep.run_sweep_cluster(args.topology, jobs, varies, out, duration, thresholds, args.cluster, stop.is_set)
+        except ClusterError as exc:
+            print(f"zswarm sweep: {exc}", file=sys.stderr)
+            return 1
+    else:
+        ok, _failed, interrupted = sweep.run_sweep(
+            args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
+        )
     wall = time.monotonic() - t0
     rows = sweep.load_rows(out / "sweep.csv")
     if interrupted:
