@@ -124,7 +124,7 @@ def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold:
     base = _load(topology)
     sc = _load(topology, draw_overrides(base, seed, draw, near))
     msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
-    rec = report.load_recording(msgs)  # type: ignore[arg-type]
+    rec = report.load_recording(msgs)
     fam = family.of(sc)
     assert fam.basin_series is not None  # draw_overrides refused a family without one
     t, mx = fam.basin_series(sc, rec)

@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 CONNECT_TIMEOUT_S = 10.0
 RETRIES = 1  # a task that raised is tried once more (a lost worker is the scheduler's: allowed-failures)
@@ -63,11 +64,11 @@ def executor(jobs: int, cluster: str | None = None) -> Iterator[Runner]:
             yield Runner(pool, jobs, kill, f"{jobs} local processes")
         return
     try:
-        from distributed import Client
+        import distributed
     except ImportError:
         raise ClusterError("--cluster needs Dask distributed: pip install 'zswarm[cluster]' (or distributed)") from None
     try:
-        client = Client(cluster, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+        client: Any = distributed.Client(cluster, timeout=CONNECT_TIMEOUT_S, set_as_default=False)  # type: ignore[no-untyped-call]  # distributed has no types
     except (OSError, TimeoutError) as exc:
         raise ClusterError(f"cannot reach the Dask scheduler at {cluster} ({type(exc).__name__}: {exc})") from None
     try:

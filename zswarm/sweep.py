@@ -432,7 +432,7 @@ def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[f
         folder = Path(d)
         (folder / "scenario.toml").write_text(sc.text, encoding="utf-8")
         msgs = simulate(sc, folder, duration, job.seed, lean=True, record=False)
-        summary = report.make_report(folder, sc, "sim", duration, 0.0, job.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)  # type: ignore[arg-type]
+        summary = report.make_report(folder, sc, "sim", duration, 0.0, job.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
         row = summarize_run(folder, sc, duration, thresholds)
         problems = None if summary["completed"] else [str(p) for p in summary.get("problems", [])]
         written = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
