@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import ModuleType
@@ -41,7 +42,8 @@ from world.plant import RigidBodyPlant
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.scenario import Scenario
 
-SENSORS = frozenset({"gyro", "rel_att"})  # what the batched world measures so far
+SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world measures so far
+HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
 
 
 class Unsupported(ValueError):
@@ -97,7 +99,7 @@ class BatchedView:
     leading draw axis.  Steps end at sensor packets (lockstep), so the history
     interpolators are never needed; they say so if an algorithm asks."""
 
-    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]]) -> None:
+    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]]) -> None:
         a = sc.agent(i)
         self.id = i
         self.role = a.role
@@ -116,6 +118,7 @@ class BatchedView:
         self.align = np.eye(3)
         self.stale_read: set[int] = set()
         self._inbox = inbox
+        self._history = history
 
     def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
         self.t = self.t_world = self.sense_t = self.sense_t_world = t
@@ -130,10 +133,24 @@ class BatchedView:
     def heard_all(self) -> bool:
         return all(j in self._inbox for j in self.neighbors)
 
-    def _history(self, *_: Any, **__: Any) -> Any:
+    def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
+        """Samples of the sensor field ``name`` in (t0, t1], the newest at or before t0 first
+        (as the runtime's View.series)."""
+        if name not in self._history:
+            raise Unsupported(f"the batched engine keeps no history of {name!r}")
+        out: list[tuple[float, np.ndarray]] = []
+        for t, v in reversed(self._history[name]):
+            if t <= t1 + 1e-12:
+                out.append((t, v))
+                if t <= t0 + 1e-12:
+                    break
+        out.reverse()
+        return out
+
+    def _interpolated(self, *_: Any, **__: Any) -> Any:
         raise Unsupported("the batched engine steps at sensor packets: no sensor history to interpolate")
 
-    mean_rate = body_rate = rotation = series = relative_attitude = body_vector = _history
+    mean_rate = body_rate = rotation = relative_attitude = body_vector = _interpolated
 
 
 def stack(values: Sequence[Any]) -> Any:
@@ -206,11 +223,13 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     views: dict[int, BatchedView] = {}
     states: dict[int, Any] = {}
     inboxes: dict[int, dict[int, tuple[dict[str, Any], float]]] = {i: {} for i in ids}
+    want = {i: sc.sensors_of(i) for i in ids}
+    histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {f: deque(maxlen=HISTORY) for f in ("attitude",) if f in want[i]} for i in ids}
     for i in ids:
         per = [setup(d, i, seed) for d in draws]
         modules[i], gains[i], tree_edges, _ = per[0]
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
-        views[i] = BatchedView(sc, i, tree_edges, inboxes[i])
+        views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i])
     hybrid = has_jumps(sc.info)
     part = sc.info.parts[0]
     nbrs = {i: sc.graph_neighbors(i) for i in ids}
@@ -237,6 +256,9 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             tr = np.trace(Rb, axis1=-2, axis2=-1)
             grid_t.append(t)
             grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
+        for i, h in histories.items():  # every sample, as an agent's inbox keeps them
+            if "attitude" in h:
+                h["attitude"].append((t, R[:, col[i]].copy()))
         if k % tick_every:
             continue
         W = plant.omega_now().reshape(M, n, 3)
@@ -244,11 +266,12 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
         for i in ids:
             a = col[i]
             sense: dict[str, Any] = {"t": t}
-            want = sc.sensors_of(i)
-            if "gyro" in want:
+            if "gyro" in want[i]:
                 sense["gyro"] = W[:, a] + bias[a]
-            if "rel_att" in want:
+            if "rel_att" in want[i]:
                 sense["rel_att"] = {j: RT[:, a] @ R[:, col[j]] for j in nbrs[i]}
+            if "attitude" in want[i]:
+                sense["attitude"] = R[:, a]
             v, mod, g = views[i], modules[i], gains[i]
             outputs = None
             if not started:

@@ -41,10 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, _times, jump, measured_edges, published_xi, tail_xi
 from zswarm import hybrid
 from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Ra, Vec3, exp, hat, log, psi
+from zswarm.so3 import Mat3, Ra, T, Vec3, exp, hat, log, psi
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
 
@@ -114,7 +114,12 @@ class _Rates:
         self.u2 = 2.0 * np.asarray(g.u, dtype=float)
 
     def __call__(self, Qt: Mat3, zeta: float) -> tuple[Vec3, float]:
-        """``(k_Q h_i, ζ̇)``: Q̃̇ = Q̃ [ω_i − k_Q h_i]^x (5.14), equivalent to (5.22) for Q_i, and (5.23)."""
+        """``(k_Q h_i, ζ̇)``: Q̃̇ = Q̃ [ω_i − k_Q h_i]^x (5.14), equivalent to (5.22) for Q_i, and (5.23).
+        Broadcasts: Q̃ (M, 3, 3) and ζ (M,) of M draws."""
+        if isinstance(zeta, np.ndarray):
+            Z = _EYE + np.sin(zeta)[:, None, None] * self.K + (1.0 - np.cos(zeta))[:, None, None] * self.K2
+            p = psi(self.A @ Qt @ Z)
+            return self.k_Q * _times(Z, p), -self.k_zeta * (self.gamma * zeta + p @ self.u2)
         Z = _EYE + math.sin(zeta) * self.K + (1.0 - math.cos(zeta)) * self.K2
         p = psi(self.A @ Qt @ Z)
         return self.k_Q * (Z @ p), -self.k_zeta * (self.gamma * zeta + float(self.u2 @ p))
@@ -133,7 +138,7 @@ def _rates(g: Gains) -> _Rates:
 
 def attitude_path(samples: tuple[tuple[float, Mat3], ...]) -> list[tuple[float, float, Mat3, Vec3]]:
     """The geodesic segments between consecutive samples: ``(t0, t1, R0, log(R0^T R1))``."""
-    return [(t0, t1, R0, log(R0.T @ R1)) for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False) if t1 > t0]
+    return [(t0, t1, R0, log(T(R0) @ R1)) for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False) if t1 > t0]
 
 
 def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float, path: list[tuple[float, float, Mat3, Vec3]] | None = None) -> Mat3:
@@ -166,7 +171,7 @@ def flow_aux(Q: Mat3, zeta: float, samples: tuple[tuple[float, Mat3], ...], dt: 
     h = dt / n
     rates = _rates(g)
     path = attitude_path(samples)
-    Qt = Q.T @ attitude_at(samples, -dt, path)
+    Qt = T(Q) @ attitude_at(samples, -dt, path)
     s = -dt
     kh1, z1 = rates(Qt, zeta)
     for _ in range(n):
@@ -179,7 +184,7 @@ def flow_aux(Q: Mat3, zeta: float, samples: tuple[tuple[float, Mat3], ...], dt: 
         s += h
         kh1, z1 = rates(Qt, zeta)
     R_end = samples[-1][1]
-    return R_end @ Qt.T, zeta
+    return R_end @ T(Qt), zeta
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
@@ -188,11 +193,16 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     if dt > 0:
         Q, zeta = flow_aux(Q, zeta, inputs.R, dt, gains)
     R = inputs.R[-1][1]
-    Qt = Q.T @ R
+    Qt = T(Q) @ R
     agent_jumps = []
     tq = Terms(gains.A, gains.u, Qt)
     new = jump(gains.A, gains.u, gains.gamma, gains.delta_Q, gains.Pi, Qt, zeta, tq)
-    if new is not None:
+    if isinstance(new, np.ndarray):  # M draws: NaN where a draw flows
+        hit = np.isfinite(new)
+        if hit.any():
+            agent_jumps.append((zeta, new))
+            zeta = np.where(hit, new, zeta)
+    elif new is not None:
         agent_jumps.append((zeta, new))
         zeta = new
     xi, jumps, coefs, terms = flow_and_jump(state.xi, state.coef_prev, inputs.edges, dt, gains)
@@ -243,5 +253,6 @@ SPEC = AlgorithmSpec(
         "zeta": InitialField("number", 0.0, "ζ_i(0) (5.22)"),
     },
     stale=StalePolicy(0.2, "hold"),
+    batched=True,
     sensor_use={"attitude": "R_i, for Q̃_i = Q_i^T R_i of (5.20)-(5.23)", "rel_att": "R_ij, the coupling and the jump logic"},
 )
