@@ -18,6 +18,8 @@ import pytest
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import wait_for
 
+pytestmark = pytest.mark.integration
+
 DASK = str(Path(sys.executable).parent / "dask")
 ROW_KEYS = ("draw", "kind", "synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "status")
 
