@@ -21,7 +21,7 @@ from zswarm import basin
 from zswarm.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7")
+SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7")
 REPEATS = 2
 
 
