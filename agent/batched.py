@@ -81,6 +81,8 @@ def problem(sc: Scenario) -> str | None:
         return "faults"
     if sc.part_rate_scale != 1.0:
         return "scaled part rates"
+    if sc.stale.max_age < 1.0 / c.rate:
+        return "a stale-data max_age shorter than a clock period (lockstep serves every message as fresh)"
     return None
 
 
@@ -207,8 +209,9 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
         raise Unsupported(f"{sc.name}: the batched engine cannot run it: {why}")
     M, ids = len(draws), sc.ids
     n = len(ids)
+    agent_gains = [dict(a.gains) for a in sc.agents]
     for d in draws[1:]:
-        if d.ids != ids or d.oriented != sc.oriented or dict(d.gains) != dict(sc.gains) or d.module is not sc.module:
+        if d.ids != ids or d.oriented != sc.oriented or dict(d.gains) != dict(sc.gains) or d.module is not sc.module or [dict(a.gains) for a in d.agents] != agent_gains:
             raise Unsupported("draws that differ in more than their agents' starts")
     col = {i: a for a, i in enumerate(ids)}
     R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
@@ -276,10 +279,9 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             outputs = None
             if not started:
                 v.begin(t, sense, first=True)
-                if hybrid:
+                if hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
                     v.dt = 0.0
-                    outputs = _step(part, states, i, v, g, 0.0, jumps, agent_jumps)
-                outputs = None  # the first tick's outputs are not sent (AgentNode._advance)
+                    _step(part, states, i, v, g, 0.0, jumps, agent_jumps)
             else:
                 v.begin(t, sense, first=False)
                 v.command_lead = 0.5 * v.period
