@@ -108,9 +108,6 @@ def bounds(**declared: Any) -> msgspec.Meta:
     return msgspec.Meta(**kw, extra={"zswarm.bounds": b})
 
 
-FINITE = bounds()  # any finite number
-
-
 def convert(c: _Ctx, d: Any, fld: str, typ: type[T], defaults: Mapping[str, Any] | None = None) -> T:
     """Table ``d`` (at ``fld``) as ``typ``; ``defaults`` fill the keys ``d`` leaves out (a
     default that depends on the algorithm, or a base table a more specific one overrides).
