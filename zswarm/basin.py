@@ -56,6 +56,7 @@ from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 # Draws stepped together at most (a chunk: one task of the pool; resume reruns a whole chunk).
 # Past ~1000 the per-call cost of numpy is paid off (agent/batched.py's benchmark).
 MAX_CHUNK = 1000
+PROGRESS_EVERY_S = 30.0  # wall seconds between a running chunk's progress lines
 COLUMNS = ("draw", "kind", "synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
 
 
@@ -156,7 +157,16 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
     base = _load(topology)
     scs = [_load(topology, draw_overrides(base, seed, d, near)) for d in draws]
     fam = family.of(base)
-    res = batched.run(scs, duration, base.seed, fam.basin_grid_s)
+    told = [time.monotonic()]
+
+    def tell(t: float) -> None:
+        # A chunk of a thousand 150 s draws takes minutes: say how far it is (stderr is the
+        # terminal's for a local worker, the worker's log on a cluster).
+        if time.monotonic() - told[0] >= PROGRESS_EVERY_S:
+            told[0] = time.monotonic()
+            print(f"draws {draws[0]}-{draws[-1]}: t = {t:.0f} of {duration:g} s", file=sys.stderr, flush=True)
+
+    res = batched.run(scs, duration, base.seed, fam.basin_grid_s, progress=tell)
     wall = round((time.monotonic() - t0) / len(draws), 3)
     rows = []
     for n, d in enumerate(draws):
