@@ -39,6 +39,7 @@ import numpy as np
 
 from agent.runtime import setup
 from world.plant import RigidBodyPlant
+from zswarm import timing
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.scenario import Scenario
 
@@ -140,14 +141,7 @@ class BatchedView:
         (as the runtime's View.series)."""
         if name not in self._history:
             raise Unsupported(f"the batched engine keeps no history of {name!r}")
-        out: list[tuple[float, np.ndarray]] = []
-        for t, v in reversed(self._history[name]):
-            if t <= t1 + 1e-12:
-                out.append((t, v))
-                if t <= t0 + 1e-12:
-                    break
-        out.reverse()
-        return out
+        return timing.window(self._history[name], t0, t1)
 
     def _interpolated(self, *_: Any, **__: Any) -> Any:
         raise Unsupported("the batched engine steps at sensor packets: no sensor history to interpolate")

@@ -414,15 +414,7 @@ class TickView:
         return self._cache[key]  # type: ignore[no-any-return]
 
     def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
-        samples = self._samples(name)
-        out: list[tuple[float, np.ndarray]] = []
-        for t, v in reversed(samples):
-            if t <= t1 + 1e-12:
-                out.append((t, v))
-                if t <= t0 + 1e-12:
-                    break
-        out.reverse()
-        return out
+        return timing.window(self._samples(name), t0, t1)
 
     def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
         return timing.interval_mean_rate(self._samples(name), t0, t1)

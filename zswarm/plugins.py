@@ -35,22 +35,24 @@ PROCESS_GROUP = "zswarm.processes"
 OWN_PROCESSES = {"agent": "agent.", "world": "world.", "batched": "agent."}
 
 
+def _load(name: str) -> object:
+    """What is registered as ``name`` in PROCESS_GROUP, zswarm's own first."""
+    ep = next((e for e in _ranked(PROCESS_GROUP, OWN_PROCESSES[name]) if e.name == name), None)
+    if ep is None:
+        raise RuntimeError(f"no {name!r} registered in the entry points {PROCESS_GROUP!r} (zswarm is not installed: pip install -e .)")
+    return ep.load()
+
+
 def engine(name: str) -> ModuleType:
     """The module registered as ``name`` in PROCESS_GROUP ("batched": the batched lockstep
     engine, agent/batched.py)."""
-    ep = next((e for e in _ranked(PROCESS_GROUP, OWN_PROCESSES[name]) if e.name == name), None)
-    if ep is None:
-        raise RuntimeError(f"no {name!r} engine registered in the entry points {PROCESS_GROUP!r} (zswarm is not installed: pip install -e .)")
-    mod = ep.load()
+    mod = _load(name)
     assert isinstance(mod, ModuleType)
     return mod
 
 
 def process_class(name: str) -> type:
     """The class of the process ``name`` ("agent": AgentNode, "world": World)."""
-    ep = next((e for e in _ranked(PROCESS_GROUP, OWN_PROCESSES[name]) if e.name == name), None)
-    if ep is None:
-        raise RuntimeError(f"no {name!r} process registered in the entry points {PROCESS_GROUP!r} (zswarm is not installed: pip install -e .)")
-    cls = ep.load()
+    cls = _load(name)
     assert isinstance(cls, type)
     return cls

@@ -25,6 +25,19 @@ from zswarm.so3 import exp, log
 Sample = tuple[float, np.ndarray]
 
 
+def window(samples: Sequence[Sample], t0: float, t1: float) -> list[Sample]:
+    """The samples in ``(t0, t1]``, with the newest one at or before t0 first when there is one
+    (View.series: what a step from t0 to t1 measured)."""
+    out: list[Sample] = []
+    for t, v in reversed(samples):
+        if t <= t1 + 1e-12:
+            out.append((t, v))
+            if t <= t0 + 1e-12:
+                break
+    out.reverse()
+    return out
+
+
 def interval_mean_rate(samples: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
     """Mean of a sampled rate over ``[t0, t1]``.
 
