@@ -164,7 +164,7 @@ def stack(values: Sequence[Any]) -> Any:
         if any(v is not None for v in values):
             raise Unsupported("draws whose states differ in what is set")
         return None
-    if isinstance(v0, tuple) and not isinstance(v0, np.ndarray):
+    if isinstance(v0, tuple):
         if any(len(v) != len(v0) for v in values):
             raise Unsupported("draws whose states differ in length")
         return tuple(stack(list(col)) for col in zip(*values, strict=True))

@@ -129,6 +129,11 @@ def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold:
     fam = family.of(sc)
     assert fam.basin_series is not None  # draw_overrides refused a family without one
     t, mx = fam.basin_series(sc, rec)
+    return _row(draw, near, t, mx, threshold, len(rec.jumps), len(rec.agent_jumps), round(time.monotonic() - t0, 2))
+
+
+def _row(draw: int, near: float | None, t: np.ndarray, mx: np.ndarray, threshold: float, jumps: int, agent_jumps: int, wall: float) -> dict[str, Any]:
+    """A draw's row of basin.csv from its max_k |R̄_k|_I series, whichever engine ran it."""
     settle = settle_time(t, mx, threshold)
     return {
         "draw": draw,
@@ -139,9 +144,9 @@ def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold:
         "settle_s": settle,
         "final_max": float(mx[-1]),
         "initial_max": float(mx[0]),
-        "jumps": len(rec.jumps),
-        "agent_jumps": len(rec.agent_jumps),
-        "wall_s": round(time.monotonic() - t0, 2),
+        "jumps": jumps,
+        "agent_jumps": agent_jumps,
+        "wall_s": wall,
         "status": "ok",
         "error": "",
     }
@@ -168,27 +173,7 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
 
     res = batched.run(scs, duration, base.seed, fam.basin_grid_s, progress=tell)
     wall = round((time.monotonic() - t0) / len(draws), 3)
-    rows = []
-    for n, d in enumerate(draws):
-        t, mx = res.t, res.max_rel[n]
-        rows.append(
-            {
-                "draw": d,
-                "kind": _kind(d, near),
-                "synchronized": settle_time(t, mx, threshold) is not None,
-                "left_s": leave_time(t, mx),
-                "settle_01_s": settle_time(t, mx, 0.1),
-                "settle_s": settle_time(t, mx, threshold),
-                "final_max": float(mx[-1]),
-                "initial_max": float(mx[0]),
-                "jumps": int(res.jumps[n]),
-                "agent_jumps": int(res.agent_jumps[n]),
-                "wall_s": wall,
-                "status": "ok",
-                "error": "",
-            }
-        )
-    return rows
+    return [_row(d, near, res.t, res.max_rel[n], threshold, int(res.jumps[n]), int(res.agent_jumps[n]), wall) for n, d in enumerate(draws)]
 
 
 def engine_problem(sc: Scenario) -> str | None:

@@ -21,6 +21,9 @@ from tests.integration.conftest import wait_for
 pytestmark = pytest.mark.integration
 
 DASK = str(Path(sys.executable).parent / "dask")
+# The waits below are deadlines for a hang, not measures: a scheduler or worker starts in
+# 2-4 s here (importing distributed), a command of this file runs in 5-25 s on a quiet
+# machine; each deadline is over 10x that, for a loaded CI machine, and a pass never waits it out.
 ROW_KEYS = ("draw", "kind", "synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "status")
 
 
