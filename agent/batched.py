@@ -38,12 +38,18 @@ from typing import Any
 import numpy as np
 
 from agent.runtime import setup
+from world.motion import prescribed
 from world.plant import RigidBodyPlant
 from zswarm import timing
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.scenario import Scenario
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world measures so far
+# Report family -> the plant its draws run on here.  "sync" (§5.6): rigid bodies (5.1), a truth
+# per draw, measured by the truth's max_k |R̄_k|_I.  "tree" (§4.5 observers): the prescribed
+# motion, the same truth for every draw (simulated once, its measurements shared by the draws),
+# measured by the estimates' max_k |R̄_k|_I.
+MEASURES = {"sync": "rigid_body", "tree": "prescribed"}
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
 
 
@@ -58,8 +64,11 @@ def problem(sc: Scenario) -> str | None:
         return f"{sc.algorithm}'s functions are not declared to broadcast over draws (SPEC.batched)"
     if sc.leader_module is not None:
         return "leaders run another algorithm"
-    if sc.plant != "rigid_body":
-        return f"the {sc.plant!r} plant (the batched engine has the rigid-body plant of (5.1) so far)"
+    measure = MEASURES.get(spec.report)
+    if measure is None:
+        return f"the {spec.report!r} report family (the batched engine measures {', '.join(sorted(MEASURES))} runs)"
+    if sc.plant != measure:
+        return f"the {sc.plant!r} plant with the {spec.report!r} family (the batched engine runs it on the {measure!r} plant)"
     need = frozenset().union(*(sc.sensors_of(i) for i in sc.ids))
     if need - SENSORS:
         return f"the sensor(s) {', '.join(sorted(need - SENSORS))} (the batched world measures {', '.join(sorted(SENSORS))})"
@@ -98,11 +107,15 @@ class _Msg:
 
 
 class BatchedView:
-    """zswarm.algorithm.View for M draws of one agent: every measurement and message has a
-    leading draw axis.  Steps end at sensor packets (lockstep), so the history
-    interpolators are never needed; they say so if an algorithm asks."""
+    """zswarm.algorithm.View for M draws of one agent: every message and state value has a
+    leading draw axis; the measurements too on a truth per draw (rigid bodies), not on a
+    shared one (prescribed motion: the same for every draw, so no draw axis).  Steps end at
+    sensor packets (lockstep).  On a shared truth the sensor history is kept as the runtime's
+    inbox keeps it (``HISTORY`` packets) and read by the same zswarm.timing functions, so
+    body_rate, rotation and relative_attitude give the runtime's numbers; on a truth per draw
+    they say they are not available."""
 
-    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]]) -> None:
+    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]], rel_history: Mapping[int, deque[tuple[float, np.ndarray]]] | None = None) -> None:
         a = sc.agent(i)
         self.id = i
         self.role = a.role
@@ -122,10 +135,13 @@ class BatchedView:
         self.stale_read: set[int] = set()
         self._inbox = inbox
         self._history = history
+        self._rel = rel_history
+        self._cache: dict[Any, Any] = {}
 
     def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
         self.t = self.t_world = self.sense_t = self.sense_t_world = t
         self.sense, self.first = sense, first
+        self._cache.clear()
 
     def neighbor(self, j: int) -> _Msg | None:
         m = None if self.first else self._inbox.get(j)
@@ -136,17 +152,46 @@ class BatchedView:
     def heard_all(self) -> bool:
         return all(j in self._inbox for j in self.neighbors)
 
+    def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
+        if name not in self._history:
+            raise Unsupported(f"the batched engine keeps no history of {name!r} here")
+        key = ("s", name)
+        if key not in self._cache:
+            self._cache[key] = list(self._history[name])
+        return self._cache[key]  # type: ignore[no-any-return]
+
     def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
         """Samples of the sensor field ``name`` in (t0, t1], the newest at or before t0 first
         (as the runtime's View.series)."""
-        if name not in self._history:
-            raise Unsupported(f"the batched engine keeps no history of {name!r}")
-        return timing.window(self._history[name], t0, t1)
+        return timing.window(self._samples(name), t0, t1)
 
-    def _interpolated(self, *_: Any, **__: Any) -> Any:
-        raise Unsupported("the batched engine steps at sensor packets: no sensor history to interpolate")
+    def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
+        return timing.interval_mean_rate(self._shared(name), t0, t1)
 
-    mean_rate = body_rate = rotation = relative_attitude = body_vector = _interpolated
+    def body_rate(self, t0: float, t1: float) -> np.ndarray:
+        return timing.rotation_rate(self._shared("gyro"), t0, t1)
+
+    def rotation(self, t0: float, t1: float) -> np.ndarray:
+        key = ("rot", t0, t1)
+        if key not in self._cache:
+            self._cache[key] = timing.rotation_over(self._shared("gyro"), t0, t1)
+        return self._cache[key]  # type: ignore[no-any-return]
+
+    def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
+        if self._rel is None:
+            raise Unsupported("relative attitudes between samples need the shared truth (prescribed motion)")
+        key = ("R", j, t_world)
+        if key not in self._cache:
+            self._cache[key] = timing.relative_attitude_at(list(self._rel.get(j, ())), self._shared("gyro"), t_world)
+        return self._cache[key]  # type: ignore[no-any-return]
+
+    def _shared(self, name: str) -> list[tuple[float, np.ndarray]]:
+        if self._rel is None:
+            raise Unsupported(f"integrals of {name!r} between samples need the shared truth (prescribed motion)")
+        return self._samples(name)
+
+    def body_vector(self, *_: Any, **__: Any) -> Any:
+        raise Unsupported("the batched engine measures no bearings")
 
 
 def stack(values: Sequence[Any]) -> Any:
@@ -193,10 +238,17 @@ class _Torques:
         return self.u
 
 
+def _truth(sc: Scenario) -> tuple[Any, ...]:
+    """What a prescribed truth is made of (world.motion.prescribed): equal for draws that share it."""
+    f = sc.formation
+    agents = tuple((a.R_matrix.tobytes(), tuple(a.p), repr(a.omega), repr(a.velocity), tuple(a.gyro_bias)) for a in sc.agents)
+    return (sc.step, sc.sensor_rate, None if f is None else (tuple(f.axis), f.rate), agents)
+
+
 def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, progress: Callable[[float], None] | None = None) -> Result:
-    """Step the draws (scenarios that differ only in their agents' starts) together for
-    ``duration`` s of world time; the truth's max_k |R̄_k|_I on a grid of ``grid_s`` (the
-    report family's, zswarm.report.family.Family.basin_grid_s)."""
+    """Step the draws (scenarios that differ only in their agents' starts, or for a prescribed
+    truth in their initial estimates) together for ``duration`` s of world time; max_k |R̄_k|_I
+    on a grid of ``grid_s`` (the report family's, zswarm.report.family.Family.basin_grid_s)."""
     sc = draws[0]
     why = problem(sc)
     if why is not None:
@@ -207,12 +259,20 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     for d in draws[1:]:
         if d.ids != ids or d.oriented != sc.oriented or dict(d.gains) != dict(sc.gains) or d.module is not sc.module or [dict(a.gains) for a in d.agents] != agent_gains:
             raise Unsupported("draws that differ in more than their agents' starts")
+    shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
-    R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
-    w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
-    J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
     torques = _Torques(M * n)
-    plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
+    plant: Any
+    if shared:
+        key = _truth(sc)
+        if any(_truth(d) != key for d in draws[1:]):
+            raise Unsupported("draws whose prescribed truths differ (the batched engine simulates it once for all)")
+        plant = prescribed(sc)
+    else:
+        R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
+        w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
+        J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
+        plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
     bias = np.array([a.gyro_bias for a in sc.agents])
 
     modules: dict[int, ModuleType] = {}
@@ -221,21 +281,24 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     states: dict[int, Any] = {}
     inboxes: dict[int, dict[int, tuple[dict[str, Any], float]]] = {i: {} for i in ids}
     want = {i: sc.sensors_of(i) for i in ids}
-    histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {f: deque(maxlen=HISTORY) for f in ("attitude",) if f in want[i]} for i in ids}
+    nbrs = {i: sc.graph_neighbors(i) for i in ids}
+    kept = ("attitude", "gyro") if shared else ("attitude",)  # the sensor fields whose history a view keeps
+    histories = {i: {f: deque(maxlen=HISTORY) for f in kept if f in want[i]} for i in ids}
+    rel_histories = {i: {j: deque(maxlen=HISTORY) for j in nbrs[i]} for i in ids if shared and "rel_att" in want[i]}
     for i in ids:
         per = [setup(d, i, seed) for d in draws]
         modules[i], gains[i], tree_edges, _ = per[0]
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
-        views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i])
+        views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], rel_histories.get(i) if shared else None)
     hybrid = has_jumps(sc.info)
     part = sc.info.parts[0]
-    nbrs = {i: sc.graph_neighbors(i) for i in ids}
 
     sample_dt = 1.0 / sc.sensor_rate
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
     grid_every = max(1, round(grid_s * sc.sensor_rate))
     n_samples = math.floor(duration * sc.sensor_rate + 1e-9) + 1
     grid_t, grid_v = [], []
+    ticks, tick_v = [], []  # the estimates' measure at every tick (shared truth)
     jumps = np.zeros(M, dtype=np.int64)
     agent_jumps = np.zeros(M, dtype=np.int64)
     started = False
@@ -247,37 +310,49 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     for k in range(n_samples):
         t = k * sample_dt  # as World.next_time computes it
         plant.advance_to(t)
-        R = plant.R.reshape(M, n, 3, 3)
-        if k % grid_every == 0 and edges:
-            Rb = np.einsum("mnji,mnjk->mnik", R[:, t_idx], R[:, h_idx])  # R̄_k = R_t^T R_h
-            tr = np.trace(Rb, axis1=-2, axis2=-1)
-            grid_t.append(t)
-            grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
-        for i, h in histories.items():  # every sample, as an agent's inbox keeps them
-            if "attitude" in h:
-                h["attitude"].append((t, R[:, col[i]].copy()))
-        if k % tick_every:
-            continue
-        W = plant.omega_now().reshape(M, n, 3)
+        if shared:
+            R = plant.R  # (n, 3, 3): every draw's
+            W = plant.omega_now()
+        else:
+            R = plant.R.reshape(M, n, 3, 3)
+            if k % grid_every == 0 and edges:
+                Rb = np.einsum("mnji,mnjk->mnik", R[:, t_idx], R[:, h_idx])  # R̄_k = R_t^T R_h
+                tr = np.trace(Rb, axis1=-2, axis2=-1)
+                grid_t.append(t)
+                grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
+            W = plant.omega_now().reshape(M, n, 3)
+        at = (lambda X, a: X[a]) if shared else (lambda X, a: X[:, a])
         RT = np.swapaxes(R, -1, -2)
+        # Every sample goes into the histories, as an agent's inbox keeps them; measured as World.sample does.
+        sensed: dict[int, dict[str, Any]] = {}
         for i in ids:
             a = col[i]
             sense: dict[str, Any] = {"t": t}
             if "gyro" in want[i]:
-                sense["gyro"] = W[:, a] + bias[a]
+                sense["gyro"] = at(W, a) + bias[a]
             if "rel_att" in want[i]:
-                sense["rel_att"] = {j: RT[:, a] @ R[:, col[j]] for j in nbrs[i]}
+                sense["rel_att"] = {j: at(RT, a) @ at(R, col[j]) for j in nbrs[i]}
             if "attitude" in want[i]:
-                sense["attitude"] = R[:, a]
+                sense["attitude"] = at(R, a)
+            for f, h in histories[i].items():
+                h.append((t, sense[f] if shared else sense[f].copy()))
+            for j, h in rel_histories.get(i, {}).items():
+                h.append((t, sense["rel_att"][j]))
+            sensed[i] = sense
+        if k % tick_every:
+            continue
+        estimates: dict[int, Any] = {}
+        for i in ids:
+            a = col[i]
             v, mod, g = views[i], modules[i], gains[i]
             outputs = None
             if not started:
-                v.begin(t, sense, first=True)
+                v.begin(t, sensed[i], first=True)
                 if hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
                     v.dt = 0.0
                     _step(part, states, i, v, g, 0.0, jumps, agent_jumps)
             else:
-                v.begin(t, sense, first=False)
+                v.begin(t, sensed[i], first=False)
                 v.command_lead = 0.5 * v.period
                 v.dt = t - last
                 outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
@@ -287,11 +362,27 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             t_stamp = t if pub.t is None else pub.t
             for j, fields in pub.edges.items():
                 inboxes[j][i] = (dict(fields), t_stamp)
+            estimates[i] = pub.estimate.get("R_hat")
+        if shared and edges:
+            # R̃_i = R_i R̂_i^T at the tick, R̄_k = R̃_t^T R̃_h (zswarm.report.families.tree.tree_metrics)
+            Rt = {i: R[col[i]] @ np.swapaxes(estimates[i], -1, -2) for i in ids}
+            vals = []
+            for h, tl in edges:
+                tr = np.trace(np.einsum("mji,mjk->mik", Rt[tl], Rt[h]), axis1=1, axis2=2)
+                vals.append(np.sqrt(np.clip((3.0 - tr) / 4.0, 0.0, 1.0)))
+            ticks.append(t)
+            tick_v.append(np.max(vals, axis=0))
         if started:
             steps += 1
         started, last = True, t
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
+    if shared:
+        # The estimates held on the grid, as tree_metrics samples a recording's estimates.
+        tk = np.array(ticks)
+        t_grid = np.arange(tk[0], tk[-1] + 1e-9, grid_s) if len(tk) else np.zeros(0)
+        idx = np.searchsorted(tk, t_grid, side="right") - 1
+        return Result(t_grid, np.array(tick_v)[idx].T if len(tk) else np.zeros((M, 0)), jumps, agent_jumps, steps)
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert len(t_grid) == len(grid_t)

@@ -167,3 +167,17 @@ class PrescribedMotion:
         elif self.velocity_exprs is not None:
             self.p = self.p + np.einsum("k,kaj->aj", h, V_mid)
         self.t = t
+
+
+def prescribed(sc: Any) -> PrescribedMotion:
+    """The truth of a scenario with the prescribed plant (a zswarm.scenario.Scenario): every
+    agent's R_i(0), p_i(0), ω_i(t) and v_i(t), and the formation's rotation."""
+    f = sc.formation
+    return PrescribedMotion(
+        np.array([a.R_matrix for a in sc.agents]),
+        np.array([a.p for a in sc.agents]),
+        [a.omega for a in sc.agents],
+        sc.step,
+        formation=None if f is None else (np.array(f.axis), f.rate),
+        velocity=[a.velocity for a in sc.agents],
+    )

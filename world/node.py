@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 
 from world import sensors
-from world.motion import PrescribedMotion
+from world.motion import PrescribedMotion, prescribed
 from world.plant import CommandInbox, KinematicPlant, RigidBodyPlant
 from zswarm import keys
 from zswarm.bus import Bus
@@ -46,7 +46,6 @@ class World:
         # World time, for the arrival of commands: virtual in sim; a run sets its clock
         # here once the epoch is announced (before that no agent sends a command).
         self.now: Callable[[], float] = now if now is not None else self.next_time
-        f = scenario.formation
         self.commands: CommandInbox | None = None
         self.motion: PrescribedMotion | RigidBodyPlant | KinematicPlant
         if scenario.plant == "kinematic":
@@ -69,14 +68,7 @@ class World:
             )
             bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
         else:
-            self.motion = PrescribedMotion(
-                np.array([a.R_matrix for a in scenario.agents]),
-                np.array([a.p for a in scenario.agents]),
-                [a.omega for a in scenario.agents],
-                scenario.step,
-                formation=None if f is None else (np.array(f.axis), f.rate),
-                velocity=[a.velocity for a in scenario.agents],
-            )
+            self.motion = prescribed(scenario)
         # What each agent's algorithm declares it measures (zswarm.algorithm.SENSORS).
         self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
         want = frozenset().union(*self.sensors.values())

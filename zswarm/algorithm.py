@@ -227,6 +227,12 @@ class AlgorithmSpec:
         return _check_fields(fields, self.edge_in, "edge")
 
 
+def number(x: Any) -> Any:
+    """A value of a number field (ξ_k, a message's scalar): a float, or a stack of M draws'
+    values on the batched engine (agent/batched.py), as it is."""
+    return x if isinstance(x, np.ndarray) else float(x)
+
+
 def _check_fields(fields: Mapping[str, Any], spec: Mapping[str, Field], what: str) -> Mapping[str, Any]:
     for name, f in spec.items():
         v = fields.get(name)

@@ -50,24 +50,40 @@ class DesignError(ValueError):
 
 
 def potential(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, xi: float) -> float:
-    """``U(R̄, ξ)`` of (4.23)."""
+    """``U(R̄, ξ)`` of (4.23).  Broadcasts: R̄ a stack (M, 3, 3) of M draws (ξ a number or
+    (M,)) gives (M,)."""
+    if R_bar.ndim > 2:
+        return np.trace(A @ (np.eye(3) - R_bar @ Ra(xi, u)), axis1=-2, axis2=-1) + 0.5 * gamma * xi * xi  # type: ignore[no-any-return]
     return float(np.trace(A @ (np.eye(3) - R_bar @ Ra(xi, u)))) + 0.5 * gamma * xi * xi
 
 
 def grad_R(A: Mat3, u: Vec3, R_bar: Mat3, xi: float) -> Vec3:
-    """``ψ(R̄^T ∇_R̄ U) = Ra(ξ,u) ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1): the body-frame gradient, g_k."""
+    """``ψ(R̄^T ∇_R̄ U) = Ra(ξ,u) ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1): the body-frame gradient, g_k.
+    Broadcasts as :func:`potential` ((M, 3))."""
     Q = Ra(xi, u)
+    if R_bar.ndim > 2:
+        return (Q @ psi(A @ R_bar @ Q)[..., None])[..., 0]
     return Q @ psi(A @ R_bar @ Q)
 
 
 def grad_xi(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, xi: float) -> float:
-    """``∇_ξ U = γ ξ + 2 u^T ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1)."""
+    """``∇_ξ U = γ ξ + 2 u^T ψ(A R̄ Ra(ξ,u))`` (Prop. 4.1).  Broadcasts as :func:`potential`."""
+    if R_bar.ndim > 2:
+        return gamma * xi + 2.0 * (psi(A @ R_bar @ Ra(xi, u)) @ u)  # type: ignore[no-any-return]
     return gamma * xi + 2.0 * float(u @ psi(A @ R_bar @ Ra(xi, u)))
 
 
 def best_xi(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, Xi: Sequence[float]) -> tuple[float, float]:
-    """``(ξ*, U(R̄, ξ*))`` with ``ξ* = argmin_{ξ∈Ξ} U(R̄, ξ)`` (first of equal minima)."""
+    """``(ξ*, U(R̄, ξ*))`` with ``ξ* = argmin_{ξ∈Ξ} U(R̄, ξ)`` (first of equal minima).
+    With R̄ a stack of M draws: both (M,)."""
     best, u_best = Xi[0], potential(A, u, gamma, R_bar, Xi[0])
+    if R_bar.ndim > 2:
+        best = np.full(R_bar.shape[:-2], float(Xi[0]))
+        for x in Xi[1:]:
+            v = potential(A, u, gamma, R_bar, x)
+            better = v < u_best
+            best, u_best = np.where(better, x, best), np.where(better, v, u_best)
+        return best, u_best  # type: ignore[return-value]
     for x in Xi[1:]:
         v = potential(A, u, gamma, R_bar, x)
         if v < u_best:

@@ -165,12 +165,15 @@ def log_batch(R: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def Ra(theta: float, v: Vec3) -> Mat3:
-    """Angle-axis rotation ``Ra(theta, v)``; ``v`` need not be unit (it is normalised)."""
+    """Angle-axis rotation ``Ra(theta, v)``; ``v`` need not be unit (it is normalised).
+    ``theta`` an array (M,) gives a stack (M, 3, 3), each by the same operations."""
     v = np.asarray(v, dtype=np.float64)
     n = float(np.linalg.norm(v))
     if n == 0.0:
         raise ValueError("Ra: rotation axis must be non-zero")
     K = hat(v / n)
+    if isinstance(theta, np.ndarray):
+        return _EYE + np.sin(theta)[..., None, None] * K + (1.0 - np.cos(theta))[..., None, None] * (K @ K)
     return _EYE + math.sin(theta) * K + (1.0 - math.cos(theta)) * (K @ K)
 
 

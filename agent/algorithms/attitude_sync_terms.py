@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.algorithm import Field, View
+from zswarm.algorithm import Field, View, number
 from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi
 
 
@@ -102,11 +102,6 @@ def measured_edges(view: View, need_xi: bool) -> tuple[Edge, ...]:
                 xi = number(m.fields["xi"])
         out.append(Edge(k, head, T(R_ij) if head else R_ij, xi))
     return tuple(out)
-
-
-def number(x: Any) -> Any:
-    """A float, or a stack of M draws' values (the batched engine): as it is."""
-    return x if isinstance(x, np.ndarray) else float(x)
 
 
 def _trig(x: Any) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:

@@ -91,4 +91,5 @@ SPEC = AlgorithmSpec(
     # Drop: a neighbour's R̂_j is brought to the tick with its last ω_j, an
     # extrapolation whose error grows with the age (½ω̇τ²).
     stale=StalePolicy(0.2, "drop"),
+    batched=True,
 )

@@ -106,8 +106,17 @@ def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tupl
     xi = dict(state.xi)
     jumps = []
     for e in inputs.edges:
-        if e.head and jump_set(R_bars[e.k], xi[e.k], gains):
-            new = jump_map(R_bars[e.k], xi[e.k], gains)
+        if not e.head:
+            continue
+        R_bar = R_bars[e.k]
+        if R_bar.ndim > 2:  # M draws (the batched engine): each jumps or flows; NaN where it flows
+            best, u_best = hybrid.best_xi(gains.A, gains.u, gains.gamma, R_bar, gains.Xi)
+            hit = hybrid.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k]) - u_best >= gains.delta
+            if hit.any():
+                jumps.append((e.k, xi[e.k], np.where(hit, best, np.nan)))
+                xi[e.k] = np.where(hit, best, xi[e.k])
+        elif jump_set(R_bar, xi[e.k], gains):
+            new = jump_map(R_bar, xi[e.k], gains)
             jumps.append((e.k, xi[e.k], new))
             xi[e.k] = new
     all_xi = {e.k: (xi[e.k] if e.head else e.xi) for e in inputs.edges}

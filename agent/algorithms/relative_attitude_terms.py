@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from zswarm import hybrid
-from zswarm.algorithm import Field, View
-from zswarm.so3 import Mat3, Vec3, exp, psi
+from zswarm.algorithm import Field, View, number
+from zswarm.so3 import Mat3, T, Vec3, exp, psi
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,25 +56,27 @@ class EdgeData:
 def relative_error(R_hat_i: Mat3, e: EdgeData) -> Mat3:
     """``R̄_k`` of the edge between i and j, in the edge's orientation (Remark 4.3)."""
     if e.head:
-        return e.R_hat_j @ e.R_ij.T @ R_hat_i.T
-    return R_hat_i @ e.R_ij @ e.R_hat_j.T
+        return e.R_hat_j @ e.R_ij.T @ T(R_hat_i)
+    return R_hat_i @ e.R_ij @ T(e.R_hat_j)
 
 
 def continuous_correction(R_hat: Mat3, edges: tuple[EdgeData, ...], A: Mat3) -> Vec3:
-    """``σ_i = −Σ_j ψ(A R̂_j R_ij^T R̂_i^T)`` of (4.8), inertial frame."""
+    """``σ_i = −Σ_j ψ(A R̂_j R_ij^T R̂_i^T)`` of (4.8), inertial frame.  Broadcasts: with R̂_i
+    and the R̂_j stacks (M, 3, 3) of M draws (R_ij shared or stacked), σ_i is (M, 3)."""
     s = np.zeros(3)
     for e in edges:
-        s = s - psi(A @ e.R_hat_j @ e.R_ij.T @ R_hat.T)
+        s = s - psi(A @ e.R_hat_j @ T(e.R_ij) @ T(R_hat))
     return s
 
 
 def hybrid_correction(R_bars: Mapping[int, Mat3], edges: tuple[EdgeData, ...], xi: Mapping[int, float], A: Mat3, u: Vec3) -> Vec3:
-    """``σ_i`` of (4.25) (READING-NOTES form); ``R_bars[k]`` (:func:`relative_error`) and ``xi[k]`` for every edge of i."""
+    """``σ_i`` of (4.25) (READING-NOTES form); ``R_bars[k]`` (:func:`relative_error`) and ``xi[k]`` for every edge of i.
+    Broadcasts over a leading draw axis of the R̄_k (and ξ_k)."""
     s = np.zeros(3)
     for e in edges:
         R_bar = R_bars[e.k]
         g = hybrid.grad_R(A, u, R_bar, xi[e.k])
-        s = s - g if e.head else s + R_bar @ g
+        s = s - g if e.head else s + (R_bar @ g if R_bar.ndim == 2 else (R_bar @ g[..., None])[..., 0])
     return s
 
 
@@ -185,7 +187,7 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
                 head,
                 R_ij,
                 R_hat_j,
-                float(f.get("xi", 0.0)),
+                number(f.get("xi", 0.0)),
                 b_own,
                 b_nbr,
                 f["p_hat"] + tau_j * f["vel"] if "vel" in f else f["p_hat"],

@@ -103,4 +103,5 @@ SPEC = replace(
     gains={"k_R": None, "k_xi": None, "k_p": None},
     sensors=frozenset({"gyro", "rel_att", "bearings", "velocity_body"}),
     parts=(Part("observer", inputs, step),),
+    batched=False,  # the position observer (4.30)-(4.31) does not broadcast over draws (yet)
 )

@@ -4,13 +4,18 @@ The engine calls the same algorithm modules on stacks of M draws and integrates 
 plant with the same steps, in sim's order (world first at a shared time, then the agents
 by id).  The only difference left is where numpy's batched linear algebra (a stack of 3x3
 products, np.sin on an array) rounds differently from the one-matrix path: a few ulps per
-operation, which the dynamics carry.  Away from the undesired equilibria the §5.6 closed
-loop contracts, so over these horizons that stays near round-off: the bound asserted is
-1e-9 on max_k |R̄_k|_I (the measured difference on this machine is 0.0: numpy's paths agree
-bit for bit here for the continuous and hybrid laws, 3e-15 for the velocity-free one, whose
-filter multiplies stacks of matrices), and the jumps (ξ_k, and the velocity-free law's ζ_i)
-are the same in number, which a real difference in the jump logic or its timing would
-change first.
+operation, which the dynamics carry.  Away from the undesired equilibria the closed loops
+(§5.6) and the observers' error dynamics (§4.5) contract, so over these horizons that stays
+near round-off.  What is compared is the square |R̄|_I² = (3 − tr R̄)/4 of the measure,
+max over edges: it carries a trace's round-off (≈ 1e-16 per operation) as it is, where
+|R̄|_I = sqrt(...) divides it by 2|R̄|_I, which falls to 1e-6 within these 4 s for the §4.5
+continuous observer (measured there: |Δ|R̄|_I| up to 6e-10, |Δ|R̄|_I²| up to 1.2e-15).  The
+bound asserted is 1e-9 on the squares; measured on this machine: 0.0 for the §5.6
+continuous and hybrid laws (numpy's paths agree bit for bit there), 6e-16 for the §4.5
+hybrid observer, 1.2e-15 for the §4.5 continuous one, 5e-15 for the §5.6 velocity-free
+law (whose filter multiplies stacks of matrices).  The jumps (ξ_k,
+and the velocity-free law's ζ_i) are the same in number, which a real difference in the
+jump logic or its timing would change first.
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ def _draws(stem):
     return base, [load(topo, basin.draw_overrides(base, 1, d)) for d in DRAWS]
 
 
-@pytest.mark.parametrize("stem", ["thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7"])
+@pytest.mark.parametrize("stem", ["thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7", "thesis-4.5-continuous5", "thesis-4.5-hybrid5"])
 def test_batched_is_sim_draw_by_draw(stem):
     base, scs = _draws(stem)
     fam = family.of(base)
@@ -50,7 +55,7 @@ def test_batched_is_sim_draw_by_draw(stem):
         rec = report.load_recording(msgs)
         t, mx = fam.basin_series(sc, rec)
         assert np.array_equal(t, res.t)
-        assert np.max(np.abs(mx - res.max_rel[n])) <= TOL, (stem, n)
+        assert np.max(np.abs(mx**2 - res.max_rel[n] ** 2)) <= TOL, (stem, n)
         assert res.jumps[n] == len(rec.jumps), (stem, n)
         assert res.agent_jumps[n] == len(rec.agent_jumps)
     if "continuous" not in stem:
@@ -63,7 +68,8 @@ def test_the_engine_says_what_it_cannot_run():
     cases = {
         "thesis-5.6-hybrid7-noisy": "sensor noise",
         "thesis-5.6-velocity-free7-noisy": "sensor noise",
-        "thesis-4.5-hybrid5": "not declared to broadcast",
+        "thesis-4.5-hybrid-pose5": "not declared to broadcast",
+        "thesis-4.5-hybrid5-noisy": "sensor noise",
         "thesis-3.2-fixed8": "not declared to broadcast",
     }
     for stem, why in cases.items():
@@ -101,10 +107,12 @@ def test_stack_puts_the_draw_axis_first():
         batched.stack([a, S({1: 0.5}, np.eye(3), 1.0)])
 
 
-def test_basin_rows_are_the_same_on_both_engines(tmp_path):
+@pytest.mark.parametrize("stem", ["thesis-5.6-hybrid7", "thesis-4.5-hybrid5"])
+def test_basin_rows_are_the_same_on_both_engines(tmp_path, stem):
     """zswarm basin's rows (synchronized, settle times, jumps) from the batched engine and from
-    sim per draw, for the same draws."""
-    topo = str(TOPO / "thesis-5.6-hybrid7.toml")
+    sim per draw, for the same draws.  (Not the §4.5 continuous observer's: its final_max of
+    ~2e-6 carries round-off divided by 2|R̄|_I, see the module docstring, into its 5th digit.)"""
+    topo = str(TOPO / f"{stem}.toml")
     got = {}
     for engine in ("batched", "sim"):
         out = tmp_path / engine

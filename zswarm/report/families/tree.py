@@ -247,9 +247,12 @@ def basin_start(sc: Scenario) -> list[tuple[str, Any]]:
     return [(f"agents[{n}].estimate.R", a.estimate["R"]) for n, a in enumerate(sc.agents)]
 
 
+BASIN_GRID_S = 0.01  # s: basin_series' grid (tree_metrics' default step)
+
+
 def basin_series(sc: Scenario, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     """max_k |R̄_k|_I on the 100 Hz grid."""
-    tm = tree_metrics(sc, rec)
+    tm = tree_metrics(sc, rec, BASIN_GRID_S)
     if tm is None:
         raise RuntimeError("some agent published no estimate")
     return tm.t, np.max(np.array(list(tm.rel_att.values())), axis=0)
