@@ -283,8 +283,8 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     want = {i: sc.sensors_of(i) for i in ids}
     nbrs = {i: sc.graph_neighbors(i) for i in ids}
     kept = ("attitude", "gyro") if shared else ("attitude",)  # the sensor fields whose history a view keeps
-    histories = {i: {f: deque(maxlen=HISTORY) for f in kept if f in want[i]} for i in ids}
-    rel_histories = {i: {j: deque(maxlen=HISTORY) for j in nbrs[i]} for i in ids if shared and "rel_att" in want[i]}
+    histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {f: deque(maxlen=HISTORY) for f in kept if f in want[i]} for i in ids}
+    rel_histories: dict[int, dict[int, deque[tuple[float, np.ndarray]]]] = {i: {j: deque(maxlen=HISTORY) for j in nbrs[i]} for i in ids if shared and "rel_att" in want[i]}
     for i in ids:
         per = [setup(d, i, seed) for d in draws]
         modules[i], gains[i], tree_edges, _ = per[0]
@@ -321,7 +321,6 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
                 grid_t.append(t)
                 grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
             W = plant.omega_now().reshape(M, n, 3)
-        at = (lambda X, a: X[a]) if shared else (lambda X, a: X[:, a])
         RT = np.swapaxes(R, -1, -2)
         # Every sample goes into the histories, as an agent's inbox keeps them; measured as World.sample does.
         sensed: dict[int, dict[str, Any]] = {}
@@ -329,15 +328,15 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             a = col[i]
             sense: dict[str, Any] = {"t": t}
             if "gyro" in want[i]:
-                sense["gyro"] = at(W, a) + bias[a]
+                sense["gyro"] = _body(W, a, shared) + bias[a]
             if "rel_att" in want[i]:
-                sense["rel_att"] = {j: at(RT, a) @ at(R, col[j]) for j in nbrs[i]}
+                sense["rel_att"] = {j: _body(RT, a, shared) @ _body(R, col[j], shared) for j in nbrs[i]}
             if "attitude" in want[i]:
-                sense["attitude"] = at(R, a)
-            for f, h in histories[i].items():
-                h.append((t, sense[f] if shared else sense[f].copy()))
-            for j, h in rel_histories.get(i, {}).items():
-                h.append((t, sense["rel_att"][j]))
+                sense["attitude"] = _body(R, a, shared)
+            for f, hist in histories[i].items():
+                hist.append((t, sense[f] if shared else sense[f].copy()))
+            for j, rel in rel_histories.get(i, {}).items():
+                rel.append((t, sense["rel_att"][j]))
             sensed[i] = sense
         if k % tick_every:
             continue
@@ -387,6 +386,11 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert len(t_grid) == len(grid_t)
     return Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps)
+
+
+def _body(X: np.ndarray, a: int, shared: bool) -> np.ndarray:
+    """Body ``a``'s entry of a truth array: (n, ...) when the truth is shared, (M, n, ...) when each draw has its own."""
+    return X[a] if shared else X[:, a]
 
 
 def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray) -> Any:

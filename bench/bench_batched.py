@@ -8,7 +8,7 @@ draw and per agent-step, and the ratio sim / batched per draw.  Process CPU time
 (time.process_time), so another process on the machine does not count; each figure is
 the best of REPEATS.
 
-    .venv/bin/python bench/bench_batched.py [--duration S] [--draws 1,10,100,1000]
+    .venv/bin/python bench/bench_batched.py [--duration S] [--draws 1,10,100,1000] [--schemes a,b]
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from zswarm import basin
 from zswarm.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]
-SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7")
+SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7", "thesis-4.5-continuous5", "thesis-4.5-hybrid5")
 REPEATS = 2
 
 
@@ -38,11 +38,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=5.0, help="world seconds per draw (default 5)")
     ap.add_argument("--draws", default="1,10,100,1000", help="batch sizes M (default 1,10,100,1000)")
+    ap.add_argument("--schemes", default=",".join(SCHEMES), help="topologies/ stems (default: the §5.6 laws and the §4.5 observers)")
     a = ap.parse_args()
     sizes = [int(x) for x in a.draws.split(",")]
     print(f"CPU per draw of {a.duration:g} s of world time (best of {REPEATS}); agent-steps per draw = agents x ticks")
     print(f"{'scheme':26} {'engine':14} {'M':>5} {'s/draw':>9} {'us/agent-step':>14} {'sim/batched':>12}")
-    for stem in SCHEMES:
+    for stem in a.schemes.split(","):
         topo = str(ROOT / "topologies" / f"{stem}.toml")
         sc = load(topo)
         steps = len(sc.ids) * round(a.duration * sc.agent(1).clock.rate)

