@@ -373,6 +373,16 @@ def _what(s: dict[str, Any]) -> str:
     return "uniform draws" if s.get("start", "uniform") == "uniform" else f"starts {s['near_rad']:g} rad from the scenario's"
 
 
+def ci_text(ci: list[float], sep: str = "-") -> str:
+    """A 95 % interval in percent, its lower bound rounded down and its upper bound up, with
+    as many decimals (up to 4) as it takes for 10,000 of 10,000 not to read "100.0-100.0 %"."""
+    lo, hi = 100.0 * ci[0], 100.0 * ci[1]
+    d = 1
+    while d < 4 and (lo > 100.0 - 10.0**-d or hi < 10.0**-d):
+        d += 1
+    return f"{math.floor(lo * 10**d) / 10**d:.{d}f}{sep}{math.ceil(hi * 10**d) / 10**d:.{d}f} %"
+
+
 def table(name: str, s: dict[str, Any]) -> str:
     def qs(q: dict[str, float] | None) -> str:
         return "n/a" if q is None else f"min {q['min']:.1f}, p10 {q['p10']:.1f}, median {q['median']:.1f}, p90 {q['p90']:.1f}, max {q['max']:.1f} s"
@@ -381,7 +391,7 @@ def table(name: str, s: dict[str, Any]) -> str:
     own = s["scenario_start"] or {}
     lines = [
         f"{name}: {s['synchronized']} of {s['drawn']} {_what(s)} synchronized (max_k |R̄_k|_I < {s['threshold']:g} from some t ≤ {s['horizon_s']:g} s on)"
-        + (f", 95 % CI {100 * ci[0]:.1f}-{100 * ci[1]:.1f} %" if ci else ""),
+        + (f", 95 % CI {ci_text(ci)}" if ci else ""),
         f"  settle below {s['threshold']:g}: {qs(s['settle_s'])}",
         f"  settle below 0.1:  {qs(s['settle_01_s'])}",
         f"  the scenario's own start: synchronized {own.get('synchronized', 'n/a')}, below 0.1 from {own.get('settle_01_s') or 'never'}, below {s['threshold']:g} from {own.get('settle_s') or 'never'}",
@@ -482,7 +492,7 @@ def compare_table(entries: list[dict[str, Any]]) -> str:
         own = s["scenario_start"] or {}
         lines.append(
             f"| {s['scenario']} | {start} | {s['synchronized']} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
-            + (f"{100 * ci[0]:.1f}–{100 * ci[1]:.1f} %" if ci else "–")
+            + (ci_text(ci, "–") if ci else "–")
             + f" | {q(s['settle_s'], 'min', 'median', 'p90', 'max')} | {q(s['settle_01_s'], 'median')} | {q(s.get('left_s'), 'median')} | {q(s['jumps'], 'median', 'max', fmt='g')} | {own_settle(own)} |"
         )
     return "\n".join(lines)
@@ -605,6 +615,7 @@ def compare_command(args: argparse.Namespace) -> int:
     print(basin.compare_table(entries))
     for line in basin.paired(entries):
         print(f"\n{line}")
+    sys.stdout.flush()  # the table before the figure's line on stderr, also through a pipe
     if args.out.parent != Path(""):
         args.out.parent.mkdir(parents=True, exist_ok=True)
     print(f"figure: {basin.plot_compare(entries, args.out)}", file=sys.stderr)

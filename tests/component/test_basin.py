@@ -82,6 +82,16 @@ def test_summary_counts_and_wilson_interval():
     assert s["scenario_start"]["settle_s"] == "90"
 
 
+def test_the_interval_of_all_synchronized_is_printed_below_100():
+    """10,000 of 10,000: the Wilson interval is 99.9616-100 %, which one decimal would print
+    as "100.0-100.0 %"; the lower bound is rounded down, with the decimals it needs."""
+    rows = [{"draw": str(d), "kind": "uniform", "status": "ok", "synchronized": "True", "settle_01_s": "1", "settle_s": "2", "final_max": "1e-3", "jumps": "0"} for d in range(1, 10001)]
+    s = basin.summarize(rows, 0.01, 30.0)
+    assert s["fraction_95ci"][0] == pytest.approx(0.999616, abs=1e-6)
+    assert "95 % CI 99.96-100.00 %" in basin.table("x", s)
+    assert basin.ci_text([0.7112, 0.8666]) == "71.1-86.7 %"  # one decimal where it shows the interval
+
+
 def test_basin_end_to_end_resume_and_bad_input(tmp_path):
     out = tmp_path / "b"
     cmd = [sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-4.5-hybrid5.toml"), "--draws", "3", "--duration", "20", "--jobs", "2", "--out", str(out)]
