@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity soak sim clean
+.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity bench-batched soak sim clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +40,11 @@ bench: $(STAMP)
 ## make bench-sim: zswarm sim of §3.2 (40 s, default recording) against 631834b (before issue 28), alternately
 bench-sim: $(STAMP)
 	$(PY) bench/bench_sim.py
+
+## make bench-batched: CPU per draw of a basin, zswarm sim against the batched engine (the §5.6 laws and
+## §4.5 observers, 3 s per draw, 10/100/1000 draws together; about 10 minutes)
+bench-batched: $(STAMP)
+	$(PY) bench/bench_batched.py --duration 3 --draws 10,100,1000
 
 ## make soak: one hour of zswarm run with every process's RSS sampled each minute (bench/soak.py)
 soak: $(STAMP)
