@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import hashlib
 import json
 import math
@@ -103,8 +104,17 @@ def draw_overrides(sc: Scenario, seed: int, draw: int, near: float | None = None
     out = []
     for field, own in starts_of(sc):
         R = uniform_rotation(rng) if near is None else near_rotation(np.array(own, dtype=float).reshape(3, 3), near, rng)
-        out.append(parse_override(f"{field}={_rows(R)}", "--draw"))
+        name, keys = _field_keys(field)
+        # What parse_override(f"{field}={_rows(R)}", "--draw") gives (repr of a float reads back
+        # exactly), without writing each matrix as TOML and parsing it back: 7 parses a draw.
+        out.append(Override(f"--draw {field}={_rows(R)}", name, keys, [[float(v) for v in r] for r in R]))
     return out
+
+
+@functools.cache
+def _field_keys(field: str) -> tuple[str, tuple[str | int, ...]]:
+    o = parse_override(f"{field}=0", "--draw")
+    return o.field, o.keys
 
 
 Source = str | tuple[str, str]  # a scenario file's path, or (its text, its path) for a worker on another host
