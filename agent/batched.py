@@ -20,9 +20,11 @@ algebra sums in another order), which the dynamics then carries: tests/component
 
 Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
 its ticks on the sensor grid, perfect links, no faults, noise-free sensors of the kinds
-implemented here (gyro, rel_att), the rigid-body plant, and an algorithm whose SPEC says its
-functions broadcast (``batched=True``).  :func:`problem` says which of these a scenario
-lacks; the commands then run it on ``sim`` per draw.
+implemented here (gyro, rel_att, attitude), the plant its report family is measured on here
+(MEASURES: the rigid-body plant for the §5.6 laws; for the §4.5 observers the prescribed
+motion, the same in every draw, so it is simulated once and its measurements are shared), and
+an algorithm whose SPEC says its functions broadcast (``batched=True``).  :func:`problem` says
+which of these a scenario lacks; the commands then run it on ``sim`` per draw.
 """
 
 from __future__ import annotations

@@ -90,6 +90,14 @@ def test_draws_must_share_their_schedule():
         batched.run([scs[0], other], 0.1, base.seed, 0.01)
 
 
+def test_draws_of_a_shared_truth_must_share_it():
+    """The §4.5 truth is simulated once for every draw: draws whose agents move differently are refused."""
+    base, scs = _draws("thesis-4.5-hybrid5")
+    moved = load(TOPO / "thesis-4.5-hybrid5.toml", [parse_override('agents[0].omega=["1", "-2", "2"]')])
+    with pytest.raises(batched.Unsupported, match="prescribed truths differ"):
+        batched.run([scs[0], moved], 0.1, base.seed, 0.01)
+
+
 def test_stack_puts_the_draw_axis_first():
     @dataclasses.dataclass(frozen=True)
     class S:
