@@ -45,6 +45,7 @@ from world.plant import RigidBodyPlant
 from zswarm import timing
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.scenario import Scenario
+from zswarm.so3 import trace
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world measures so far
 # Report family -> the plant its draws run on here.  "sync" (§5.6): rigid bodies (5.1), a truth
@@ -319,28 +320,32 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             R = plant.R.reshape(M, n, 3, 3)
             if k % grid_every == 0 and edges:
                 Rb = np.einsum("mnji,mnjk->mnik", R[:, t_idx], R[:, h_idx])  # R̄_k = R_t^T R_h
-                tr = np.trace(Rb, axis1=-2, axis2=-1)
+                tr = trace(Rb)
                 grid_t.append(t)
                 grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
             W = plant.omega_now().reshape(M, n, 3)
         RT = np.swapaxes(R, -1, -2)
-        # Every sample goes into the histories, as an agent's inbox keeps them; measured as World.sample does.
+        # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
+        # keeps them; the rest is measured at the agents' ticks only (with a truth per draw a
+        # relative attitude is M products, at 200 Hz for 100 Hz agents).
+        tick = k % tick_every == 0
         sensed: dict[int, dict[str, Any]] = {}
         for i in ids:
             a = col[i]
+            need = want[i] if tick or shared else histories[i].keys()
             sense: dict[str, Any] = {"t": t}
-            if "gyro" in want[i]:
+            if "gyro" in need:
                 sense["gyro"] = _body(W, a, shared) + bias[a]
-            if "rel_att" in want[i]:
+            if "rel_att" in need:
                 sense["rel_att"] = {j: _body(RT, a, shared) @ _body(R, col[j], shared) for j in nbrs[i]}
-            if "attitude" in want[i]:
+            if "attitude" in need:
                 sense["attitude"] = _body(R, a, shared)
             for f, hist in histories[i].items():
                 hist.append((t, sense[f] if shared else sense[f].copy()))
             for j, rel in rel_histories.get(i, {}).items():
                 rel.append((t, sense["rel_att"][j]))
             sensed[i] = sense
-        if k % tick_every:
+        if not tick:
             continue
         estimates: dict[int, Any] = {}
         for i in ids:
@@ -369,7 +374,7 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             Rt = {i: R[col[i]] @ np.swapaxes(estimates[i], -1, -2) for i in ids}
             vals = []
             for h, tl in edges:
-                tr = np.trace(np.einsum("mji,mjk->mik", Rt[tl], Rt[h]), axis1=1, axis2=2)
+                tr = trace(np.einsum("mji,mjk->mik", Rt[tl], Rt[h]))
                 vals.append(np.sqrt(np.clip((3.0 - tr) / 4.0, 0.0, 1.0)))
             ticks.append(t)
             tick_v.append(np.max(vals, axis=0))

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zswarm.algorithm import InitialField
-from zswarm.so3 import Mat3, Ra, Vec3, psi
+from zswarm.so3 import Mat3, Ra, Vec3, psi, trace
 
 # The published designs take γ and δ at 95 % of their Prop. 4.2 bounds:
 # 0.95·4·5/π² = 1.9251 (§4.5, §5.6); 0.95·(4Δ*/π² − γ)ξ_L²/2 = 0.0030 (Ξ = {0.08π})
@@ -53,7 +53,7 @@ def potential(A: Mat3, u: Vec3, gamma: float, R_bar: Mat3, xi: float) -> float:
     """``U(R̄, ξ)`` of (4.23).  Broadcasts: R̄ a stack (M, 3, 3) of M draws (ξ a number or
     (M,)) gives (M,)."""
     if R_bar.ndim > 2:
-        return np.trace(A @ (np.eye(3) - R_bar @ Ra(xi, u)), axis1=-2, axis2=-1) + 0.5 * gamma * xi * xi  # type: ignore[no-any-return]
+        return trace(A @ (np.eye(3) - R_bar @ Ra(xi, u))) + 0.5 * gamma * xi * xi  # type: ignore[no-any-return]
     return float(np.trace(A @ (np.eye(3) - R_bar @ Ra(xi, u)))) + 0.5 * gamma * xi * xi
 
 

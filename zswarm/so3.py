@@ -65,8 +65,19 @@ def Pa(C: Mat3) -> Mat3:
 def psi(C: Mat3) -> Vec3:
     """``psi(C) = vee(Pa(C))`` (thesis eq. (2.5)); a stack (..., 3, 3) gives (..., 3)."""
     if C.ndim > 2:
-        return 0.5 * np.stack((C[..., 2, 1] - C[..., 1, 2], C[..., 0, 2] - C[..., 2, 0], C[..., 1, 0] - C[..., 0, 1]), axis=-1)
+        out = np.empty(C.shape[:-1])  # the same operations as below, written in place (np.stack cost twice as much)
+        np.subtract(C[..., 2, 1], C[..., 1, 2], out=out[..., 0])
+        np.subtract(C[..., 0, 2], C[..., 2, 0], out=out[..., 1])
+        np.subtract(C[..., 1, 0], C[..., 0, 1], out=out[..., 2])
+        out *= 0.5
+        return out
     return 0.5 * np.array((C[2, 1] - C[1, 2], C[0, 2] - C[2, 0], C[1, 0] - C[0, 1]))
+
+
+def trace(X: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The trace of each matrix of a stack (..., 3, 3): ``(X00 + X11) + X22``, np.trace's own
+    sum of three, at a sixth of its cost on a stack of a thousand."""
+    return X[..., 0, 0] + X[..., 1, 1] + X[..., 2, 2]  # type: ignore[no-any-return]
 
 
 def T(R: Mat3) -> Mat3:
@@ -151,7 +162,7 @@ def log(R: Mat3) -> Vec3:
 
 def log_batch(R: NDArray[np.float64]) -> NDArray[np.float64]:
     """:func:`log` of each of a stack (n, 3, 3) -> (n, 3): its branches, element by element."""
-    c = (np.trace(R, axis1=1, axis2=2) - 1.0) * 0.5
+    c = (trace(R) - 1.0) * 0.5
     s = psi(R)
     theta = np.arctan2(np.sqrt(np.einsum("ij,ij->i", s, s)), c)
     small = theta < 1e-6

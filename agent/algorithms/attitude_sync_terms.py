@@ -61,7 +61,7 @@ import numpy as np
 
 from zswarm import kernels
 from zswarm.algorithm import Field, View, number
-from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi
+from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi, trace
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,7 +139,7 @@ class Terms:
             self.t0, self.t1, self.t2 = float(M.trace()), float(MK.trace()), float(MK2.trace())
             self.abc = (float(u @ self.p0), float(u @ self.p1), float(u @ self.p2))
         else:
-            self.t0, self.t1, self.t2 = (np.trace(X, axis1=-2, axis2=-1) for X in (M, MK, MK2))
+            self.t0, self.t1, self.t2 = trace(M), trace(MK), trace(MK2)
             self.abc = (self.p0 @ u, self.p1 @ u, self.p2 @ u)
         self.K, self.K2, self.trA = K, K2, trA
 
