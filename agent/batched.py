@@ -109,14 +109,14 @@ class _Msg:
     age: float
 
 
-class BatchedView:
+class BatchedView(timing.HistoryReads):
     """zswarm.algorithm.View for M draws of one agent: every message and state value has a
     leading draw axis; the measurements too on a truth per draw (rigid bodies), not on a
     shared one (prescribed motion: the same for every draw, so no draw axis).  Steps end at
     sensor packets (lockstep).  On a shared truth the sensor history is kept as the runtime's
-    inbox keeps it (``HISTORY`` packets) and read by the same zswarm.timing functions, so
-    body_rate, rotation and relative_attitude give the runtime's numbers; on a truth per draw
-    they say they are not available."""
+    inbox keeps it (``HISTORY`` packets) and read as the runtime reads it (timing.HistoryReads,
+    timing.relative_attitude_at), so body_rate, rotation and relative_attitude give the
+    runtime's numbers; on a truth per draw they say they are not available."""
 
     def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]], rel_history: Mapping[int, deque[tuple[float, np.ndarray]]] | None = None) -> None:
         a = sc.agent(i)
@@ -163,32 +163,16 @@ class BatchedView:
             self._cache[key] = list(self._history[name])
         return self._cache[key]  # type: ignore[no-any-return]
 
-    def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
-        """Samples of the sensor field ``name`` in (t0, t1], the newest at or before t0 first
-        (as the runtime's View.series)."""
-        return timing.window(self._samples(name), t0, t1)
-
-    def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
-        return timing.interval_mean_rate(self._shared(name), t0, t1)
-
-    def body_rate(self, t0: float, t1: float) -> np.ndarray:
-        return timing.rotation_rate(self._shared("gyro"), t0, t1)
-
-    def rotation(self, t0: float, t1: float) -> np.ndarray:
-        key = ("rot", t0, t1)
-        if key not in self._cache:
-            self._cache[key] = timing.rotation_over(self._shared("gyro"), t0, t1)
-        return self._cache[key]  # type: ignore[no-any-return]
-
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
         if self._rel is None:
             raise Unsupported("relative attitudes between samples need the shared truth (prescribed motion)")
         key = ("R", j, t_world)
         if key not in self._cache:
-            self._cache[key] = timing.relative_attitude_at(list(self._rel.get(j, ())), self._shared("gyro"), t_world)
+            self._cache[key] = timing.relative_attitude_at(list(self._rel.get(j, ())), self._rates("gyro"), t_world)
         return self._cache[key]  # type: ignore[no-any-return]
 
-    def _shared(self, name: str) -> list[tuple[float, np.ndarray]]:
+    def _rates(self, name: str) -> list[tuple[float, np.ndarray]]:
+        """The samples that body_rate, rotation and mean_rate integrate: only a shared truth's."""
         if self._rel is None:
             raise Unsupported(f"integrals of {name!r} between samples need the shared truth (prescribed motion)")
         return self._samples(name)

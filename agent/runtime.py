@@ -326,8 +326,9 @@ class _Neighbor:
         self.age = age
 
 
-class TickView:
-    """What the algorithm sees at a tick (implements :class:`zswarm.algorithm.View`).
+class TickView(timing.HistoryReads):
+    """What the algorithm sees at a tick (implements :class:`zswarm.algorithm.View`; the reads
+    of the sensor history come from timing.HistoryReads on :meth:`_samples`).
 
     Built once per agent; :meth:`begin` points it at a tick.  Histories and
     per-neighbour lookups are computed at most once per tick.
@@ -412,21 +413,6 @@ class TickView:
                 samples = [(clock.local(t), w) for t, w in samples]
             self._cache[key] = samples
         return self._cache[key]  # type: ignore[no-any-return]
-
-    def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
-        return timing.window(self._samples(name), t0, t1)
-
-    def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
-        return timing.interval_mean_rate(self._samples(name), t0, t1)
-
-    def body_rate(self, t0: float, t1: float) -> np.ndarray:
-        return timing.rotation_rate(self._samples("gyro"), t0, t1)
-
-    def rotation(self, t0: float, t1: float) -> np.ndarray:
-        ck = ("rot", t0, t1)  # algorithms ask for the same interval per neighbour and per term
-        if ck not in self._cache:
-            self._cache[ck] = timing.rotation_over(self._samples("gyro"), t0, t1)
-        return self._cache[ck]  # type: ignore[no-any-return]
 
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
         ck = ("R", j, t_world)

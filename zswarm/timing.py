@@ -215,3 +215,35 @@ def body_vector_at(hist: Sequence[tuple[float, np.ndarray, np.ndarray]], t: floa
     s_ = (t - t0) / (t1 - t0)
     v = rotation_over(gyro, t1, t).T @ ((1 - s_) * b0_in_1 + s_ * b1)
     return v / np.sqrt(v @ v) if unit else v
+
+
+class HistoryReads:
+    """The reads of a View (zswarm.algorithm.View) that come from the sensor history:
+    ``series``, ``mean_rate``, ``body_rate`` and ``rotation``, on the samples a subclass gives
+    by ``_samples(name)`` (the rates by ``_rates(name)``, the same unless a subclass says
+    otherwise), with ``rotation`` cached per tick in the subclass's ``_cache``.  The runtime's
+    TickView and the batched engine's view both read their histories through these."""
+
+    _cache: dict[object, object]
+
+    def _samples(self, name: str) -> list[Sample]:
+        raise NotImplementedError
+
+    def _rates(self, name: str) -> list[Sample]:
+        return self._samples(name)
+
+    def series(self, name: str, t0: float, t1: float) -> list[Sample]:
+        return window(self._samples(name), t0, t1)
+
+    def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
+        return interval_mean_rate(self._rates(name), t0, t1)
+
+    def body_rate(self, t0: float, t1: float) -> np.ndarray:
+        return rotation_rate(self._rates("gyro"), t0, t1)
+
+    def rotation(self, t0: float, t1: float) -> np.ndarray:
+        ck = ("rot", t0, t1)  # algorithms ask for the same interval per neighbour and per term
+        if ck not in self._cache:
+            self._cache[ck] = rotation_over(self._rates("gyro"), t0, t1)
+        return self._cache[ck]  # type: ignore[return-value]
+
