@@ -19,12 +19,14 @@ So a draw here and the same draw on ``sim`` differ by round-off only (the batche
 algebra sums in another order), which the dynamics then carries: tests/component/test_batched.py.
 
 Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
-its ticks on the sensor grid, perfect links, no faults, noise-free sensors of the kinds
-implemented here (gyro, rel_att, attitude), the plant its report family is measured on here
-(MEASURES: the rigid-body plant for the §5.6 laws; for the §4.5 observers the prescribed
-motion, the same in every draw, so it is simulated once and its measurements are shared), and
-an algorithm whose SPEC says its functions broadcast (``batched=True``).  :func:`problem` says
-which of these a scenario lacks; the commands then run it on ``sim`` per draw.
+its ticks on the sensor grid, perfect links, no faults, sensors of the kinds implemented here
+(gyro, rel_att, attitude, with their noise: drawn from the world's generators in the world's
+order, and a basin's draws share the scenario's seed, so each draw gets its sim run's
+numbers), the plant its report family is measured on here (MEASURES: the rigid-body plant for
+the §5.6 laws; for the §4.5 observers the prescribed motion, the same in every draw, so it is
+simulated once and its measurements are shared), and an algorithm whose SPEC says its
+functions broadcast (``batched=True``).  :func:`problem` says which of these a scenario
+lacks; the commands then run it on ``sim`` per draw.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from world.plant import RigidBodyPlant
 from zswarm import timing
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.scenario import Scenario
-from zswarm.so3 import trace
+from zswarm.so3 import exp, trace
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world measures so far
 # Report family -> the plant its draws run on here.  "sync" (§5.6): rigid bodies (5.1), a truth
@@ -75,8 +77,6 @@ def problem(sc: Scenario) -> str | None:
     need = frozenset().union(*(sc.sensors_of(i) for i in sc.ids))
     if need - SENSORS:
         return f"the sensor(s) {', '.join(sorted(need - SENSORS))} (the batched world measures {', '.join(sorted(SENSORS))})"
-    if any(getattr(sc, f) > 0 for f in ("gyro_var", "bearing_var", "velocity_var", "rel_att_var", "attitude_var", "rel_pos_var")):
-        return "sensor noise (each draw of sim draws its own; not batched yet)"
     if len(spec.parts) != 1 or spec.parts[0].rate is not None:
         return "an algorithm of several parts or with a part rate of its own"
     clocks = {a.clock for a in sc.agents}
@@ -261,6 +261,8 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
         J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
         plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
     bias = np.array([a.gyro_bias for a in sc.agents])
+    std = {"gyro": math.sqrt(sc.gyro_var), "rel_att": math.sqrt(sc.rel_att_var), "attitude": math.sqrt(sc.attitude_var)}
+    rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in ids}  # as World's
 
     modules: dict[int, ModuleType] = {}
     gains: dict[int, Any] = {}
@@ -317,13 +319,22 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
         for i in ids:
             a = col[i]
             need = want[i] if tick or shared else histories[i].keys()
+            # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
+            # then attitude) from its generator per agent: a basin's draws share the scenario's
+            # seed, so each draw gets the numbers its own sim run gets.
+            rng, want_i = rngs[i], want[i]
+            n_gyro = rng.normal(0.0, std["gyro"], 3) if "gyro" in want_i and std["gyro"] > 0 else None
+            n_rel = {j: rng.normal(0.0, std["rel_att"], 3) for j in nbrs[i]} if "rel_att" in want_i and std["rel_att"] > 0 else None
+            n_att = rng.normal(0.0, std["attitude"], 3) if "attitude" in want_i and std["attitude"] > 0 else None
             sense: dict[str, Any] = {"t": t}
             if "gyro" in need:
-                sense["gyro"] = _body(W, a, shared) + bias[a]
+                sense["gyro"] = _body(W, a, shared) + bias[a] if n_gyro is None else _body(W, a, shared) + bias[a] + n_gyro
             if "rel_att" in need:
                 sense["rel_att"] = {j: _body(RT, a, shared) @ _body(R, col[j], shared) for j in nbrs[i]}
+                if n_rel is not None:
+                    sense["rel_att"] = {j: R_ij @ exp(n_rel[j]) for j, R_ij in sense["rel_att"].items()}
             if "attitude" in need:
-                sense["attitude"] = _body(R, a, shared)
+                sense["attitude"] = _body(R, a, shared) if n_att is None else _body(R, a, shared) @ exp(n_att)
             for f, hist in histories[i].items():
                 hist.append((t, sense[f] if shared else sense[f].copy()))
             for j, rel in rel_histories.get(i, {}).items():
