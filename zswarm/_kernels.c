@@ -11,6 +11,7 @@
  *    elementwise operations round each operation, and einsum("ij,ij->i") sums the three
  *    squares as (x² + z²) + y².  J_inv must be diagonal (world/dynamics.py checks): then
  *    J_inv tau is exact in any order.
+ *  - exp_batch: zswarm/so3.py exp_batch, Rodrigues' formula for a stack of rotation vectors.
  *  - flow_xi: agent/algorithms/attitude_sync_terms.py flow_xi, Heun's method on (5.21) in n
  *    sub-steps for each of M draws.  Python's float arithmetic and numpy's ufuncs round every
  *    operation; sin and cos are the C library's, as Python's math and numpy call them.
@@ -30,6 +31,33 @@ static inline void mm3(const double *a, const double *b, double *c)
             c[3 * i + k] = fma(a[3 * i + 2], b[6 + k], fma(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
 }
 
+/* Rodrigues' formula of one rotation vector W into E, as zswarm/so3.py exp_batch computes it. */
+static inline void rodrigues(const double W[3], double E[9])
+{
+    const double t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1]; /* einsum("ij,ij->i")'s order */
+    double a, b;
+    if (t2 < 1e-8) {
+        a = 1.0 - t2 / 6.0;
+        b = 0.5 - t2 / 24.0;
+    } else {
+        const double s = sqrt(t2);
+        a = sin(s) / s;
+        b = (1.0 - cos(s)) / t2;
+    }
+    const double K[9] = {0.0, -W[2], W[1], W[2], 0.0, -W[0], -W[1], W[0], 0.0};
+    double KK[9];
+    mm3(K, K, KK);
+    for (int q = 0; q < 9; q++)
+        E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
+}
+
+/* zswarm/so3.py exp_batch: n rotation vectors W (n,3) -> E (n,3,3). */
+void exp_batch(size_t n, const double *W, double *E)
+{
+    for (size_t m = 0; m < n; m++)
+        rodrigues(W + 3 * m, E + 9 * m);
+}
+
 /* n bodies: R (n,3,3) and w (n,3) advanced by h under the torques tau (n,3) held over the step,
  * into R_out and w_out; J_inv (n,3,3) the inverse inertias (isotropic: J = jI). */
 void rigid_step(size_t n, const double *R, const double *w, const double *J_inv, const double *tau, double h, double *R_out, double *w_out)
@@ -45,21 +73,8 @@ void rigid_step(size_t n, const double *R, const double *w, const double *J_inv,
             w_out[3 * m + r] = 2.0 * wb[r] - wm[r];
             W[r] = h * wb[r];
         }
-        const double t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1]; /* einsum("ij,ij->i")'s order */
-        double a, b;
-        if (t2 < 1e-8) {
-            a = 1.0 - t2 / 6.0;
-            b = 0.5 - t2 / 24.0;
-        } else {
-            const double s = sqrt(t2);
-            a = sin(s) / s;
-            b = (1.0 - cos(s)) / t2;
-        }
-        const double K[9] = {0.0, -W[2], W[1], W[2], 0.0, -W[0], -W[1], W[0], 0.0};
-        double KK[9], E[9];
-        mm3(K, K, KK);
-        for (int q = 0; q < 9; q++)
-            E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
+        double E[9];
+        rodrigues(W, E);
         mm3(Rm, E, R_out + 9 * m);
     }
 }

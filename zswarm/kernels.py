@@ -1,6 +1,6 @@
 """zswarm's compiled loops (zswarm/_kernels.c), for the hot spots that the batched engine's
 profile shows and numpy cannot make cheap: the rigid-body step of every body and world step,
-and the ξ_k filter's Heun sub-steps (agent/batched.py, issue 31).
+Rodrigues' formula on stacks, and the ξ_k filter's Heun sub-steps (agent/batched.py, issue 31).
 
 Each does the operations of the numpy or Python code it replaces in the same order, so the
 numbers are the same with or without it (tests/unit/test_kernels.py checks it bit for bit,
@@ -46,6 +46,7 @@ def _f64(a: Any, shape: tuple[int, ...]) -> np.ndarray:
     return np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=np.float64), shape))
 
 
+exp_batch: Callable[[np.ndarray], np.ndarray] | None = None
 rigid_step: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]] | None = None
 flow_xi: Callable[..., Any] | None = None
 
@@ -53,10 +54,19 @@ if _lib is not None:
     lib = _lib
     lib.rigid_step.restype = None
     lib.rigid_step.argtypes = [ctypes.c_size_t, _c_double_p, _c_double_p, _c_double_p, _c_double_p, ctypes.c_double, _c_double_p, _c_double_p]
+    lib.exp_batch.restype = None
+    lib.exp_batch.argtypes = [ctypes.c_size_t, _c_double_p, _c_double_p]
     lib.flow_xi.restype = None
     lib.flow_xi.argtypes = [ctypes.c_size_t] + [_c_double_p] * 7 + [ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_long]
     lib.flow_xi_one.restype = ctypes.c_double
     lib.flow_xi_one.argtypes = [ctypes.c_double] * 10 + [ctypes.c_long]
+
+    def _exp_batch(W: np.ndarray) -> np.ndarray:
+        """zswarm.so3.exp_batch of (n, 3) rotation vectors: (n, 3, 3)."""
+        W = np.ascontiguousarray(W, dtype=np.float64)
+        E = np.empty((W.shape[0], 3, 3))
+        lib.exp_batch(W.shape[0], _ptr(W), _ptr(E))
+        return E
 
     def _rigid_step(R: np.ndarray, w: np.ndarray, J_inv: np.ndarray, tau: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
         """``(R⁺, ω⁺)`` of world.dynamics.RigidBodies.step for isotropic inertias (new arrays)."""
@@ -77,4 +87,4 @@ if _lib is not None:
         lib.flow_xi(x.size, *(_ptr(c) for c in cs), _ptr(x), dt, k_xi, gamma, n)
         return x
 
-    rigid_step, flow_xi = _rigid_step, _flow_xi
+    exp_batch, rigid_step, flow_xi = _exp_batch, _rigid_step, _flow_xi

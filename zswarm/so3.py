@@ -10,7 +10,8 @@ Notation follows the thesis (Boughellaba 2024, §2.1):
   ``sin(theta/2)`` for a rotation by ``theta``.
 * ``projector(x) = P_x = I - x x^T/||x||^2``.
 
-Only numpy and the standard library are imported here.
+Only numpy, the standard library and zswarm.kernels (the compiled Rodrigues formula of
+exp_batch: the same numbers) are imported here.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+
+from zswarm import kernels
 
 Vec3 = NDArray[np.float64]
 Mat3 = NDArray[np.float64]
@@ -118,6 +121,8 @@ def exp(w: Vec3) -> Mat3:
 def exp_batch(W: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rodrigues' formula for a stack of rotation vectors, shape (n, 3) -> (n, 3, 3)."""
     W = np.asarray(W, dtype=np.float64)
+    if kernels.exp_batch is not None:  # the lines below, compiled (zswarm/_kernels.c): the same numbers
+        return kernels.exp_batch(W)
     t2 = np.einsum("ij,ij->i", W, W)
     small = t2 < 1e-8
     t = np.sqrt(np.where(small, 1.0, t2))

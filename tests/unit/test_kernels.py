@@ -41,6 +41,15 @@ def test_rigid_step_is_the_numpy_step(monkeypatch):
     assert not np.array_equal(fast.R, _bodies(np.random.default_rng(1), n, scale).R)  # they did move
 
 
+def test_exp_batch_is_numpys(monkeypatch):
+    assert kernels.exp_batch is not None, NEEDED
+    rng = np.random.default_rng(5)
+    W = np.concatenate([rng.normal(size=(300, 3)) * s for s in (1e-6, 1e-4, 0.05, 1.0, 3.0)])  # both branches, |W| up to ~10
+    fast = exp_batch(W)
+    monkeypatch.setattr(kernels, "exp_batch", None)
+    assert np.array_equal(fast, exp_batch(W))
+
+
 @pytest.mark.parametrize("dt", [2e-4, 5e-3, 1e-2, 0.2])
 def test_flow_xi_is_the_python_loop(monkeypatch, dt):
     assert kernels.flow_xi is not None, NEEDED
