@@ -1,6 +1,7 @@
 """zswarm's compiled loops (zswarm/_kernels.c), for the hot spots that the batched engine's
 profile shows and numpy cannot make cheap: the rigid-body step of every body and world step,
-Rodrigues' formula on stacks, and the ξ_k filter's Heun sub-steps (agent/batched.py, issue 31).
+Rodrigues' formula on stacks, the ξ_k filter's Heun sub-steps and the velocity-free law's
+(Q_i, ζ_i) filter (agent/batched.py, issue 31).
 
 Each does the operations of the numpy or Python code it replaces in the same order, so the
 numbers are the same with or without it (tests/unit/test_kernels.py checks it bit for bit,
@@ -49,6 +50,7 @@ def _f64(a: Any, shape: tuple[int, ...]) -> np.ndarray:
 exp_batch: Callable[[np.ndarray], np.ndarray] | None = None
 rigid_step: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]] | None = None
 flow_xi: Callable[..., Any] | None = None
+flow_aux: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
 
 if _lib is not None:
     lib = _lib
@@ -60,6 +62,8 @@ if _lib is not None:
     lib.flow_xi.argtypes = [ctypes.c_size_t] + [_c_double_p] * 7 + [ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_long]
     lib.flow_xi_one.restype = ctypes.c_double
     lib.flow_xi_one.argtypes = [ctypes.c_double] * 10 + [ctypes.c_long]
+    lib.flow_aux.restype = None
+    lib.flow_aux.argtypes = [ctypes.c_size_t, ctypes.c_long] + [_c_double_p] * 3 + [ctypes.POINTER(ctypes.c_int64), ctypes.c_double] + [_c_double_p] * 4 + [ctypes.c_double] * 3
 
     def _exp_batch(W: np.ndarray) -> np.ndarray:
         """zswarm.so3.exp_batch of (n, 3) rotation vectors: (n, 3, 3)."""
@@ -87,4 +91,19 @@ if _lib is not None:
         lib.flow_xi(x.size, *(_ptr(c) for c in cs), _ptr(x), dt, k_xi, gamma, n)
         return x
 
-    exp_batch, rigid_step, flow_xi = _exp_batch, _rigid_step, _flow_xi
+    def _flow_aux(Qt: np.ndarray, z: np.ndarray, table: np.ndarray, rows: np.ndarray, h: float, A: np.ndarray, K: np.ndarray, K2: np.ndarray, u2: np.ndarray, k_Q: float, k_zeta: float, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+        """attitude_sync_velocity_free.flow_aux's sub-steps: (Q̃ (M, 3, 3), ζ (M,)) after len(rows)
+        sub-steps of h, sub-step m at the body rate table[rows[m]] (table (rows, M, 3)); new arrays."""
+        M = z.shape[0]
+        Q_out = np.array(Qt, dtype=np.float64, order="C")  # copies: flowed in place
+        z_out = np.array(z, dtype=np.float64, order="C")
+        tab = _f64(table, (table.shape[0], M, 3))
+        r = np.ascontiguousarray(rows, dtype=np.int64)
+        if r.size and (r.min() < 0 or r.max() >= tab.shape[0]):
+            raise IndexError("flow_aux: a sub-step's row is outside the rate table")
+        mats = [_f64(x, (3, 3)) for x in (A, K, K2)]
+        u = _f64(u2, (3,))
+        lib.flow_aux(M, r.size, _ptr(Q_out), _ptr(z_out), _ptr(tab), r.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), h, *(_ptr(x) for x in mats), _ptr(u), k_Q, k_zeta, gamma)
+        return Q_out, z_out
+
+    exp_batch, rigid_step, flow_xi, flow_aux = _exp_batch, _rigid_step, _flow_xi, _flow_aux

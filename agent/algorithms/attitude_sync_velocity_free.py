@@ -36,13 +36,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, _times, jump, measured_edges, published_xi, tail_xi
-from zswarm import hybrid
+from zswarm import hybrid, kernels
 from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Ra, T, Vec3, exp, hat, log, psi
 
@@ -92,6 +93,18 @@ class Outputs:
     agent_jumps: tuple[tuple[float, float], ...]  # (ζ before, ζ after)
 
 
+def _mv(Z: Any, p: Any) -> Any:
+    """``Z p`` for one 3x3 or a stack (M, 3, 3) with (M, 3), summed ``(Z_r0 p_0 + Z_r1 p_1) + Z_r2 p_2``
+    with every product rounded: an order that C can repeat (numpy's own matrix-vector
+    kernels sum in an order of their own), so the compiled filter gives the same bits."""
+    return (Z[..., 0] * p[..., 0, None] + Z[..., 1] * p[..., 1, None]) + Z[..., 2] * p[..., 2, None]
+
+
+def _dot(p: Any, u: Vec3) -> Any:
+    """``p · u`` for a 3-vector or a stack (M, 3): ``(p_0 u_0 + p_1 u_1) + p_2 u_2``, as :func:`_mv`."""
+    return (p[..., 0] * u[0] + p[..., 1] * u[1]) + p[..., 2] * u[2]
+
+
 def damping(Q_tilde: Mat3, zeta: float, g: Gains) -> tuple[Vec3, Vec3]:
     """``(h_i, ψ(A Q̃ Ra(ζ,u)))``: the gradient term of (5.20) and the ψ of (5.23)."""
     Z = Ra(zeta, g.u)
@@ -107,22 +120,19 @@ class _Rates:
     __slots__ = ("A", "K", "K2", "k_Q", "k_zeta", "gamma", "u2")
 
     def __init__(self, g: Gains) -> None:
-        self.A = np.asarray(g.A, dtype=float)
+        self.A = np.ascontiguousarray(g.A, dtype=float)
         self.K = hat(np.asarray(g.u, dtype=float))
         self.K2 = self.K @ self.K
-        self.k_Q, self.k_zeta, self.gamma = g.k_Q, g.k_zeta, g.gamma
+        self.k_Q, self.k_zeta, self.gamma = float(g.k_Q), float(g.k_zeta), float(g.gamma)
         self.u2 = 2.0 * np.asarray(g.u, dtype=float)
 
-    def __call__(self, Qt: Mat3, zeta: float) -> tuple[Vec3, float]:
-        """``(k_Q h_i, ζ̇)``: Q̃̇ = Q̃ [ω_i − k_Q h_i]^x (5.14), equivalent to (5.22) for Q_i, and (5.23).
-        Broadcasts: Q̃ (M, 3, 3) and ζ (M,) of M draws."""
-        if isinstance(zeta, np.ndarray):
-            Z = _EYE + np.sin(zeta)[:, None, None] * self.K + (1.0 - np.cos(zeta))[:, None, None] * self.K2
-            p = psi(self.A @ Qt @ Z)
-            return self.k_Q * _times(Z, p), -self.k_zeta * (self.gamma * zeta + p @ self.u2)
-        Z = _EYE + math.sin(zeta) * self.K + (1.0 - math.cos(zeta)) * self.K2
+    def __call__(self, Qt: np.ndarray, zeta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(k_Q h_i, ζ̇)`` of M draws, Q̃ (M, 3, 3) and ζ (M,): Q̃̇ = Q̃ [ω_i − k_Q h_i]^x
+        (5.14), equivalent to (5.22) for Q_i, and (5.23).  The operations of
+        zswarm/_kernels.c's flow_aux, in its order."""
+        Z = _EYE + np.sin(zeta)[:, None, None] * self.K + (1.0 - np.cos(zeta))[:, None, None] * self.K2
         p = psi(self.A @ Qt @ Z)
-        return self.k_Q * (Z @ p), -self.k_zeta * (self.gamma * zeta + float(self.u2 @ p))
+        return self.k_Q * _mv(Z, p), -self.k_zeta * (self.gamma * zeta + _dot(p, self.u2))
 
 
 _EYE = np.eye(3)
@@ -151,40 +161,55 @@ def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float, path: list[tu
     return samples[-1][1]
 
 
-def _rate_at(path: list[tuple[float, float, Mat3, Vec3]], s: float) -> Vec3:
-    """The body rate of R_i on the piecewise geodesic at time ``s`` (0 outside the samples)."""
-    for t0, t1, _R0, w in path:
-        if s <= t1:
-            return w / (t1 - t0) if s >= t0 else _ZERO3
-    return _ZERO3
+def substep_rates(path: list[tuple[float, float, Mat3, Vec3]], s0: float, h: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The body rate of R_i on the piecewise geodesic at the middle of each of ``n`` sub-steps
+    of ``h`` from ``s0``: a table of the segments' rates ``w/(t1 − t0)`` and a zero row last,
+    (segments + 1, M, 3) (M = 1 for one draw), and each sub-step's row (0 before or after
+    the samples)."""
+    table = [w / (t1 - t0) for t0, t1, _R0, w in path]
+    shape = (1, 3) if not path or np.ndim(path[0][3]) == 1 else np.shape(path[0][3])
+    table.append(np.zeros(shape))
+    rows = np.empty(n, dtype=np.int64)
+    s = s0
+    for m in range(n):
+        mid = s + 0.5 * h
+        rows[m] = next((i if mid >= t0 else len(path) for i, (t0, t1, _R0, _w) in enumerate(path) if mid <= t1), len(path))
+        s += h
+    return np.ascontiguousarray(np.stack([np.reshape(r, shape) for r in table])), rows
 
 
-_ZERO3 = np.zeros(3)
-
-
-def flow_aux(Q: Mat3, zeta: float, samples: tuple[tuple[float, Mat3], ...], dt: float, g: Gains) -> tuple[Mat3, float]:
+def flow_aux(Q: Mat3, zeta: Any, samples: tuple[tuple[float, Mat3], ...], dt: float, g: Gains) -> tuple[Mat3, Any]:
     """(Q_i, ζ_i) over the step ``[−dt, 0]``: Heun sub-steps of at most SUBSTEP_S on
     (Q̃_i, ζ_i) by (5.14), (5.23), with ω_i the rate of R_i's piecewise geodesic between the
     samples (taken at each sub-step's middle); then ``Q_i = R_i Q̃_i^T`` at the newest sample.
-    The same flow as (5.22) for Q_i, without interpolating R_i at every sub-step."""
+    The same flow as (5.22) for Q_i, without interpolating R_i at every sub-step.  One draw
+    (Q (3, 3), ζ a float) or M (stacks): one draw goes the stacked way with M = 1, so that
+    sim and the batched engine do the same arithmetic, compiled (zswarm/_kernels.c) or not."""
     n = max(1, math.ceil(dt / SUBSTEP_S - 1e-9))
     h = dt / n
-    rates = _rates(g)
     path = attitude_path(samples)
     Qt = T(Q) @ attitude_at(samples, -dt, path)
-    s = -dt
-    kh1, z1 = rates(Qt, zeta)
-    for _ in range(n):
-        w = _rate_at(path, s + 0.5 * h)
-        v1 = w - kh1
-        Qt1 = Qt @ exp(h * v1)
-        kh2, z2 = rates(Qt1, zeta + h * z1)
-        Qt = Qt @ exp(0.5 * h * (v1 + w - kh2))
-        zeta = zeta + 0.5 * h * (z1 + z2)
-        s += h
-        kh1, z1 = rates(Qt, zeta)
-    R_end = samples[-1][1]
-    return R_end @ T(Qt), zeta
+    one = Qt.ndim == 2
+    z = np.array([zeta], dtype=float) if one else np.asarray(zeta, dtype=float)
+    Qt = Qt[None] if one else Qt
+    table, rows = substep_rates(path, -dt, h, n)
+    rates = _rates(g)
+    if kernels.flow_aux is not None:
+        Qt, z = kernels.flow_aux(Qt, z, table, rows, h, rates.A, rates.K, rates.K2, rates.u2, rates.k_Q, rates.k_zeta, rates.gamma)
+    else:
+        hh = 0.5 * h
+        kh1, z1 = rates(Qt, z)
+        for r in rows:
+            w = table[r]
+            v1 = w - kh1
+            Qt1 = Qt @ exp(h * v1)
+            kh2, z2 = rates(Qt1, z + h * z1)
+            Qt = Qt @ exp(hh * (v1 + w - kh2))
+            z = z + hh * (z1 + z2)
+            kh1, z1 = rates(Qt, z)
+    if one:
+        return samples[-1][1] @ T(Qt[0]), float(z[0])
+    return samples[-1][1] @ T(Qt), z
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from agent.algorithms import attitude_sync_terms as terms
+from agent.algorithms import attitude_sync_velocity_free as vf
 from world.dynamics import RigidBodies
 from zswarm import kernels
 from zswarm.so3 import exp_batch
@@ -65,3 +66,30 @@ def test_flow_xi_is_the_python_loop(monkeypatch, dt):
     slow_one = [terms.flow_xi(tuple(float(c[m]) for c in c0), tuple(float(c[m]) for c in c1), float(xi[m]), dt, 20.0, 1.9251) for m in range(M)]
     assert np.array_equal(fast, slow) and one == slow_one and np.array_equal(slow, np.array(slow_one))
     assert not np.array_equal(fast, xi)
+
+
+@pytest.mark.parametrize("dt", [3e-4, 1e-2, 0.05])
+def test_flow_aux_is_the_numpy_loop(monkeypatch, dt):
+    """The velocity-free law's (Q_i, ζ_i) filter: compiled or numpy, a stack of draws or each
+    draw alone (sim's path), over attitude samples before, inside and after the step (so
+    sub-steps read every row of the rate table, the zero row included), Q_i near Q̃ = I and
+    far from it, ζ on both sides of 0."""
+    assert kernels.flow_aux is not None, NEEDED
+    rng = np.random.default_rng(11)
+    M = 97
+    g = vf.Gains(0.4, 20.0, 30.0, 3.0, 20.0, np.diag([5.0, 8.57, 12.0]), np.array([0.0, 0.6455, 0.7638]) / np.linalg.norm([0.0, 0.6455, 0.7638]), 1.9251, 0.3848, (2.83,), 0.3848, (2.83,))
+    R0 = exp_batch(rng.normal(size=(M, 3)))
+    Q = np.concatenate([R0[: M // 2] @ exp_batch(rng.normal(size=(M // 2, 3)) * 1e-3), exp_batch(rng.normal(size=(M - M // 2, 3)) * 2.0)])
+    zeta = rng.uniform(-3.0, 3.0, M)
+    times = (-1.3 * dt, -0.6 * dt, -0.1 * dt)  # the newest sample 0.1 dt before the step's end: the zero row
+    samples = tuple((t, R0 @ exp_batch(rng.normal(size=(M, 3)) * 0.05 * k)) for k, t in enumerate(times))
+    fast = vf.flow_aux(Q, zeta, samples, dt, g)
+    one = [vf.flow_aux(Q[m], float(zeta[m]), tuple((t, R[m]) for t, R in samples), dt, g) for m in range(M)]
+    monkeypatch.setattr(kernels, "flow_aux", None)
+    slow = vf.flow_aux(Q, zeta, samples, dt, g)
+    slow_one = [vf.flow_aux(Q[m], float(zeta[m]), tuple((t, R[m]) for t, R in samples), dt, g) for m in range(M)]
+    assert np.array_equal(fast[0], slow[0]) and np.array_equal(fast[1], slow[1])
+    for m in range(M):
+        assert np.array_equal(one[m][0], fast[0][m]) and one[m][1] == fast[1][m]
+        assert np.array_equal(slow_one[m][0], fast[0][m]) and slow_one[m][1] == fast[1][m]
+    assert not np.array_equal(fast[1], zeta)
