@@ -219,6 +219,18 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--hold", action="store_true", help="with --live: keep serving after the end until Ctrl-C")
     procutil.add_zenoh_args(rp)  # an endpoint replays onto a Zenoh network
 
+    vw = sub.add_parser(
+        "view",
+        help="open a results folder in Rerun: bodies true and estimated in 3-D, errors, hybrid variables, jumps, links, commands, faults",
+        description="Reads RESULTS/recording.mcap into a Rerun recording (timelines world_time and log_time): every agent's "
+        "true and estimated frame, the graph's edges, the per-agent and per-edge errors, ξ and ζ and their jumps, the link "
+        "counters, the commands and the scenario's fault windows.  Opens it in Rerun's viewer; --save writes the .rrd file "
+        "instead; --web serves Rerun's web viewer (no browser is opened).",
+    )
+    vw.add_argument("run_dir", type=Path, help="results folder holding recording.mcap (and scenario.toml)")
+    vw.add_argument("--save", type=Path, default=None, metavar="FILE.rrd", help="write the Rerun recording to FILE.rrd and exit")
+    vw.add_argument("--web", nargs="?", const="127.0.0.1:9090", default=None, metavar="HOST:PORT", help="serve the web viewer on HOST:PORT (default 127.0.0.1:9090) until Ctrl-C")
+
     rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
 
@@ -280,6 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         "compose": _lazy("compose", "command"),
         "record": _lazy("recorder", "command"),
         "replay": _lazy("replay", "command"),
+        "view": _lazy("rerun_view", "command"),
         "report": cmd_report,
         "design-hybrid": _lazy("hybrid", "design_command"),
         "generate": _lazy("generate", "command"),

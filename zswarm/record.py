@@ -223,7 +223,7 @@ class ViewerOut(_McapOut):
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        from zswarm.viz import Views
+        from zswarm.viz import FoxgloveSink, Views
 
         self.ctx = foxglove.Context()
         self.writer: Any = None
@@ -240,7 +240,7 @@ class ViewerOut(_McapOut):
                 self._write_metadata(metadata)
         if live is not None:
             self.server = foxglove.start_server(name=server_name, host=live[0], port=live[1], context=self.ctx)
-        self.views = Views(self.ctx, self.log_json, scenario)
+        self.views = Views(FoxgloveSink(self.ctx, self.log_json), scenario)
         self._streams = None if scenario is None else run_streams(scenario)
 
     @property
