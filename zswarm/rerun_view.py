@@ -10,9 +10,10 @@ recording, on two timelines: ``world_time`` (the run's world seconds) and
     (true: blue, labelled i; estimate: translucent orange).
 ``world/edges``
     the graph's edges between the true positions (LineStrips3D).
-``errors/<i>/…``, ``errors/edge/<h>_<t>/…``, ``sync/edge/<h>_<t>/…``, ``sync/<i>/…``, ``hybrid/<i>/…``, ``links/<j>_to_<i>/…``, ``commands/<i>/…``
-    every number of the corresponding JSON record as a time series (Scalars):
-    attitude and position errors, ξ_k and ζ_i, link counters, command components.
+``errors/<quantity>/<i>``, ``errors/edge/<quantity>/<h>_<t>``, ``sync/edge/attitude/<h>_<t>``, ``sync/omega/<i>``, ``hybrid/xi/<k>``, ``hybrid/zeta/<i>``, ``links/<counter>/<j>_to_<i>``, ``commands/<component>/<i>``
+    every number of the viewer's JSON records as a time series (Scalars),
+    grouped by quantity (:func:`entity`): attitude and position errors,
+    |R̄_k|_I and ‖ω_i‖, ξ_k and ζ_i, link counters, command components.
 ``hybrid/jumps``
     one text entry per jump of ξ_k or ζ_i (TextLog).
 ``events/alive``
@@ -68,13 +69,46 @@ def rerun_module() -> Any:
     return rerun
 
 
-class RerunSink:
-    """A :class:`zswarm.viz.Sink` on a ``rerun.RecordingStream`` (see the module docstring)."""
+def entity(stream: str, field: str) -> str:
+    """The entity of one number of a record: grouped by quantity, the agent, edge or link last
+    (``errors/3`` attitude -> ``errors/attitude/3``, ``links/1_to_2`` dropped ->
+    ``links/dropped/1_to_2``, ξ_k -> ``hybrid/xi/k``), so that one view plots a quantity for
+    all and its legend names them."""
+    if field.startswith("xi_") and stream.startswith("hybrid/"):
+        return f"hybrid/xi/{field[3:]}"
+    head, _, last = stream.rpartition("/")
+    return f"{head}/{field}/{last}" if head else f"{stream}/{field}"
 
-    def __init__(self, rec: Any) -> None:
+
+def layout(sc: Scenario | None) -> dict[int, np.ndarray]:
+    """Where the 3-D view draws each agent, as an offset from its true position: zero, unless
+    every agent starts at the same point (the Chapter 5 laws steer attitudes only), when they
+    stand on a circle in the x-y plane, a body's length apart (display only; the series and
+    the Foxglove channels keep the truth)."""
+    if sc is None or len(sc.agents) < 2:
+        return {}
+    pts = np.array([a.p for a in sc.agents], dtype=float)
+    if float(np.max(np.ptp(pts, axis=0))) > 1e-9:
+        return {}
+    n = len(sc.agents)
+    r = 2.0 * n / (2.0 * math.pi)  # neighbours 2 apart on the circle, bodies 1 long
+    return {a.id: np.array([r * math.cos(2 * math.pi * k / n), r * math.sin(2 * math.pi * k / n), 0.0]) for k, a in enumerate(sc.agents)}
+
+
+class RerunSink:
+    """A :class:`zswarm.viz.Sink` on a ``rerun.RecordingStream`` (see the module docstring).
+    Bodies are boxes 1 : 0.6 : 0.3 (so that an attitude shows) with their frame's axes;
+    ``offsets`` moves an agent's drawing (:func:`layout`)."""
+
+    def __init__(self, rec: Any, offsets: dict[int, np.ndarray] | None = None) -> None:
         self.rr = rerun_module()
         self.rec = rec
         self.bodies: set[tuple[int, bool]] = set()
+        self.offsets = offsets or {}
+
+    def _offset(self, frame: str) -> np.ndarray | float:
+        i = frame.removeprefix("agent_").removesuffix("_est")
+        return self.offsets.get(int(i), 0.0) if i.isdigit() else 0.0
 
     def _time(self, t: float, log_time: int) -> None:
         self.rec.set_time("world_time", duration=float(t))
@@ -83,20 +117,24 @@ class RerunSink:
     def frames(self, log_time: int, t: float, frames: list[tuple[str, np.ndarray, np.ndarray]]) -> None:
         self._time(t, log_time)
         for name, p, R in frames:
-            self.rec.log(f"world/{name}", self.rr.Transform3D(translation=np.asarray(p, dtype=float), mat3x3=np.asarray(R, dtype=float)))
+            self.rec.log(f"world/{name}", self.rr.Transform3D(translation=np.asarray(p, dtype=float) + self._offset(name), mat3x3=np.asarray(R, dtype=float)))
 
-    def scene(self, log_time: int, t: float, bodies: list[tuple[int, bool]], size: float, edges: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    def scene(self, log_time: int, t: float, bodies: list[tuple[int, bool]], size: float, edges: list[tuple[int, int, np.ndarray, np.ndarray]]) -> None:
         rr = self.rr
         for i, est in bodies:
             if (i, est) in self.bodies:
                 continue
             self.bodies.add((i, est))
-            path = f"world/agent_{i}_est/body" if est else f"world/agent_{i}/body"
-            box = rr.Boxes3D(half_sizes=[[size / 2] * 3], colors=[_EST if est else _TRUE], labels=None if est else [str(i)], fill_mode="solid")
-            self.rec.log(path, box, static=True)
+            frame = f"agent_{i}_est" if est else f"agent_{i}"
+            length = size if not self.offsets else 1.0
+            box = rr.Boxes3D(half_sizes=[[length / 2, 0.3 * length, 0.15 * length]], colors=[_EST if est else _TRUE], labels=None if est else [str(i)], fill_mode="solid")
+            self.rec.log(f"world/{frame}/body", box, static=True)
+            if not est:
+                self.rec.log(f"world/{frame}", rr.TransformAxes3D(0.9 * length), static=True)
         if edges:
             self._time(t, log_time)
-            self.rec.log("world/edges", rr.LineStrips3D([[a, b] for a, b in edges], colors=[_EDGE]))
+            strips = [[pa + self.offsets.get(a, 0.0), pb + self.offsets.get(b, 0.0)] for a, b, pa, pb in edges]
+            self.rec.log("world/edges", rr.LineStrips3D(strips, colors=[_EDGE]))
 
     def record(self, stream: str, schema: dict[str, Any], obj: dict[str, Any], log_time: int) -> None:
         rr = self.rr
@@ -111,7 +149,7 @@ class RerunSink:
         for k, v in obj.items():
             if k in _SKIP or isinstance(v, bool) or not isinstance(v, (int, float)):
                 continue
-            self.rec.log(f"{stream}/{k}", rr.Scalars(float(v)))
+            self.rec.log(entity(stream, k), rr.Scalars(float(v)))
 
     def event(self, payload: Any, log_time: int) -> None:
         """A process's liveliness token came or went (``events/alive``), on the log_time timeline."""
@@ -138,22 +176,28 @@ class RerunSink:
                 self.rec.log(f"faults/{n}/active", rr.Scalars(v))
 
 
-def blueprint() -> Any:
-    """The layout: the 3-D scene beside the error, hybrid, link and command series."""
+def blueprint(sc: Scenario | None, sync: bool) -> Any:
+    """The layout: the 3-D scene beside the run's error series (|R̄_k|_I per edge and ‖ω_i‖ for
+    a synchronization law, relative errors per edge for the §4 observers, else each agent's
+    errors), the hybrid variables of a hybrid scheme, and tabs of commands (a plant driven by
+    the agents), links and the text log (jumps, faults, processes)."""
     import rerun.blueprint as rrb
 
+    if sync:
+        series = [rrb.TimeSeriesView(origin="sync/edge/attitude", name="|R̄_k|_I per edge (5.24)"), rrb.TimeSeriesView(origin="sync/omega", name="‖ω_i‖ (rad/s)")]
+    elif sc is not None and sc.oriented:
+        series = [rrb.TimeSeriesView(origin="errors/edge/attitude", name="relative attitude error per edge"), rrb.TimeSeriesView(origin="errors/edge/position", name="relative position error per edge (m)")]
+    else:
+        series = [rrb.TimeSeriesView(origin="errors/attitude", name="attitude error |R̃_i|_I"), rrb.TimeSeriesView(origin="errors/position", name="position error (m)")]
+    if sc is not None and getattr(sc.params, "Xi", ()):
+        series.append(rrb.TimeSeriesView(origin="hybrid", name="hybrid variables ξ_k, ζ_i"))
+    tab_views = [rrb.TimeSeriesView(origin="commands", name="commands")] if sc is not None and sc.plant != "prescribed" else []
+    tabs = rrb.Tabs(*tab_views, rrb.TimeSeriesView(origin="links", name="links"), rrb.TextLogView(origin="/", name="jumps, faults, processes"))
+    title = "bodies: true (blue) and estimated (orange)" if not sync else "bodies (true attitudes)"
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(origin="world", name="bodies: true (blue) and estimated (orange)"),
-            rrb.Vertical(
-                rrb.TimeSeriesView(origin="errors", name="estimation errors"),
-                rrb.TimeSeriesView(origin="sync", name="synchronization: |R̄_k|_I per edge, ‖ω_i‖"),
-                rrb.TimeSeriesView(origin="hybrid", name="hybrid variables"),
-                rrb.Tabs(rrb.TimeSeriesView(origin="commands", name="commands"), rrb.TimeSeriesView(origin="links", name="links"), rrb.TextLogView(origin="/", name="jumps and faults")),
-            ),
-            column_shares=[3, 2],
-        ),
+        rrb.Horizontal(rrb.Spatial3DView(origin="world", name=title), rrb.Vertical(*series, tabs), column_shares=[3, 2]),
         rrb.TimePanel(timeline="world_time"),
+        collapse_panels=True,
     )
 
 
@@ -166,13 +210,14 @@ class RerunViewer:
 
         rr = rerun_module()
         self.rec = rr.RecordingStream(APP, recording_id=recording_id)
-        self.sink = RerunSink(self.rec)
+        self.sink = RerunSink(self.rec, layout(scenario))
         self.views = Views(self.sink, scenario)
+        self.scenario = scenario
         self.count = 0
         self.malformed = 0
 
     def save(self, path: Path) -> None:
-        self.rec.save(str(path), default_blueprint=blueprint())
+        self.rec.save(str(path), default_blueprint=blueprint(self.scenario, self.views.sync))
 
     def message(self, stream: str, payload: Any, t: int) -> dict[str, Any] | None:
         from zswarm.record import STREAM_TYPES, decode
@@ -235,11 +280,39 @@ def _host_port(text: str) -> tuple[str, int]:
     return host or "127.0.0.1", p
 
 
-def serve_web(rrd: Path, host: str, port: int, grpc_port: int = 0) -> subprocess.Popen[bytes]:
+def serve_web(rrd: Path, host: str, port: int, grpc_port: int = 0) -> tuple[subprocess.Popen[bytes], str]:
     """The ``rerun`` program of the installed SDK serving ``rrd`` to its web viewer on
-    ``host:port`` (HTTP) and a gRPC server on ``grpc_port`` (0: a free one)."""
-    cmd = [sys.executable, "-m", "rerun", "--serve-web", "--bind", host, "--web-viewer-port", str(port), "--port", str(grpc_port or _free_port(host)), str(rrd)]
-    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, env=os.environ | {"TELEMETRY_ENABLED": "false"}, start_new_session=True)
+    ``host:port`` (HTTP) and a gRPC server on ``grpc_port`` (0: a free one); with the page's
+    address, which tells the viewer where the data is (``?url=``)."""
+    from urllib.parse import quote
+
+    grpc = grpc_port or _free_port(host)
+    cmd = [viewer_program(), "--serve-web", "--bind", host, "--web-viewer-port", str(port), "--port", str(grpc), str(rrd)]
+    return _child(cmd), f"http://{host}:{port}/?url={quote(f'rerun+http://{host}:{grpc}/proxy', safe='')}"
+
+
+def viewer_program() -> str:
+    """The ``rerun`` program of the installed ``rerun-sdk`` wheel (its viewer and server), run
+    directly: ``python -m rerun`` would put a Python process between us and it."""
+    import rerun_cli
+
+    path = os.environ.get("RERUN_CLI_PATH") or os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
+    if not os.path.exists(path):
+        raise SystemExit(f"zswarm view: the Rerun viewer program is missing ({path}): reinstall 'zswarm[rerun]'")
+    return path
+
+
+def _child(cmd: list[str]) -> subprocess.Popen[bytes]:
+    """The viewer program as a child in our process group (a Ctrl-C or a kill of the group
+    reaches it) that the kernel stops when this process dies, however it dies (Linux)."""
+
+    def on_parent_death() -> None:
+        if sys.platform.startswith("linux"):
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, env=os.environ | {"TELEMETRY_ENABLED": "false"}, preexec_fn=on_parent_death)  # noqa: PLW1509
 
 
 def _free_port(host: str) -> int:
@@ -250,7 +323,20 @@ def _free_port(host: str) -> int:
         return int(s.getsockname()[1])
 
 
+def _terminated(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C: the viewer program is stopped and reaped
+
+
 def command(args: argparse.Namespace) -> int:
+    signal.signal(signal.SIGTERM, _terminated)
+    try:
+        return _command(args)
+    except KeyboardInterrupt:
+        print("zswarm view: interrupted", file=sys.stderr)
+        return 130
+
+
+def _command(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
         print(f"zswarm view: {run_dir}: not a results folder", file=sys.stderr)
@@ -277,8 +363,8 @@ def command(args: argparse.Namespace) -> int:
                 return 0
             return _open_native(save)
         host, port = _host_port(args.web)
-        proc = serve_web(save, host, port)
-        print(f"serving the web viewer at http://{host}:{port} (Ctrl-C stops it)", flush=True)
+        proc, url = serve_web(save, host, port)
+        print(f"serving the web viewer: {url} (Ctrl-C stops it)", flush=True)
         try:
             return proc.wait()
         except KeyboardInterrupt:
@@ -292,7 +378,7 @@ def command(args: argparse.Namespace) -> int:
 
 def _open_native(rrd: Path) -> int:
     """The native viewer on ``rrd`` (needs a display); until it is closed."""
-    proc = subprocess.Popen([sys.executable, "-m", "rerun", str(rrd)], env=os.environ | {"TELEMETRY_ENABLED": "false"}, start_new_session=True)
+    proc = _child([viewer_program(), str(rrd)])
     try:
         return proc.wait()
     except KeyboardInterrupt:
@@ -302,12 +388,13 @@ def _open_native(rrd: Path) -> int:
 
 
 def _stop(proc: subprocess.Popen[bytes]) -> None:
+    """Stop the viewer program and reap it (by its PID)."""
     if proc.poll() is None:
         with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGTERM)
+            proc.terminate()
         try:
             proc.wait(5)
         except subprocess.TimeoutExpired:
             with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGKILL)
+                proc.kill()
             proc.wait()

@@ -131,9 +131,10 @@ class Sink(Protocol):
     def frames(self, log_time: int, t: float, frames: list[tuple[str, np.ndarray, np.ndarray]]) -> None:
         """``world → frame`` transforms ``(frame, p, R)`` at world time ``t``."""
 
-    def scene(self, log_time: int, t: float, bodies: list[tuple[int, bool]], size: float, edges: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    def scene(self, log_time: int, t: float, bodies: list[tuple[int, bool]], size: float, edges: list[tuple[int, int, np.ndarray, np.ndarray]]) -> None:
         """Every agent's body ``(i, estimated?)`` as a cube of edge ``size`` locked to its frame
-        (``agent_<i>`` or ``agent_<i>_est``), and the graph's edges between true positions."""
+        (``agent_<i>`` or ``agent_<i>_est``), and the graph's edges ``(a, b, p_a, p_b)`` between
+        true positions."""
 
     def record(self, stream: str, schema: dict[str, Any], obj: dict[str, Any], log_time: int) -> None:
         """A JSON record on the channel ``/<stream>`` (``obj["t"]`` its world time)."""
@@ -159,7 +160,7 @@ class FoxgloveSink:
             log_time=log_time,
         )
 
-    def scene(self, log_time: int, t: float, bodies: list[tuple[int, bool]], size: float, edges: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    def scene(self, log_time: int, t: float, bodies: list[tuple[int, bool]], size: float, edges: list[tuple[int, int, np.ndarray, np.ndarray]]) -> None:
         from foxglove.messages import Color, CubePrimitive, LinePrimitive, LinePrimitiveLineType, Point3, Pose, SceneEntity, SceneUpdate, TextPrimitive
 
         stamp = _stamp(log_time)
@@ -174,7 +175,7 @@ class FoxgloveSink:
             ]  # fmt: skip
             cube = CubePrimitive(pose=origin, size=cube_size, color=Color(r=c[0], g=c[1], b=c[2], a=c[3]))
             ents.append(SceneEntity(timestamp=stamp, frame_id=frame, id=frame, frame_locked=True, cubes=[cube], texts=label))
-        pts = [Point3(x=float(q[0]), y=float(q[1]), z=float(q[2])) for a, b in edges for q in (a, b)]
+        pts = [Point3(x=float(q[0]), y=float(q[1]), z=float(q[2])) for _a, _b, pa, pb in edges for q in (pa, pb)]
         if pts:
             ents.append(
                 SceneEntity(
@@ -239,7 +240,7 @@ class Views:
         if t >= self.next_scene:
             self.next_scene = t + self.scene_period - 1e-9
             bodies = [(i, est) for i in col for est in ((False, True) if i in self.newest else (False,))]
-            edges = [(m["p"][col[a]], m["p"][col[b]]) for a, b in self.edges if a in col and b in col]
+            edges = [(a, b, m["p"][col[a]], m["p"][col[b]]) for a, b in self.edges if a in col and b in col]
             self.sink.scene(log_time, t, bodies, self.size, edges)
         while self.pending and self.pending[0][1] <= t:
             self._error(*self.pending.popleft())

@@ -46,20 +46,19 @@ def test_every_shipped_scenario_views(name, tmp_path):
     assert v.count > 0 and v.malformed == 0
     got = entities(tmp_path / "x.rrd")
     want = {f"/world/agent_{i}" for i in sc.ids} | {f"/world/agent_{i}/body" for i in sc.ids} | {"/world/edges"}
-    want |= {f"/commands/{i}/" for i in sc.ids} if sc.plant != "prescribed" else set()
+    if sc.plant != "prescribed":  # every agent's command, each component (τ_i: x, y, z and the norm)
+        assert {g.rsplit("/", 1)[1] for g in got if g.startswith("/commands/")} == {str(i) for i in sc.ids}, sorted(got)
     fam = family.of(sc).name
     if fam == "sync":
-        want |= {f"/sync/edge/{h}_{t}/attitude" for h, t in sc.oriented} | {f"/sync/{i}/omega" for i in sc.ids}
+        want |= {f"/sync/edge/attitude/{h}_{t}" for h, t in sc.oriented} | {f"/sync/omega/{i}" for i in sc.ids}
     else:
-        want |= {f"/world/agent_{i}_est" for i in sc.ids if sc.agent(i).role != "leader"}
-        want |= {f"/errors/{i}/attitude" for i in sc.ids if sc.agent(i).role != "leader"}
+        estimating = [i for i in sc.ids if sc.agent(i).role != "leader"]
+        want |= {f"/world/agent_{i}_est" for i in estimating} | {f"/errors/attitude/{i}" for i in estimating}
+        want |= {f"/errors/edge/attitude/{h}_{t}" for h, t in sc.oriented}
     if getattr(sc.params, "Xi", ()):
-        want |= {"/hybrid/jumps"}
-    prefixes = {w for w in want if w.endswith("/")}
-    assert not (want - prefixes) - got, sorted((want - prefixes) - got)
-    for p in prefixes:
-        assert any(g.startswith(p) for g in got), (p, sorted(got))
-    assert any(g.startswith("/links/") for g in got)
+        want |= {"/hybrid/jumps"} | {f"/hybrid/xi/{k}" for k in range(1, len(sc.oriented) + 1)}
+    assert not want - got, sorted(want - got)
+    assert any(g.startswith("/links/delivered/") for g in got)
 
 
 def test_fault_windows_and_the_cli(tmp_path):
@@ -75,7 +74,7 @@ def test_fault_windows_and_the_cli(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "messages" in r.stdout and "malformed" not in r.stdout
     got = entities(tmp_path / "f.rrd")
-    assert {"/faults", "/faults/0/active"} <= got, sorted(got)
+    assert {"/faults", "/faults/0/active", "/links/dropped/1_to_3"} <= got, sorted(got)
     empty = tmp_path / "empty"
     empty.mkdir()
     r = subprocess.run([sys.executable, "-m", "zswarm", "view", str(empty), "--save", str(tmp_path / "g.rrd")], capture_output=True, text=True, env=ENV, timeout=120)

@@ -1,0 +1,200 @@
+"""A real browser for the viewer tests and the README's pictures: Debian's ``chromium``,
+headless, driven over the Chrome DevTools Protocol (CDP) with ``websockets``.
+
+:func:`screenshot` opens a page, takes screenshots until the caller's test says it has
+drawn, waits ``settle`` s more for the last frames and returns the PNG and the page's
+title.  WebGL runs on SwiftShader (software), so no GPU is needed.  The browser
+is a child in its own process group, killed with the group however the call ends.
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import itertools
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+FLAGS = (
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-extensions",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--remote-debugging-address=127.0.0.1",
+    "--remote-debugging-port=0",
+)
+
+
+def find_chromium() -> str | None:
+    """The browser's path: ``chromium`` (Debian) or ``chromium-browser``/``google-chrome``."""
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def install_chromium() -> str | None:
+    """Debian's ``chromium`` if missing and apt-get can install it (as root); its path or None."""
+    found = find_chromium()
+    if found or os.geteuid() != 0 or not shutil.which("apt-get"):
+        return found
+    env = os.environ | {"DEBIAN_FRONTEND": "noninteractive"}
+    for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", "chromium"]):
+        if subprocess.run(cmd, env=env, capture_output=True, timeout=900).returncode != 0:
+            return None
+    return find_chromium()
+
+
+@contextlib.contextmanager
+def _browser(chromium: str, size: tuple[int, int]) -> Iterator[int]:
+    """A headless browser; yields its DevTools port."""
+    profile = tempfile.mkdtemp(prefix="zswarm-chromium-")
+    log = Path(profile) / "stderr.log"
+    with open(log, "wb") as err:
+        proc = subprocess.Popen([chromium, *FLAGS, f"--user-data-dir={profile}", f"--window-size={size[0]},{size[1]}", "about:blank"], stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        port = None
+        while port is None:
+            m = re.search(rb"DevTools listening on ws://127\.0\.0\.1:(\d+)/", log.read_bytes())
+            if m:
+                port = int(m.group(1))
+            elif proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"chromium did not start: {log.read_text(errors='replace')[-2000:]}")
+            else:
+                time.sleep(0.1)
+        yield port
+    finally:
+        # SIGTERM to the browser alone: it closes and reaps its own helper processes (killed
+        # together, they would be left to init as zombies); then the group, whatever is left.
+        with contextlib.suppress(ProcessLookupError):
+            proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            pass
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+class _Page:
+    def __init__(self, ws: Any) -> None:
+        self.ws = ws
+        self.ids = itertools.count(1)
+
+    def call(self, method: str, **params: Any) -> dict[str, Any]:
+        n = next(self.ids)
+        self.ws.send(json.dumps({"id": n, "method": method, "params": params}))
+        while True:
+            msg = json.loads(self.ws.recv(timeout=120))
+            if msg.get("id") == n:
+                if "error" in msg:
+                    raise RuntimeError(f"{method}: {msg['error']}")
+                return msg.get("result", {})
+
+    def evaluate(self, expr: str) -> Any:
+        r = self.call("Runtime.evaluate", expression=expr, returnByValue=True)
+        return r.get("result", {}).get("value")
+
+
+def screenshot(
+    url: str, ready: Callable[[bytes], bool], timeout: float = 180.0, settle: float = 3.0, size: tuple[int, int] = (1600, 1000)
+) -> tuple[bytes, str, float]:
+    """``(PNG, page title, seconds until ready)`` of ``url`` in headless Chromium: screenshots
+    every 2 s until ``ready(png)`` holds, then one more after ``settle`` s (the last frames).
+    Raises TimeoutError with the last screenshot's size if ``ready`` never holds."""
+    from urllib.request import urlopen
+
+    from websockets.sync.client import connect
+
+    chromium = find_chromium()
+    if chromium is None:
+        raise RuntimeError("no chromium on this machine")
+    with _browser(chromium, size) as port:
+        targets = json.loads(urlopen(f"http://127.0.0.1:{port}/json/list", timeout=30).read())
+        page_ws = next(t["webSocketDebuggerUrl"] for t in targets if t.get("type") == "page")
+        with connect(page_ws, max_size=64 << 20, open_timeout=30) as ws:
+            page = _Page(ws)
+            page.call("Page.enable")
+            t0 = time.monotonic()
+            page.call("Page.navigate", url=url)
+            while True:
+                time.sleep(2.0)
+                png = base64.b64decode(page.call("Page.captureScreenshot", format="png")["data"])
+                if ready(png):
+                    break
+                if time.monotonic() - t0 > timeout:
+                    raise TimeoutError(f"{url}: not drawn after {timeout:g} s (last screenshot {len(png)} bytes)")
+            took = time.monotonic() - t0
+            time.sleep(settle)
+            png = base64.b64decode(page.call("Page.captureScreenshot", format="png")["data"])
+            title = str(page.evaluate("document.title") or "")
+    return png, title, took
+
+
+def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float = 3.0, timeout: float = 180.0) -> tuple[bytes, str, float]:
+    """``zswarm view RUN_DIR --web`` on a free localhost port, its page in :func:`screenshot`
+    (Rerun's WebGL renderer); the server is stopped (its process group) however this ends."""
+    import socket
+    import sys
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = int(sock.getsockname()[1])
+    log = Path(tempfile.mkdtemp(prefix="zswarm-view-log-")) / "view.log"
+    env = os.environ | {"TELEMETRY_ENABLED": "false"}
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "zswarm", "view", str(run_dir), "--web", f"127.0.0.1:{port}"], stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        url = None
+        while url is None:
+            m = re.search(r"serving the web viewer: (\S+)", log.read_text(errors="replace"))
+            if m:
+                url = m.group(1)
+            elif proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"zswarm view --web did not serve: {log.read_text(errors='replace')[-2000:]}")
+            else:
+                time.sleep(0.1)
+        return screenshot(url + "&renderer=webgl", ready, timeout=timeout, settle=settle)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        shutil.rmtree(log.parent, ignore_errors=True)
+
+
+def body_pixels(png: bytes) -> tuple[float, float]:
+    """(share of the 3-D view's pixels in the true bodies' blue, std of the whole image): the
+    3-D view is the left half below the top bar (zswarm's blueprint, side panels collapsed)."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    left = img[60 : img.shape[0] * 3 // 4, : img.shape[1] // 2]
+    r, g, b = left[..., 0], left[..., 1], left[..., 2]
+    blue = (b > r + 60) & (b > g + 25) & (b > 80)
+    return float(blue.mean()), float(img.std())
