@@ -198,3 +198,35 @@ def body_pixels(png: bytes) -> tuple[float, float]:
     r, g, b = left[..., 0], left[..., 1], left[..., 2]
     blue = (b > r + 60) & (b > g + 25) & (b > 80)
     return float(blue.mean()), float(img.std())
+
+
+@contextlib.contextmanager
+def rerun_receiver(out: Path) -> Iterator[str]:
+    """The wheel's ``rerun`` program saving what it receives to ``out`` (``rerun --save``) on a
+    free localhost port; yields the URL to stream to; stopped (SIGTERM: it ends the file) and
+    reaped by PID at the end."""
+    import socket
+
+    from zswarm.rerun_view import viewer_program
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = int(sock.getsockname()[1])
+    log = out.with_suffix(".log")
+    with open(log, "wb") as err:
+        proc = subprocess.Popen([viewer_program(), "--save", str(out), "--bind", "127.0.0.1", "--port", str(port)], stdout=err, stderr=subprocess.STDOUT, env=os.environ | {"TELEMETRY_ENABLED": "false"})
+    try:
+        deadline = time.monotonic() + 60
+        while b"Listening for gRPC connections" not in log.read_bytes():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"rerun --save did not listen: {log.read_text(errors='replace')[-2000:]}")
+            time.sleep(0.1)
+        yield f"rerun+http://127.0.0.1:{port}/proxy"
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            proc.terminate()
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()

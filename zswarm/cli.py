@@ -38,6 +38,12 @@ def _common_run_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _rerun_arg(p: argparse.ArgumentParser, what: str) -> None:
+    """``--rerun [URL]``: stream to a Rerun viewer, at its default address without a value."""
+    url = procutil.RERUN_DEFAULT
+    p.add_argument("--rerun", nargs="?", const=url, default=None, metavar="URL", help=f"{what} (default {url}, where 'rerun' listens; needs zswarm[rerun])")
+
+
 def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
     """``--live [HOST:PORT]``: a Foxglove WebSocket server, on the default address without a value."""
     p.add_argument(
@@ -60,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     _live_arg(r, "serve the recording's channels on a Foxglove WebSocket server while the run goes on (open it in Foxglove or Lichtblick)")
+    _rerun_arg(r, "stream the run to a Rerun viewer while it goes on (the recorder does it, off the agents' loops)")
     r.add_argument(
         "--secure",
         nargs="?",
@@ -75,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--lean", action="store_true", help="leave sensor and edge messages out of the recording (a quarter of the size)")
     s.add_argument("--quiet", action="store_true", help="print nothing but errors")
     s.add_argument("--no-recording", action="store_true", help="write no recording.mcap (the report is made from memory; zswarm sweep uses this)")
+    _rerun_arg(s, "stream the run to a Rerun viewer as it is simulated")
 
     sw = sub.add_parser(
         "sweep",
@@ -200,6 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
     rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end (the recording stays as recording.raw.mcap, payloads as they came, until zswarm report transcodes it)")
     rec.add_argument("--live", type=procutil.host_port, default=None, metavar="HOST:PORT", help="also serve the channels on a Foxglove WebSocket server")
+    _rerun_arg(rec, "also stream the run to a Rerun viewer")
     procutil.add_run_args(rec)
     procutil.add_zenoh_args(rec)
 
@@ -314,7 +323,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     sc = procutil.load_args(args)
     procutil.warn_notes(sc)
     secure = None if args.secure is None else Path(args.secure) if args.secure else True
-    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure)
+    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure, rerun=args.rerun)
 
 
 def cmd_router(args: argparse.Namespace) -> int:

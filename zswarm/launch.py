@@ -335,6 +335,7 @@ def run(
     startup_timeout: float = 60.0,
     live: tuple[str, int] | None = None,
     secure: Path | bool | None = None,
+    rerun: str | None = None,
 ) -> int:
     """Run the scenario over real processes; return the exit code for the CLI."""
     duration = sc.duration if duration is None else duration
@@ -371,7 +372,7 @@ def run(
         router.open()
         alive, progress = router.alive, router.progress
         say(f"zswarm run: {sc.name}: router on {endpoint}, results in {out}")
-        live_args = [] if live is None else ["--live", f"{live[0]}:{live[1]}"]
+        live_args = ([] if live is None else ["--live", f"{live[0]}:{live[1]}"]) + ([] if rerun is None else ["--rerun", rerun])
         la.spawn("recorder", "recorder", 0, [py, "-m", "zswarm", "record", topology, "--out", str(out), "--no-report", *live_args, *common])
         if live is not None:
             say(f"zswarm run: live view on ws://{live[0]}:{live[1]} (Foxglove or Lichtblick: open connection, Foxglove WebSocket)")

@@ -303,6 +303,7 @@ def positive_int(s: str) -> int:
 
 
 LIVE_DEFAULT = "127.0.0.1:8765"
+RERUN_DEFAULT = "rerun+http://127.0.0.1:9876/proxy"  # where the rerun viewer program listens by default (zswarm --rerun)
 
 
 def host_port(s: str) -> tuple[str, int]:

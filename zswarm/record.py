@@ -480,9 +480,14 @@ class Recorder:
         live: tuple[str, int] | None = None,
         raw: bool = False,
         defer: int = 0,
+        rerun: str | None = None,
     ) -> None:
         """``raw``: write ``path`` as :class:`RawOut` (payloads as they came; a run's
         recorder, whose report transcodes it); otherwise JSON as it goes.
+
+        ``rerun``: also stream every message, as it is taken, to the Rerun viewer listening
+        at that URL (:class:`zswarm.rerun_view.RerunViewer`: decoded here, in the recorder,
+        off the agents' and the world's loops).
 
         ``defer`` (``zswarm sim``): keep up to that many messages in :attr:`messages` and
         write them to ``path`` at :meth:`close`, not as they come: the viewer file's JSON
@@ -508,6 +513,12 @@ class Recorder:
         self.stopped = threading.Event()
         self._closed = False
         self.out: ViewerOut | RawOut | None = None
+        self.rerun: Any = None
+        if rerun is not None:
+            from zswarm.rerun_view import RerunViewer
+
+            self.rerun = RerunViewer(scenario, recording_id=run)
+            self.rerun.connect(rerun)
         meta = dict(metadata or {})
         meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
         if raw and self.path is not None and live is None:
@@ -617,6 +628,9 @@ class Recorder:
             buf, self._buf = self._buf, []
             if self._closed:
                 return
+            if self.rerun is not None:
+                for stream, payload, t in buf:
+                    self.rerun.message(stream, payload, t)
             if self.out is None or self._defer:
                 self.messages.extend(buf)  # raw payloads (or events) as they came
                 self.count += len(buf)
@@ -668,6 +682,8 @@ class Recorder:
             if self._closed:
                 return
             self._closed = True
+            if self.rerun is not None:
+                self.rerun.finish(self.rerun.horizon)
             if self.out is not None:
                 if self._defer:
                     for stream, payload, t in self.messages:

@@ -49,6 +49,7 @@ def simulate(
     objects: bool = True,
     keep: list[tuple[str, bytes, int]] | None = None,
     times: dict[str, float] | None = None,
+    rerun: str | None = None,
 ) -> Path | list[tuple[str, bytes, int]]:
     """Run ``scenario`` for ``duration`` s of world time; return the recording path.
 
@@ -65,6 +66,7 @@ def simulate(
     them all to write the file after the run (up to DEFER_MESSAGES), so that the report
     need not read the file back; left empty otherwise.  ``times``: filled with the wall
     time of the run (``run_s``) and of writing the recording after it (``record_s``).
+    ``rerun``: stream the run to the Rerun viewer at that URL as it is simulated.
     """
     t_start = time.perf_counter()
     bus = MemoryBus(objects=objects)
@@ -79,6 +81,7 @@ def simulate(
         skip=LEAN_SKIP if lean else (),
         scenario=scenario,
         defer=DEFER_MESSAGES if record else 0,
+        rerun=rerun,
     )
     World, AgentNode = plugins.process_class("world"), plugins.process_class("agent")  # noqa: N806 - classes
     world = World(scenario, bus, run, seed, now=lambda: t_now[0])
@@ -202,7 +205,7 @@ def command(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     kept: list[tuple[str, bytes, int]] = []
     times: dict[str, float] = {}
-    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times)
+    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times, rerun=args.rerun)
     wall = time.perf_counter() - t0
     if tty and not args.quiet:
         print(file=sys.stderr)
