@@ -59,6 +59,23 @@ def install_chromium() -> str | None:
     return find_chromium()
 
 
+def reap(proc: subprocess.Popen[bytes], grace: float, group: bool = False) -> None:
+    """SIGTERM to ``proc``, ``grace`` s to exit, then SIGKILL (to its process group with
+    ``group``, whatever of it is left); reaped by PID."""
+    with contextlib.suppress(ProcessLookupError):
+        proc.terminate()
+    try:
+        proc.wait(grace)
+    except subprocess.TimeoutExpired:
+        pass
+    with contextlib.suppress(ProcessLookupError):
+        if group:
+            os.killpg(proc.pid, signal.SIGKILL)
+        elif proc.poll() is None:
+            proc.kill()
+    proc.wait()
+
+
 @contextlib.contextmanager
 def _browser(chromium: str, size: tuple[int, int]) -> Iterator[int]:
     """A headless browser; yields its DevTools port."""
@@ -81,15 +98,7 @@ def _browser(chromium: str, size: tuple[int, int]) -> Iterator[int]:
     finally:
         # SIGTERM to the browser alone: it closes and reaps its own helper processes (killed
         # together, they would be left to init as zombies); then the group, whatever is left.
-        with contextlib.suppress(ProcessLookupError):
-            proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            pass
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+        reap(proc, 10.0, group=True)
         shutil.rmtree(profile, ignore_errors=True)
 
 
@@ -174,14 +183,7 @@ def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float
                 time.sleep(0.1)
         return screenshot(url + "&renderer=webgl", ready, timeout=timeout, settle=settle)
     finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        reap(proc, 10.0, group=True)  # zswarm view stops its viewer program on SIGTERM; the group: whatever is left
         shutil.rmtree(log.parent, ignore_errors=True)
 
 
@@ -223,10 +225,4 @@ def rerun_receiver(out: Path) -> Iterator[str]:
             time.sleep(0.1)
         yield f"rerun+http://127.0.0.1:{port}/proxy"
     finally:
-        with contextlib.suppress(ProcessLookupError):
-            proc.terminate()
-        try:
-            proc.wait(30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        reap(proc, 30.0)  # SIGTERM: it ends the file

@@ -480,14 +480,14 @@ class Recorder:
         live: tuple[str, int] | None = None,
         raw: bool = False,
         defer: int = 0,
-        rerun: str | None = None,
+        rerun: Any = None,
     ) -> None:
         """``raw``: write ``path`` as :class:`RawOut` (payloads as they came; a run's
         recorder, whose report transcodes it); otherwise JSON as it goes.
 
-        ``rerun``: also stream every message, as it is taken, to the Rerun viewer listening
-        at that URL (:class:`zswarm.rerun_view.RerunViewer`: decoded here, in the recorder,
-        off the agents' and the world's loops).
+        ``rerun``: also hand every message, as it is taken, to this
+        :class:`zswarm.rerun_view.RerunViewer` (streaming to a viewer: decoded here, in the
+        recorder, off the agents' and the world's loops); finished at :meth:`close`.
 
         ``defer`` (``zswarm sim``): keep up to that many messages in :attr:`messages` and
         write them to ``path`` at :meth:`close`, not as they come: the viewer file's JSON
@@ -513,12 +513,7 @@ class Recorder:
         self.stopped = threading.Event()
         self._closed = False
         self.out: ViewerOut | RawOut | None = None
-        self.rerun: Any = None
-        if rerun is not None:
-            from zswarm.rerun_view import RerunViewer
-
-            self.rerun = RerunViewer(scenario, recording_id=run)
-            self.rerun.connect(rerun)
+        self.rerun = rerun
         meta = dict(metadata or {})
         meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
         if raw and self.path is not None and live is None:
@@ -729,6 +724,17 @@ def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:
         except Exception as exc:  # a truncated tail ends the stream
             if not _is_truncation(exc):
                 raise
+
+
+def recorded_run_id(path: Path) -> str | None:
+    """The run id the recording was made under (its ``ctl/start``), if any."""
+    for stream, payload, _t in read(path):
+        if stream == "ctl/start":
+            try:
+                return str(decode(payload, "start")["run"])
+            except wire.MessageError:
+                return None
+    return None
 
 
 def _is_truncation(exc: Exception) -> bool:

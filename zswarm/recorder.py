@@ -35,7 +35,9 @@ def command(args: argparse.Namespace) -> int:
         # Without a live view the recorder copies payloads as they come (recording.raw.mcap);
         # the report below (or zswarm report) transcodes them into recording.mcap.
         path = out / ("recording" + (RAW_SUFFIX if args.live is None else ".mcap"))
-        rec = Recorder(bus, run, path, metadata={"engine": "run", "scenario": sc.name, "run": run}, scenario=sc, live=args.live, raw=args.live is None, rerun=args.rerun)
+        if args.rerun is not None:
+            from zswarm import rerun_view
+        rec = Recorder(bus, run, path, metadata={"engine": "run", "scenario": sc.name, "run": run}, scenario=sc, live=args.live, raw=args.live is None, rerun=None if args.rerun is None else rerun_view.live(sc, run, args.rerun))
 
         def on_start(key: str, payload: bytes) -> None:
             if not start:

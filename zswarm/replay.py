@@ -24,21 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from zswarm import keys, procutil, wire
-from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, decode, read
+from zswarm.record import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, read, recorded_run_id
 from zswarm.scenario import Scenario
 
 log = logging.getLogger("zswarm.replay")
-
-
-def recorded_run_id(path: Path) -> str | None:
-    """The run id the recording was made under (its ``ctl/start``), if any."""
-    for stream, payload, _t in read(path):
-        if stream == "ctl/start":
-            try:
-                return str(decode(payload, "start")["run"])
-            except wire.MessageError:
-                return None
-    return None
 
 
 def _rerun_alive_key(key: str, run: str) -> str | None:
@@ -147,7 +136,7 @@ def command(args: argparse.Namespace) -> int:
     stop = procutil.stop_on_signals()
     run = None
     if zenoh_out:
-        run = keys.check_run_id(args.run_id or replay.recorded_run_id(rec_path) or "default")
+        run = keys.check_run_id(args.run_id or recorded_run_id(rec_path) or "default")
     bus = None
     try:
         if zenoh_out:

@@ -181,21 +181,27 @@ def blueprint(sc: Scenario | None, sync: bool) -> Any:
     a synchronization law, relative errors per edge for the §4 observers, else each agent's
     errors), the hybrid variables of a hybrid scheme, and tabs of commands (a plant driven by
     the agents), links and the text log (jumps, faults, processes)."""
+    import rerun as rr
     import rerun.blueprint as rrb
 
+    whole = rr.VisibleTimeRange("world_time", start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
+
+    def series(origin: str, name: str) -> Any:  # the whole run, not a window following the cursor
+        return rrb.TimeSeriesView(origin=origin, name=name, time_ranges=whole)
+
     if sync:
-        series = [rrb.TimeSeriesView(origin="sync/edge/attitude", name="|R̄_k|_I per edge (5.24)"), rrb.TimeSeriesView(origin="sync/omega", name="‖ω_i‖ (rad/s)")]
+        views = [series("sync/edge/attitude", "|R̄_k|_I per edge (5.24)"), series("sync/omega", "‖ω_i‖ (rad/s)")]
     elif sc is not None and sc.oriented:
-        series = [rrb.TimeSeriesView(origin="errors/edge/attitude", name="relative attitude error per edge"), rrb.TimeSeriesView(origin="errors/edge/position", name="relative position error per edge (m)")]
+        views = [series("errors/edge/attitude", "relative attitude error per edge"), series("errors/edge/position", "relative position error per edge (m)")]
     else:
-        series = [rrb.TimeSeriesView(origin="errors/attitude", name="attitude error |R̃_i|_I"), rrb.TimeSeriesView(origin="errors/position", name="position error (m)")]
+        views = [series("errors/attitude", "attitude error |R̃_i|_I"), series("errors/position", "position error (m)")]
     if sc is not None and getattr(sc.params, "Xi", ()):
-        series.append(rrb.TimeSeriesView(origin="hybrid", name="hybrid variables ξ_k, ζ_i"))
-    tab_views = [rrb.TimeSeriesView(origin="commands", name="commands")] if sc is not None and sc.plant != "prescribed" else []
-    tabs = rrb.Tabs(*tab_views, rrb.TimeSeriesView(origin="links", name="links"), rrb.TextLogView(origin="/", name="jumps, faults, processes"))
+        views.append(series("hybrid", "hybrid variables ξ_k, ζ_i"))
+    tab_views = [series("commands", "commands")] if sc is not None and sc.plant != "prescribed" else []
+    tabs = rrb.Tabs(*tab_views, series("links", "links"), rrb.TextLogView(origin="/", name="jumps, faults, processes"))
     title = "bodies: true (blue) and estimated (orange)" if not sync else "bodies (true attitudes)"
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Spatial3DView(origin="world", name=title), rrb.Vertical(*series, tabs), column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Spatial3DView(origin="world", name=title), rrb.Vertical(*views, tabs), column_shares=[3, 2]),
         rrb.TimePanel(timeline="world_time"),
         collapse_panels=True,
     )
@@ -267,16 +273,22 @@ class RerunViewer:
         self.rec.disconnect()
 
 
+def live(scenario: Scenario | None, run: str, url: str) -> RerunViewer:
+    """A viewer streaming to the Rerun program at ``url`` (``--rerun``), for a Recorder."""
+    viewer = RerunViewer(scenario, recording_id=run)
+    viewer.connect(url)
+    return viewer
+
+
 def view(run_dir: Path, save: Path) -> RerunViewer:
     """Every message of ``run_dir``'s recording into the Rerun file ``save``."""
     from zswarm import record
-    from zswarm.replay import recorded_run_id
     from zswarm.scenario import load
 
     mcap = record.ensure_recording(run_dir, None)
     sc_file = run_dir / "scenario.toml"
     sc = load(sc_file) if sc_file.exists() else None
-    viewer = RerunViewer(sc, recording_id=recorded_run_id(mcap), offline=True)
+    viewer = RerunViewer(sc, recording_id=record.recorded_run_id(mcap), offline=True)
     viewer.save(save)
     try:
         for stream, payload, t in record.read(mcap):
@@ -384,12 +396,7 @@ def _command(args: argparse.Namespace) -> int:
         host, port = _host_port(args.web)
         proc, url = serve_web(save, host, port)
         print(f"serving the web viewer: {url} (Ctrl-C stops it)", flush=True)
-        try:
-            return proc.wait()
-        except KeyboardInterrupt:
-            return 0
-        finally:
-            _stop(proc)
+        return _until_stopped(proc)
     finally:
         if tmp is not None:
             tmp.cleanup()
@@ -397,7 +404,11 @@ def _command(args: argparse.Namespace) -> int:
 
 def _open_native(rrd: Path) -> int:
     """The native viewer on ``rrd`` (needs a display); until it is closed."""
-    proc = _child([viewer_program(), str(rrd)])
+    return _until_stopped(_child([viewer_program(), str(rrd)]))
+
+
+def _until_stopped(proc: subprocess.Popen[bytes]) -> int:
+    """Wait for the viewer program; Ctrl-C (or SIGTERM) stops it: exit 0 either way."""
     try:
         return proc.wait()
     except KeyboardInterrupt:

@@ -72,6 +72,8 @@ def simulate(
     bus = MemoryBus(objects=objects)
     t_now = [0.0]
     rec_path = out_dir / "recording.mcap"
+    if rerun is not None:
+        from zswarm import rerun_view
     recorder = Recorder(
         bus,
         run,
@@ -81,7 +83,7 @@ def simulate(
         skip=LEAN_SKIP if lean else (),
         scenario=scenario,
         defer=DEFER_MESSAGES if record else 0,
-        rerun=rerun,
+        rerun=None if rerun is None else rerun_view.live(scenario, run, rerun),
     )
     World, AgentNode = plugins.process_class("world"), plugins.process_class("agent")  # noqa: N806 - classes
     world = World(scenario, bus, run, seed, now=lambda: t_now[0])

@@ -228,8 +228,6 @@ class Views:
             self._cmd(m, log_time)
 
     def _truth(self, m: Mapping[str, Any], log_time: int) -> None:
-        from foxglove.messages import FrameTransform, FrameTransforms
-
         t = m["t"]
         ids = m["ids"]
         col = {i: k for k, i in enumerate(ids)}
