@@ -22,13 +22,30 @@ SETTLE = 90.0  # s: SwiftShader draws the whole run's series on the CPU
 
 
 def main() -> int:
-    if browser.install_chromium() is None:
-        print("no chromium", file=sys.stderr)
+    path, why = browser.install_chromium()
+    if path is None:
+        print(why, file=sys.stderr)
         return 1
     for name, duration in RUNS:
         with tempfile.TemporaryDirectory() as d:
             run = Path(d) / "run"
-            subprocess.run([sys.executable, "-m", "zswarm", "sim", str(ROOT / "topologies" / f"{name}.toml"), "--duration", str(duration), "--out", str(run), "--no-plots", "--quiet"], check=True, cwd=ROOT)
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "zswarm",
+                    "sim",
+                    str(ROOT / "topologies" / f"{name}.toml"),
+                    "--duration",
+                    str(duration),
+                    "--out",
+                    str(run),
+                    "--no-plots",
+                    "--quiet",
+                ],
+                check=True,
+                cwd=ROOT,
+            )
             png, title, took = browser.view_screenshot(run, ready=lambda p: browser.body_pixels(p)[0] > 0.002, settle=SETTLE, timeout=600)
         out = ROOT / "docs" / "figures" / f"rerun-{name}.png"
         out.write_bytes(png)

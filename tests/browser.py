@@ -47,16 +47,28 @@ def find_chromium() -> str | None:
     return None
 
 
-def install_chromium() -> str | None:
-    """Debian's ``chromium`` if missing and apt-get can install it (as root); its path or None."""
+def install_chromium() -> tuple[str | None, str]:
+    """``(path, why not)``: Debian's ``chromium``, installed with apt-get first if missing (as
+    root; one installer at a time across processes, by a lock file); the path, or None and the
+    reason in one line."""
     found = find_chromium()
-    if found or os.geteuid() != 0 or not shutil.which("apt-get"):
-        return found
+    if found:
+        return found, ""
+    if os.geteuid() != 0 or not shutil.which("apt-get"):
+        return None, "no chromium, and apt-get cannot install it here (not root, or not Debian)"
+    import fcntl
+
     env = os.environ | {"DEBIAN_FRONTEND": "noninteractive"}
-    for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", "chromium"]):
-        if subprocess.run(cmd, env=env, capture_output=True, timeout=900).returncode != 0:
-            return None
-    return find_chromium()
+    with open(Path(tempfile.gettempdir()) / "zswarm-chromium-install.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # another test process may be installing it
+        if find_chromium():
+            return find_chromium(), ""
+        for cmd in (["apt-get", "update", "-qq"], ["apt-get", "install", "-y", "-qq", "-o", "DPkg::Lock::Timeout=600", "chromium"]):
+            r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=1200)
+            if r.returncode != 0:
+                return None, f"apt-get could not install chromium: {' '.join(cmd)}: {(r.stderr or r.stdout).strip().splitlines()[-1:]}"
+    found = find_chromium()
+    return found, "" if found else "apt-get installed chromium but no chromium program is on PATH"
 
 
 def reap(proc: subprocess.Popen[bytes], grace: float, group: bool = False) -> None:
@@ -82,7 +94,12 @@ def _browser(chromium: str, size: tuple[int, int]) -> Iterator[int]:
     profile = tempfile.mkdtemp(prefix="zswarm-chromium-")
     log = Path(profile) / "stderr.log"
     with open(log, "wb") as err:
-        proc = subprocess.Popen([chromium, *FLAGS, f"--user-data-dir={profile}", f"--window-size={size[0]},{size[1]}", "about:blank"], stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
+        proc = subprocess.Popen(
+            [chromium, *FLAGS, f"--user-data-dir={profile}", f"--window-size={size[0]},{size[1]}", "about:blank"],
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+            start_new_session=True,
+        )
     try:
         deadline = time.monotonic() + 60
         port = None
@@ -169,7 +186,13 @@ def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float
     log = Path(tempfile.mkdtemp(prefix="zswarm-view-log-")) / "view.log"
     env = os.environ | {"TELEMETRY_ENABLED": "false"}
     with open(log, "wb") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "zswarm", "view", str(run_dir), "--web", f"127.0.0.1:{port}"], stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "zswarm", "view", str(run_dir), "--web", f"127.0.0.1:{port}"],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+        )
     try:
         deadline = time.monotonic() + 120
         url = None
@@ -216,7 +239,12 @@ def rerun_receiver(out: Path) -> Iterator[str]:
         port = int(sock.getsockname()[1])
     log = out.with_suffix(".log")
     with open(log, "wb") as err:
-        proc = subprocess.Popen([viewer_program(), "--save", str(out), "--bind", "127.0.0.1", "--port", str(port)], stdout=err, stderr=subprocess.STDOUT, env=os.environ | {"TELEMETRY_ENABLED": "false"})
+        proc = subprocess.Popen(
+            [viewer_program(), "--save", str(out), "--bind", "127.0.0.1", "--port", str(port)],
+            stdout=err,
+            stderr=subprocess.STDOUT,
+            env=os.environ | {"TELEMETRY_ENABLED": "false"},
+        )
     try:
         deadline = time.monotonic() + 60
         while b"Listening for gRPC connections" not in log.read_bytes():

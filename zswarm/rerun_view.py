@@ -10,7 +10,9 @@ recording, on two timelines: ``world_time`` (the run's world seconds) and
     (true: blue, labelled i; estimate: translucent orange).
 ``world/edges``
     the graph's edges between the true positions (LineStrips3D).
-``errors/<quantity>/<i>``, ``errors/edge/<quantity>/<h>_<t>``, ``sync/edge/attitude/<h>_<t>``, ``sync/omega/<i>``, ``hybrid/xi/<k>``, ``hybrid/zeta/<i>``, ``links/<counter>/<j>_to_<i>``, ``commands/<component>/<i>``
+``errors/<quantity>/<i>``, ``errors/edge/<quantity>/<h>_<t>``, ``sync/edge/attitude/<h>_<t>``,
+``sync/omega/<i>``, ``hybrid/xi/<k>``, ``hybrid/zeta/<i>``, ``links/<counter>/<j>_to_<i>``,
+``commands/<component>/<i>``
     every number of the viewer's JSON records as a time series (Scalars),
     grouped by quantity (:func:`entity`): attitude and position errors,
     |R̄_k|_I and ‖ω_i‖, ξ_k and ζ_i, link counters, command components.
@@ -127,7 +129,9 @@ class RerunSink:
             self.bodies.add((i, est))
             frame = f"agent_{i}_est" if est else f"agent_{i}"
             length = size if not self.offsets else 1.0
-            box = rr.Boxes3D(half_sizes=[[length / 2, 0.3 * length, 0.15 * length]], colors=[_EST if est else _TRUE], labels=None if est else [str(i)], fill_mode="solid")
+            box = rr.Boxes3D(
+                half_sizes=[[length / 2, 0.3 * length, 0.15 * length]], colors=[_EST if est else _TRUE], labels=None if est else [str(i)], fill_mode="solid"
+            )
             self.rec.log(f"world/{frame}/body", box, static=True)
             if not est:
                 self.rec.log(f"world/{frame}", rr.TransformAxes3D(0.9 * length), static=True)

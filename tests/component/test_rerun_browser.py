@@ -19,15 +19,30 @@ import pytest
 from tests import browser
 from tests.conftest import ROOT, TOPO
 
-CHROMIUM = browser.install_chromium()
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium and apt-get could not install it (not root, or no Debian archive)")
+
+@pytest.fixture(scope="module")
+def chromium():
+    """Debian's chromium, installed if missing (tests/browser.py); the tests skip, saying why,
+    only where it cannot be."""
+    path, why = browser.install_chromium()
+    if path is None:
+        pytest.skip(why)
+    return path
+
+
 BLUE = 0.002  # share of the 3-D view: measured 0.008 (§3.2, eight small bodies) to 0.09 (§5.6) once drawn, 0 before
 
 
 @pytest.mark.parametrize("name, duration", [("thesis-3.2-fixed8", 6.0), ("thesis-5.6-hybrid7", 6.0)])
-def test_the_web_viewer_shows_the_run(name, duration, tmp_path):
+def test_the_web_viewer_shows_the_run(name, duration, tmp_path, chromium):
     run = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "zswarm", "sim", str(TOPO / f"{name}.toml"), "--duration", str(duration), "--out", str(run), "--no-plots", "--quiet"], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "zswarm", "sim", str(TOPO / f"{name}.toml"), "--duration", str(duration), "--out", str(run), "--no-plots", "--quiet"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr
     png, title, took = browser.view_screenshot(run, ready=lambda p: browser.body_pixels(p)[0] > BLUE)
     blue, std = browser.body_pixels(png)

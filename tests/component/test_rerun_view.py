@@ -71,14 +71,18 @@ def test_fault_windows_and_the_cli(tmp_path):
         capture_output=True, text=True, cwd=ROOT, timeout=300,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
-    r = subprocess.run([sys.executable, "-m", "zswarm", "view", str(run), "--save", str(tmp_path / "f.rrd")], capture_output=True, text=True, env=ENV, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "zswarm", "view", str(run), "--save", str(tmp_path / "f.rrd")], capture_output=True, text=True, env=ENV, timeout=300
+    )
     assert r.returncode == 0, r.stderr
     assert "messages" in r.stdout and "malformed" not in r.stdout
     got = entities(tmp_path / "f.rrd")
     assert {"/faults", "/faults/0/active", "/links/dropped/1_to_3"} <= got, sorted(got)
     empty = tmp_path / "empty"
     empty.mkdir()
-    r = subprocess.run([sys.executable, "-m", "zswarm", "view", str(empty), "--save", str(tmp_path / "g.rrd")], capture_output=True, text=True, env=ENV, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "zswarm", "view", str(empty), "--save", str(tmp_path / "g.rrd")], capture_output=True, text=True, env=ENV, timeout=120
+    )
     assert r.returncode == 2 and "no recording there" in r.stderr, (r.stdout, r.stderr)
     assert not (tmp_path / "g.rrd").exists() and not list(empty.iterdir())
 
@@ -88,7 +92,28 @@ def test_sim_streams_live_to_a_rerun_viewer(tmp_path):
     (here ``rerun --save``, which writes what it receives), with the entities of the view."""
     sc = load(TOPO / "thesis-5.6-hybrid7.toml")
     with browser.rerun_receiver(tmp_path / "live.rrd") as url:
-        r = subprocess.run([sys.executable, "-m", "zswarm", "sim", str(TOPO / "thesis-5.6-hybrid7.toml"), "--duration", "2", "--out", str(tmp_path / "run"), "--no-plots", "--quiet", "--rerun", url], capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=300)
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "zswarm",
+                "sim",
+                str(TOPO / "thesis-5.6-hybrid7.toml"),
+                "--duration",
+                "2",
+                "--out",
+                str(tmp_path / "run"),
+                "--no-plots",
+                "--quiet",
+                "--rerun",
+                url,
+            ],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            env=ENV,
+            timeout=300,
+        )
         assert r.returncode == 0, r.stderr
     got = entities(tmp_path / "live.rrd")
     want = {f"/world/agent_{i}" for i in sc.ids} | {f"/sync/edge/attitude/{h}_{t}" for h, t in sc.oriented} | {"/hybrid/jumps", "/world/edges"}

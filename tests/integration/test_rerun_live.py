@@ -22,12 +22,16 @@ def test_run_streams_live_to_a_rerun_viewer(procs, tmp_path):
     sc = load(TOPO / "thesis-5.6-hybrid7.toml")
     out = tmp_path / "run"
     with browser.rerun_receiver(tmp_path / "live.rrd") as url:
-        p = procs.start(zswarm("run", str(TOPO / "thesis-5.6-hybrid7.toml"), "--duration", "5", "--out", str(out), "--quiet", "--rerun", url), log=tmp_path / "launcher.log")
+        p = procs.start(
+            zswarm("run", str(TOPO / "thesis-5.6-hybrid7.toml"), "--duration", "5", "--out", str(out), "--quiet", "--rerun", url), log=tmp_path / "launcher.log"
+        )
         code = p.wait(5 * 3 + 90)
         procs.adopt(out)
         assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert s["completed"]
     got = entities(tmp_path / "live.rrd")
-    want = {f"/world/agent_{i}" for i in sc.ids} | {f"/sync/edge/attitude/{h}_{t}" for h, t in sc.oriented} | {"/hybrid/jumps", f"/commands/tau_norm/{sc.ids[0]}"}
+    want = (
+        {f"/world/agent_{i}" for i in sc.ids} | {f"/sync/edge/attitude/{h}_{t}" for h, t in sc.oriented} | {"/hybrid/jumps", f"/commands/tau_norm/{sc.ids[0]}"}
+    )
     assert not want - got, sorted(want - got)
