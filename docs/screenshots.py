@@ -2,7 +2,7 @@
 ``zswarm sim`` of a scenario, ``zswarm view --web``, headless Chromium, a screenshot once the
 bodies are drawn and the run's data has loaded (SETTLE s more).
 
-    .venv/bin/python docs/screenshots.py            # writes docs/figures/rerun-*.png
+    .venv/bin/python docs/screenshots.py [NAME ...]   # writes docs/figures/rerun-*.png
 """
 
 from __future__ import annotations
@@ -26,7 +26,10 @@ def main() -> int:
     if path is None:
         print(why, file=sys.stderr)
         return 1
+    only = set(sys.argv[1:])  # scenario names to redo (default: all)
     for name, duration in RUNS:
+        if only and name not in only:
+            continue
         with tempfile.TemporaryDirectory() as d:
             run = Path(d) / "run"
             subprocess.run(

@@ -189,9 +189,10 @@ def blueprint(sc: Scenario | None, sync: bool) -> Any:
     import rerun.blueprint as rrb
 
     whole = rr.VisibleTimeRange("world_time", start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
+    from_zero = rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.absolute(seconds=0.0), end=rr.TimeRangeBoundary.infinite()))
 
-    def series(origin: str, name: str) -> Any:  # the whole run, not a window following the cursor
-        return rrb.TimeSeriesView(origin=origin, name=name, time_ranges=whole)
+    def series(origin: str, name: str) -> Any:  # the whole run on the x axis, not a window around the cursor
+        return rrb.TimeSeriesView(origin=origin, name=name, time_ranges=whole, axis_x=from_zero)
 
     if sync:
         views = [series("sync/edge/attitude", "|R̄_k|_I per edge (5.24)"), series("sync/omega", "‖ω_i‖ (rad/s)")]
