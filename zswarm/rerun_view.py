@@ -377,6 +377,9 @@ def _command(args: argparse.Namespace) -> int:
     if not run_dir.is_dir():
         print(f"zswarm view: {run_dir}: not a results folder", file=sys.stderr)
         return 2
+    if args.save is None and args.web is None and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        print("zswarm view: no display to open Rerun's viewer on: use --web [HOST:PORT] (and open the address it prints) or --save FILE.rrd", file=sys.stderr)
+        return 2
     from zswarm.record import RAW_SUFFIX, RecordingError
 
     if not (run_dir / "recording.mcap").exists() and not (run_dir / ("recording" + RAW_SUFFIX)).exists():

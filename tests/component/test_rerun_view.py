@@ -85,6 +85,9 @@ def test_fault_windows_and_the_cli(tmp_path):
     )
     assert r.returncode == 2 and "no recording there" in r.stderr, (r.stdout, r.stderr)
     assert not (tmp_path / "g.rrd").exists() and not list(empty.iterdir())
+    headless = {k: v for k, v in ENV.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    r = subprocess.run([sys.executable, "-m", "zswarm", "view", str(run)], capture_output=True, text=True, env=headless, timeout=120)
+    assert r.returncode == 2 and "no display" in r.stderr and "--web" in r.stderr, (r.stdout, r.stderr)
 
 
 def test_sim_streams_live_to_a_rerun_viewer(tmp_path):
