@@ -71,6 +71,27 @@ def install_chromium() -> tuple[str | None, str]:
     return found, "" if found else "apt-get installed chromium but no chromium program is on PATH"
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def _started(proc: subprocess.Popen[bytes], log: Path, pattern: bytes, timeout: float, what: str) -> re.Match[bytes]:
+    """Wait for ``pattern`` in the child's ``log``: the match, or RuntimeError with the log's tail
+    if the child exits or ``timeout`` s pass first."""
+    deadline = time.monotonic() + timeout
+    while True:
+        m = re.search(pattern, log.read_bytes())
+        if m:
+            return m
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"{what} did not start: {log.read_text(errors='replace')[-2000:]}")
+        time.sleep(0.1)
+
+
 def reap(proc: subprocess.Popen[bytes], grace: float, group: bool = False) -> None:
     """SIGTERM to ``proc``, ``grace`` s to exit, then SIGKILL (to its process group with
     ``group``, whatever of it is left); reaped by PID."""
@@ -101,16 +122,7 @@ def _browser(chromium: str, size: tuple[int, int]) -> Iterator[int]:
             start_new_session=True,
         )
     try:
-        deadline = time.monotonic() + 60
-        port = None
-        while port is None:
-            m = re.search(rb"DevTools listening on ws://127\.0\.0\.1:(\d+)/", log.read_bytes())
-            if m:
-                port = int(m.group(1))
-            elif proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"chromium did not start: {log.read_text(errors='replace')[-2000:]}")
-            else:
-                time.sleep(0.1)
+        port = int(_started(proc, log, rb"DevTools listening on ws://127\.0\.0\.1:(\d+)/", 60, "chromium").group(1))
         yield port
     finally:
         # SIGTERM to the browser alone: it closes and reaps its own helper processes (killed
@@ -177,12 +189,9 @@ def screenshot(
 def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float = 3.0, timeout: float = 180.0) -> tuple[bytes, str, float]:
     """``zswarm view RUN_DIR --web`` on a free localhost port, its page in :func:`screenshot`
     (Rerun's WebGL renderer); the server is stopped (its process group) however this ends."""
-    import socket
     import sys
 
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = int(sock.getsockname()[1])
+    port = _free_port()
     log = Path(tempfile.mkdtemp(prefix="zswarm-view-log-")) / "view.log"
     env = os.environ | {"TELEMETRY_ENABLED": "false"}
     with open(log, "wb") as out:
@@ -194,16 +203,7 @@ def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float
             start_new_session=True,
         )
     try:
-        deadline = time.monotonic() + 120
-        url = None
-        while url is None:
-            m = re.search(r"serving the web viewer: (\S+)", log.read_text(errors="replace"))
-            if m:
-                url = m.group(1)
-            elif proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"zswarm view --web did not serve: {log.read_text(errors='replace')[-2000:]}")
-            else:
-                time.sleep(0.1)
+        url = _started(proc, log, rb"serving the web viewer: (\S+)", 120, "zswarm view --web").group(1).decode()
         return screenshot(url + "&renderer=webgl", ready, timeout=timeout, settle=settle)
     finally:
         reap(proc, 10.0, group=True)  # zswarm view stops its viewer program on SIGTERM; the group: whatever is left
@@ -230,13 +230,9 @@ def rerun_receiver(out: Path) -> Iterator[str]:
     """The wheel's ``rerun`` program saving what it receives to ``out`` (``rerun --save``) on a
     free localhost port; yields the URL to stream to; stopped (SIGTERM: it ends the file) and
     reaped by PID at the end."""
-    import socket
-
     from zswarm.rerun_view import viewer_program
 
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = int(sock.getsockname()[1])
+    port = _free_port()
     log = out.with_suffix(".log")
     with open(log, "wb") as err:
         proc = subprocess.Popen(
@@ -246,11 +242,7 @@ def rerun_receiver(out: Path) -> Iterator[str]:
             env=os.environ | {"TELEMETRY_ENABLED": "false"},
         )
     try:
-        deadline = time.monotonic() + 60
-        while b"Listening for gRPC connections" not in log.read_bytes():
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"rerun --save did not listen: {log.read_text(errors='replace')[-2000:]}")
-            time.sleep(0.1)
+        _started(proc, log, rb"Listening for gRPC connections", 60, "rerun --save")
         yield f"rerun+http://127.0.0.1:{port}/proxy"
     finally:
         reap(proc, 30.0)  # SIGTERM: it ends the file
