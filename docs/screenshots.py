@@ -49,7 +49,7 @@ def main() -> int:
                 check=True,
                 cwd=ROOT,
             )
-            png, title, took = browser.view_screenshot(run, ready=lambda p: browser.body_pixels(p)[0] > 0.002, settle=SETTLE, timeout=600)
+            png, title, took = browser.view_screenshot(run, ready=lambda p: browser.body_pixels(p)[0] > browser.BODIES_DRAWN, settle=SETTLE, timeout=600)
         out = ROOT / "docs" / "figures" / f"rerun-{name}.png"
         out.write_bytes(png)
         print(f"{out.relative_to(ROOT)}: {title}, drawn after {took:.1f} s, then {SETTLE:g} s")

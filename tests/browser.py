@@ -210,6 +210,13 @@ def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float
         shutil.rmtree(log.parent, ignore_errors=True)
 
 
+# The share of the 3-D view (the left half of a 1600x1000 page below its top bar, ~5.5e5
+# pixels) in the bodies' blue that says they are drawn: 0.002 is ~1100 pixels, one §3.2 body
+# seen whole; measured 0.0 before the data arrives, 0.007 (§3.2's eight small bodies) to 0.09
+# (§5.6's seven) once drawn.
+BODIES_DRAWN = 0.002
+
+
 def body_pixels(png: bytes) -> tuple[float, float]:
     """(share of the 3-D view's pixels in the true bodies' blue, std of the whole image): the
     3-D view is the left half below the top bar (zswarm's blueprint, side panels collapsed)."""
