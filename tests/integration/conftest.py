@@ -95,6 +95,32 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+COMPOSE_MODULE = "test_compose.py"
+COMPOSE_IMAGE_TEST = "test_compose_run_converges_in_a_real_engine"
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The compose tests run last: the base root of their image is built while the other
+    tests run (tests/integration/dockerbase.py)."""
+    items.sort(key=lambda item: item.path.name == COMPOSE_MODULE)  # stable: the order otherwise kept
+
+
+@pytest.fixture(scope="session", autouse=True)
+def base_rootfs(request, tmp_path_factory, no_process_left):
+    """The base image's root (dockerbase.Rootfs), started at the session's start when the
+    compose image test is to run and no base image exists; None otherwise.  Stopped (its
+    processes reaped) before ``no_process_left`` looks."""
+    from tests.integration import dockerbase
+
+    wanted = any(item.name == COMPOSE_IMAGE_TEST for item in request.session.items)
+    build = dockerbase.Rootfs(tmp_path_factory.mktemp("rootfs")) if wanted and not dockerbase.image_exists(dockerbase.BASE_IMAGE) else None
+    try:
+        yield build
+    finally:
+        if build is not None:
+            build.stop()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def no_process_left():
     """After the integration layer, no process this test session started is left (the
@@ -250,3 +276,67 @@ def assert_run_matches_sim(s: dict, ss: dict, keys: tuple[str, ...], launcher_lo
         assert a is not None and b is not None and np.isfinite(a) and np.isfinite(b), (k, a, b)
         # 1e-12: both at rounding level (a leader-like zero), where a ratio means nothing.
         assert max(a, b) < 1e-12 or max(a, b) / max(min(a, b), 1e-300) <= SIM_RUN_TOL, (k, a, b, ov)
+
+
+# A run's ``sim`` reference, computed while the run runs.  The real-time run leaves most of
+# the machine idle (a §5.6 run at time scale 1 uses 0.8-1.0 of the two cores, the §3 runs
+# less), and its reference sim is CPU-bound work of 7-37 s (measured quietly, 2026-12-04:
+# §5.6 hybrid 150 s 37 s, §4.5 hybrid pose 60 s 25 s, §3.2 40 s 9 s, §3.3 30 s 7.5 s).
+# The reference process runs at SCHED_IDLE: the scheduler gives it only CPU that no other
+# process asks for, and a waking process of the run preempts it at once, so the run keeps
+# the machine it had (the run's own overload figures stay the judge of that).  When the run
+# is over, the reference is raised back to the normal policy and the test waits for it.
+SIM_REFERENCE_TIMEOUT_S = 900.0  # 37 s quietly for the longest; ×20 for a loaded machine
+
+
+class SimReference:
+    """``zswarm sim`` of a scenario (with ``--set`` overrides) and its report, in a process
+    of its own at SCHED_IDLE (tests/integration/simref.py); :meth:`summary` waits for the
+    report's summary (its files are in ``out``)."""
+
+    def __init__(self, topo: Path, out: Path, duration: float | None = None, sets: tuple[str, ...] = (), lean: bool = False, record: bool = False) -> None:
+        self.out = out
+        args = {"topo": str(topo), "sets": list(sets), "duration": duration, "out": str(out), "lean": lean, "record": record}
+        self.log = out.parent / f"{out.name}-reference.log"
+        with open(self.log, "wb") as log:
+            self.proc = subprocess.Popen([sys.executable, "-m", "tests.integration.simref", json.dumps(args)], cwd=ROOT, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            os.sched_setscheduler(self.proc.pid, os.SCHED_IDLE, os.sched_param(0))
+        except OSError:
+            pass  # exited already: summary() says how
+
+    def summary(self) -> dict:
+        try:  # the run is over: the reference may now have the CPU the others have
+            os.sched_setscheduler(self.proc.pid, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass  # it has exited already
+        try:
+            code = self.proc.wait(SIM_REFERENCE_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"the sim reference did not finish in {SIM_REFERENCE_TIMEOUT_S:g} s") from None
+        assert code == 0, f"the sim reference exited {code}:\n{self.log.read_text(errors='replace')[-3000:]}"
+        return json.loads((self.out / "reference.json").read_text())
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        self.proc.wait(30)
+
+
+@pytest.fixture
+def sim_reference():
+    """Start :class:`SimReference` s; every one still running is killed (by PID) at the end."""
+    made: list[SimReference] = []
+
+    def start(*args, **kw) -> SimReference:
+        made.append(SimReference(*args, **kw))
+        return made[-1]
+
+    try:
+        yield start
+    finally:
+        for r in made:
+            r.kill()

@@ -28,34 +28,16 @@ import time
 import pytest
 
 from tests.conftest import ROOT, TOPO
+from tests.integration.dockerbase import BASE_IMAGE, Rootfs
+from tests.integration.dockerbase import apt_install as _apt_install
+from tests.integration.dockerbase import image_exists as _image_exists
+from tests.integration.dockerbase import run as _run
 from zswarm import compose
 from zswarm.scenario import load
 
 pytestmark = pytest.mark.integration
 
-BASE_IMAGE = "zswarm-base:bookworm"
 APT_PACKAGES = ("docker.io", "docker-compose")
-
-
-def _run(cmd: list[str], timeout: float, **kw) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL, **kw)
-
-
-def _last_line(r: subprocess.CompletedProcess[str]) -> str:
-    lines = (r.stderr or r.stdout or "").strip().splitlines()
-    return lines[-1] if lines else f"exit {r.returncode}"
-
-
-def _apt_install(*pkgs: str) -> str | None:
-    """Install Debian packages; None, or why it could not."""
-    if os.geteuid() != 0 or not shutil.which("apt-get"):
-        return "not root with apt-get"
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    r = _run(["apt-get", "install", "-y", "-q", *pkgs], 900, env=env)
-    if r.returncode != 0:  # a fresh machine may need the package lists first
-        _run(["apt-get", "update", "-q"], 600, env=env)
-        r = _run(["apt-get", "install", "-y", "-q", *pkgs], 900, env=env)
-    return None if r.returncode == 0 else f"apt-get install {' '.join(pkgs)}: {_last_line(r)}"
 
 
 @pytest.fixture(scope="module")
@@ -103,22 +85,22 @@ def _stop(p: subprocess.Popen) -> None:
         p.wait(10)
 
 
-def _image_exists(name: str) -> bool:
-    return _run(["docker", "image", "inspect", name], 30).returncode == 0
-
-
 @pytest.fixture(scope="module")
-def image(engine, tmp_path_factory):
-    """The zswarm image on a locally built base, removed at the end with what it made."""
+def image(engine, base_rootfs, tmp_path_factory):
+    """The zswarm image on a locally built base, removed at the end with what it made.  The
+    base's root was started with the session (conftest.base_rootfs) where it was missing then."""
     made: list[str] = []
     t0 = time.monotonic()
     try:
         if not _image_exists(BASE_IMAGE):
-            if not shutil.which("debootstrap") and _apt_install("debootstrap"):
-                pytest.skip("no base image and no debootstrap to build one")
-            root = tmp_path_factory.mktemp("rootfs") / "root"
-            r = _run(["debootstrap", "--variant=minbase", "--include=python3,python3-venv", "bookworm", str(root), "http://deb.debian.org/debian"], 900)
-            assert r.returncode == 0, f"debootstrap: {_last_line(r)}"
+            build = base_rootfs or Rootfs(tmp_path_factory.mktemp("rootfs"))
+            try:
+                root = build.wait()
+            except Rootfs.Unavailable as e:
+                pytest.skip(f"no base image, and {e}")
+            finally:
+                build.stop()
+            print(f"\nbase root: debootstrap took {build.seconds:.0f} s (at idle priority, from the session's start)", file=sys.stderr)
             tar = subprocess.Popen(["tar", "-C", str(root), "-c", "."], stdout=subprocess.PIPE)
             r = subprocess.run(["docker", "import", "-", BASE_IMAGE], stdin=tar.stdout, capture_output=True, text=True, timeout=600)
             tar.wait(60)

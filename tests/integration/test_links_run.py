@@ -29,9 +29,6 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import not_alive, stop_tail, zswarm
-from zswarm.report import make_report
-from zswarm.scenario import load, parse_override
-from zswarm.sim import simulate
 
 pytestmark = pytest.mark.integration
 
@@ -68,19 +65,16 @@ def test_drop_ratio_and_delay_on_every_link(procs, tmp_path):
         assert c["applied_delay_p50_ms"] == pytest.approx(50.0, abs=1e-6)
 
 
-def test_sim_and_run_agree_on_convergence_time_with_lossy_delayed_links(procs, tmp_path):
+def test_sim_and_run_agree_on_convergence_time_with_lossy_delayed_links(procs, sim_reference, tmp_path):
     sets = ["links.delay_ms=50", "links.drop=0.2"]
     # At time scale 1 (the links' 50 ms are in world time at any scale).  Beside
     # `stress-ng --cpu 1` the world skipped 1.5-1.6 % of its samples here (2026-12-03) while
     # it skipped every sample it woke a period late; it now takes them late, up to 0.1 s
     # (test_run.py).  Before issue 28 a busy machine made the agents miss up to 23 % of their
     # ticks at 1 (attitude 24.9 s against sim's 11.2 s).
+    ref = sim_reference(FIXED8, tmp_path / "sim", sets=tuple(sets), lean=True)  # computed while the run runs
     _, s = run(procs, tmp_path, sets, 40.0)
-    sc = load(FIXED8, [parse_override(x) for x in sets])
-    sim_out = tmp_path / "sim"
-    sim_out.mkdir()
-    msgs = simulate(sc, sim_out, sc.duration, sc.seed, lean=True, record=False)  # in memory: the report needs no file
-    ss = make_report(sim_out, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs)
+    ss = ref.summary()
     for key in ("attitude_s", "position_s"):
         tr, ts = s["convergence"][key], ss["convergence"][key]
         assert tr is not None and ts is not None, (s["convergence"], ss["convergence"])

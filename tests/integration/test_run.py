@@ -27,13 +27,14 @@ def run_and_load(procs, tmp_path, name, duration, extra=()):
 
 
 @pytest.mark.parametrize("name", ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered"])
-def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
+def test_run_converges_and_agrees_with_sim(procs, sim_reference, tmp_path, name):
     # Time scale 1.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's cheaper ticks)
     # the agents keep up (≤ 0.1 % missed ticks).  The world, which skipped a sample whenever
     # it woke more than one 5 ms period late, dropped 0.4-3.9 % of them in four runs (3.9 %
     # is over the report's 2 %, and an overloaded run is not compared with sim below); since
     # it takes samples late (world/__main__.py: CATCH_UP_S), 0.05 %.
     # Before issue 28 the agents missed 26-33 % of their ticks at 1 with a core kept busy.
+    ref = sim_reference(TOPO / f"{name}.toml", tmp_path / "sim", 40.0)  # computed while the run runs
     code, out = run_and_load(procs, tmp_path, name, 40.0, ("--time-scale", "1"))
     assert code == 0, (tmp_path / "launcher.log").read_text()
     s = json.loads((out / "summary.json").read_text())
@@ -75,15 +76,7 @@ def test_run_converges_and_agrees_with_sim(procs, tmp_path, name):
     assert {"truth", "est/3", "sense/3", "edge/1/3", "stats/agent/3", "ctl/start", "ctl/stop", "events/alive"} <= topics
 
     # sim on the same scenario and seed: final errors within SIM_RUN_TOL, unless the run says it was overloaded.
-    sim_out = tmp_path / "sim"
-    from zswarm.report import make_report
-    from zswarm.scenario import load
-    from zswarm.sim import simulate
-
-    sc = load(TOPO / f"{name}.toml")
-    sim_out.mkdir()
-    msgs = simulate(sc, sim_out, 40.0, sc.seed, record=False)  # in memory: the report needs no file
-    ss = make_report(sim_out, sc, "sim", 40.0, 0.0, sc.seed, plots=False, messages=msgs)
+    ss = ref.summary()
     assert_run_matches_sim(s, ss, ("mean_attitude_error_final", "mean_position_error_final"), tmp_path / "launcher.log")
 
 

@@ -32,18 +32,15 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import not_alive, zswarm
-from zswarm.report import make_report
-from zswarm.scenario import load
-from zswarm.sim import simulate
 
 pytestmark = pytest.mark.integration
 NAME = "decarli-8-formation"
 DURATION, SCALE = 8.0, 0.25
 
 
-def test_decarli_over_zenoh_matches_sim(procs, tmp_path):
-    sc = load(TOPO / f"{NAME}.toml")
+def test_decarli_over_zenoh_matches_sim(procs, sim_reference, tmp_path):
     out = tmp_path / "run"
+    ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", DURATION, lean=True)  # computed while the run runs
     p = procs.start(
         zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--duration", str(DURATION), "--time-scale", str(SCALE), "--quiet"),
         log=tmp_path / "launcher.log",
@@ -54,10 +51,7 @@ def test_decarli_over_zenoh_matches_sim(procs, tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["completed"]
     assert not (why := not_alive(out, s)), why
-    sim_out = tmp_path / "sim"
-    sim_out.mkdir()
-    msgs = simulate(sc, sim_out, DURATION, sc.seed, lean=True, record=False)  # in memory: the report needs no file
-    ss = make_report(sim_out, sc, "sim", DURATION, 0.0, sc.seed, plots=False, messages=msgs)
+    ss = ref.summary()
 
     for a in s["agents"].values():
         for name, want in (("relative", 200.0), ("yaw", 100.0), ("position", 50.0), ("control", 200.0)):

@@ -25,9 +25,7 @@ from tests.conftest import TOPO
 from tests.integration.conftest import not_alive, stop_tail, wait_for, zswarm
 from zswarm import keys, wire
 from zswarm.bus import ZenohBus, zenoh_config
-from zswarm.report import make_report
 from zswarm.scenario import load
-from zswarm.sim import simulate
 
 pytestmark = pytest.mark.integration
 NAME = "thesis-5.6-hybrid7"
@@ -46,9 +44,10 @@ def _bad_commands(run: str) -> list[tuple[str, bytes]]:
     ]
 
 
-def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_path):
+def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_reference, tmp_path):
     sc = load(TOPO / f"{NAME}.toml")
     out = tmp_path / "run"
+    ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", lean=True)  # computed while the run runs
     # At time scale 1 (150 world s in 150 s of wall time): seven agents at 100 Hz and the
     # rigid-body world at 1 kHz use 0.8-1.0 of this machine's two cores (2026-12-03, summary
     # "cpu": agents 6-8 % of a core each, world 16 %, router 10 %, recorder 8 %).  Beside
@@ -92,10 +91,7 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, tmp_pat
     if not ov["overloaded"]:  # a run that kept up: no command outlived its max_age at the world
         assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values()), s["commands"]
 
-    sim_out = tmp_path / "sim"
-    sim_out.mkdir()
-    msgs = simulate(sc, sim_out, sc.duration, sc.seed, lean=True, record=False)  # in memory: the report needs no file
-    ss = make_report(sim_out, sc, "sim", sc.duration, 0.0, sc.seed, plots=False, messages=msgs)
+    ss = ref.summary()
     sy, sy_sim = s["synchronization"], ss["synchronization"]
     # Every ξ_k jumps 0 -> 0.9π at the start (the first steps after the epoch), finitely often after.
     for e in s["edges"].values():

@@ -23,16 +23,16 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import assert_run_matches_sim, not_alive, zswarm
-from zswarm.report import make_report
 from zswarm.scenario import load
-from zswarm.sim import simulate
 
 pytestmark = pytest.mark.integration
 
 
-def run(procs, tmp_path, name, time_scale=1.0):
+def run(procs, sim_reference, tmp_path, name, time_scale=1.0):
     sc = load(TOPO / f"{name}.toml")
     out = tmp_path / "run"
+    sim_out = tmp_path / "sim"
+    ref = sim_reference(TOPO / f"{name}.toml", sim_out, record=True)  # computed while the run runs; its files are read below
     p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), "--out", str(out), "--time-scale", f"{time_scale:g}", "--quiet"), log=tmp_path / "launcher.log")
     code = p.wait(sc.duration / time_scale * 3 + 90)
     procs.adopt(out)
@@ -41,10 +41,7 @@ def run(procs, tmp_path, name, time_scale=1.0):
     assert s["completed"]
     assert not (why := not_alive(out, s)), why
     assert all(c["dropped"] == 0 for c in s["links"].values()), s["links"]
-    sim_out = tmp_path / "sim"
-    sim_out.mkdir()
-    simulate(sc, sim_out, sc.duration, sc.seed)
-    ss = make_report(sim_out, sc, "sim", sc.duration, 0.0, sc.seed, plots=False)
+    ss = ref.summary()
     return sc, out, s, sim_out, ss
 
 
@@ -70,8 +67,8 @@ def edge_series(path, col):
     return {k: np.array(v) for k, v in out.items()}
 
 
-def test_moving5_run(procs, tmp_path):
-    sc, out, s, sim_out, ss = run(procs, tmp_path, "thesis-3.3-moving5")
+def test_moving5_run(procs, sim_reference, tmp_path):
+    sc, out, s, sim_out, ss = run(procs, sim_reference, tmp_path, "thesis-3.3-moving5")
     t, att, pos = follower_means(out)
     assert np.max(att[t >= 5.0]) < 1e-2  # attitude < 1e-2 by 5 s
     assert pos[t >= 29.9][0] < 0.1 and s["mean_position_error_final"] < 0.1  # position < 0.1 by 30 s
@@ -83,13 +80,13 @@ def test_moving5_run(procs, tmp_path):
 
 
 @pytest.mark.parametrize("name", ["thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"])
-def test_hybrid_run(procs, tmp_path, name):
+def test_hybrid_run(procs, sim_reference, tmp_path, name):
     # Time scale 1.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's cheaper ticks)
     # the agents keep up (≤ 0.13 % missed ticks); the world skipped 0.5-1.9 % of its samples
     # over three runs of each while it skipped every sample it woke a period late, near the
     # 2 % where a run is overloaded; it now takes them late, up to 0.1 s (test_run.py).
     # Before issue 28 the agents missed 15-22 % at 1 and the settle times moved by +45 %.
-    sc, out, s, sim_out, ss = run(procs, tmp_path, name, time_scale=1.0)
+    sc, out, s, sim_out, ss = run(procs, sim_reference, tmp_path, name, time_scale=1.0)
     for k, e in s["edges"].items():
         first = e["jump_log"][0]
         assert first["t"] < 0.1 and first["xi_before"] == 0.0 and first["xi_after"] == pytest.approx(0.08 * math.pi), (k, e["jump_log"])
