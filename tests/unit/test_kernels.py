@@ -93,3 +93,36 @@ def test_flow_aux_is_the_numpy_loop(monkeypatch, dt):
         assert np.array_equal(one[m][0], fast[0][m]) and one[m][1] == fast[1][m]
         assert np.array_equal(slow_one[m][0], fast[0][m]) and slow_one[m][1] == fast[1][m]
     assert not np.array_equal(fast[1], zeta)
+
+
+def test_the_module_refuses_arrays_it_cannot_read():
+    """zswarm._kernels reads arrays through the buffer protocol: one of the wrong kind, layout
+    or size, a row outside the rate table, or a wrong number of arguments is an exception
+    (TypeError, ValueError, IndexError), never a read or write out of bounds."""
+    assert kernels.flow_aux is not None, NEEDED
+    from zswarm import _kernels as k
+
+    R, w, J, tau = np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3)), np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3))
+    Ro, wo = np.empty_like(R), np.empty_like(w)
+    k.rigid_step(R, w, J, tau, 1e-3, Ro, wo)  # the right arguments go through
+    assert np.array_equal(Ro, R) and np.array_equal(wo, w)
+    bad = [
+        (TypeError, lambda: k.rigid_step(R.astype(np.float32), w, J, tau, 1e-3, Ro, wo)),  # float32
+        (ValueError, lambda: k.rigid_step(R[:1], w, J, tau, 1e-3, Ro, wo)),  # one body short
+        (ValueError, lambda: k.rigid_step(R, w, J, tau, 1e-3, Ro, np.empty((1, 3)))),  # output too small
+        (ValueError, lambda: k.rigid_step(R, w, J, tau, 1e-3, Ro, np.empty((3, 2)).T)),  # not C-contiguous (numpy says so)
+        (TypeError, lambda: k.rigid_step(R, w, J, tau, 1e-3, Ro)),  # an argument missing
+        (TypeError, lambda: k.rigid_step(R, w, J, tau, "h", Ro, wo)),
+        (ValueError, lambda: k.exp_batch(np.zeros(4), np.empty((2, 3, 3)))),  # not a stack of 3-vectors
+        (ValueError, lambda: k.flow_xi(*([np.zeros(3)] * 5), np.zeros(2), np.zeros(3), 1e-2, 20.0, 1.9, 4)),  # a coefficient of 2 draws for 3
+        (ValueError, lambda: k.flow_xi_one(*([0.0] * 10), -1)),  # a negative sub-step count
+        (IndexError, lambda: k.flow_aux(np.tile(np.eye(3), (2, 1, 1)), np.zeros(2), np.zeros((2, 2, 3)), np.array([0, 2]), 1e-3, *([np.eye(3)] * 3), np.zeros(3), 1.0, 1.0, 1.0)),
+        (TypeError, lambda: k.flow_aux(np.tile(np.eye(3), (2, 1, 1)), np.zeros(2), np.zeros((2, 2, 3)), np.array([0.0, 1.0]), 1e-3, *([np.eye(3)] * 3), np.zeros(3), 1.0, 1.0, 1.0)),  # float rows
+    ]
+    for exc, call in bad:
+        with pytest.raises(exc):
+            call()
+    with pytest.raises(ValueError, match="read-only"):  # a read-only output (numpy refuses it)
+        ro = np.empty_like(w)
+        ro.flags.writeable = False
+        k.rigid_step(R, w, J, tau, 1e-3, Ro, ro)
