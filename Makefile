@@ -16,11 +16,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/zswarm run topologies/thesis-3.2-fixed8.toml --duration 40
 
-## make test: unit and component tests on two workers (by file), then the integration tests alone
-## (each part lists its slowest tests: where the suite's time goes, on CI's machine too)
+## make test: unit and component tests on two workers (by file); then the integration tests alone, with
+## the CPU-bound component tests that keep no real time (marker "background") beside them at idle
+## priority; each part lists its slowest tests (tests/layers.sh says how and why)
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile --durations=15
-	$(PY) -m pytest -q -m integration --durations=15
+	bash tests/layers.sh $(PY)
 
 ## make test-fast: everything but the integration tests
 test-fast: $(STAMP)

@@ -32,3 +32,21 @@ def examples(n: int) -> int:
 @pytest.fixture
 def fixed8_text() -> str:
     return (TOPO / "thesis-3.2-fixed8.toml").read_text()
+
+
+# The component tests that `make test` runs in the background (marker "background"): beside the
+# integration layer, at idle priority (tests/layers.sh).  The integration layer's processes keep real
+# time and leave much of the machine idle (a §5.6 run at time scale 1 uses 0.8-1.0 of the two
+# cores, the §3 runs less, compose waits on Docker); these files are its opposite: CPU-bound
+# `sim` runs (the convergence study's fine steps, the Chapter 3-5 scenarios over their whole
+# horizons; 700 s of one core of the component layer's 1080, measured quietly on 2026-12-04)
+# that keep no time and have no wall-clock limit, so a starved one is late, never wrong.  At
+# SCHED_IDLE the scheduler gives them only CPU that no other process asks for, and a waking
+# process of a run preempts them at once: the runs keep the machine they had.
+BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py"})
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in BACKGROUND and item.path.parent.name == "component":
+            item.add_marker(pytest.mark.background)

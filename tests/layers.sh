@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# make test: the test layers in the order and on the cores that fit a 2-core machine.
+#
+# 1. Unit and component tests on two workers (by file).
+# 2. The integration tests alone (their processes keep real time), and beside them, at idle
+#    priority, the component tests marked "background" (tests/conftest.py: long `sim` runs that
+#    keep no time and have no wall-clock limit).  `chrt --idle 0` gives them only CPU that no
+#    other process asks for, and a waking process of a run preempts them at once, so the
+#    integration runs keep the machine they had.  Their output follows the integration layer's.
+#
+# Each part lists its slowest tests (where the suite's time goes, on CI's machine too).  The exit
+# status is 0 only if every part passed.  Ctrl-C (or SIGTERM) stops both parts of step 2: the
+# background part runs in a session of its own (so a terminal's Ctrl-C does not reach it, and a
+# shell starts it with SIGINT ignored), terminated as a whole (SIGTERM to its process group: pytest
+# and its workers) and waited for.
+set -u
+PY=${1:-.venv/bin/python}
+
+"$PY" -m pytest -q -m "not integration and not background" -n 2 --dist loadfile --durations=15 || exit $?
+
+idle=(nice -n 19)
+command -v chrt >/dev/null 2>&1 && idle=(chrt --idle 0)
+log=$(mktemp)
+setsid "${idle[@]}" "$PY" -m pytest -q -m "background and not integration" -n 2 --dist loadfile --durations=15 >"$log" 2>&1 &
+bg=$!
+
+show_background() {
+    echo "--- the background tests (${idle[*]}, beside the integration layer): exit $1"
+    cat "$log"
+    rm -f "$log"
+}
+stop_background() {
+    kill -TERM -- "-$bg" 2>/dev/null
+    wait "$bg"
+    show_background "$?"
+}
+trap 'stop_background; exit 130' INT
+trap 'stop_background; exit 143' TERM
+
+echo "$PY -m pytest -q -m integration --durations=15   (beside it: pytest -m background at ${idle[*]}, its output below)"
+"$PY" -m pytest -q -m integration --durations=15
+it=$?
+wait "$bg"
+bt=$?
+trap - INT TERM
+show_background "$bt"
+exit $((it != 0 || bt != 0))
