@@ -27,7 +27,7 @@ TIMEOUT_S = 900.0
 
 
 def run(cmd: list[str], timeout: float, **kw) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL, **kw)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL, check=False, **kw)
 
 
 def last_line(r: subprocess.CompletedProcess[str]) -> str:
