@@ -37,6 +37,17 @@ def pid_alive(pid: int) -> bool:
         return False
 
 
+def kill_group(p: subprocess.Popen, timeout: float) -> None:
+    """SIGKILL to ``p``'s process group (started with ``start_new_session``) if it still
+    runs, then reap ``p`` by PID, waiting at most ``timeout`` s."""
+    if p.poll() is None:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    p.wait(timeout)
+
+
 class Procs:
     def __init__(self) -> None:
         self.started: list[subprocess.Popen[bytes]] = []
@@ -64,12 +75,7 @@ class Procs:
         """
         leftovers = []
         for p in self.started:
-            if p.poll() is None:
-                try:
-                    os.killpg(p.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-            p.wait(10)
+            kill_group(p, 10)
         for pid in self.extra_pids:
             if pid_alive(pid):
                 leftovers.append(pid)
@@ -318,12 +324,7 @@ class SimReference:
         return json.loads((self.out / "reference.json").read_text())
 
     def kill(self) -> None:
-        if self.proc.poll() is None:
-            try:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        self.proc.wait(30)
+        kill_group(self.proc, 30)
 
 
 @pytest.fixture

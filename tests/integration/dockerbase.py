@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import subprocess
 import threading
 import time
 from pathlib import Path
+
+from tests.integration.conftest import kill_group
 
 BASE_IMAGE = "zswarm-base:bookworm"
 DEBOOTSTRAP = ["debootstrap", "--variant=minbase", "--include=python3,python3-venv", "bookworm"]
@@ -98,13 +99,8 @@ class Rootfs:
         return self.root
 
     def _kill(self) -> None:
-        p = self._proc
-        if p is not None and p.poll() is None:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            p.wait(30)
+        if self._proc is not None:
+            kill_group(self._proc, 30)
 
     def stop(self) -> None:
         """Kill the build if it still runs (its process group, by PID) and wait for the thread."""

@@ -93,6 +93,7 @@ def image(engine, base_rootfs, tmp_path_factory):
     t0 = time.monotonic()
     try:
         if not _image_exists(BASE_IMAGE):
+            early = base_rootfs is not None
             build = base_rootfs or Rootfs(tmp_path_factory.mktemp("rootfs"))
             try:
                 root = build.wait()
@@ -100,7 +101,7 @@ def image(engine, base_rootfs, tmp_path_factory):
                 pytest.skip(f"no base image, and {e}")
             finally:
                 build.stop()
-            print(f"\nbase root: debootstrap took {build.seconds:.0f} s (at idle priority, from the session's start)", file=sys.stderr)
+            print(f"\nbase root: debootstrap took {build.seconds:.0f} s (at idle priority{', from the session start' if early else ''})", file=sys.stderr)
             tar = subprocess.Popen(["tar", "-C", str(root), "-c", "."], stdout=subprocess.PIPE)
             r = subprocess.run(["docker", "import", "-", BASE_IMAGE], stdin=tar.stdout, capture_output=True, text=True, timeout=600)
             tar.wait(60)
