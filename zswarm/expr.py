@@ -16,6 +16,7 @@ arrays of times alike (the world evaluates many sub-steps in one call).
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Callable
@@ -226,7 +227,13 @@ def parse(src: str | int | float) -> Expr:
     """
     if isinstance(src, bool) or not isinstance(src, (str, int, float)):
         raise ExprError(f"expected an expression string or a number, got {type(src).__name__}")
-    text = str(src)
+    return _parse(str(src))
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse(text: str) -> Expr:
+    """:func:`parse` of a text, remembered (an Expr is immutable; a basin's draws read the same
+    motions once a draw).  An ExprError is raised again on every call."""
     p = _Parser(text)
     if not p.toks:
         raise ExprError("empty expression")

@@ -18,6 +18,7 @@ Symbols -> names: A ``A`` (3×3, symmetric), u ``u``, γ ``gamma``, δ ``delta``
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -280,6 +281,14 @@ def angle_set(r: Any, v: Any, fld: str, example: str) -> tuple[float, ...]:
     return tuple(float(r.expr(x, f"{fld}[{n}]")(0.0)) if isinstance(x, str) else r.num(x, f"{fld}[{n}]") for n, x in enumerate(v))
 
 
+@functools.lru_cache(maxsize=64)
+def _checked(A: tuple[float, ...], u: tuple[float, float, float], gamma: float, delta: float, Xi: tuple[float, ...], condition: str) -> None:
+    """:func:`check_parameters` of a scenario's params, remembered: a basin's draws load the same
+    [algorithm.params] once a draw (0.5 ms of eigen-decompositions and gap conditions each);
+    a DesignError is raised again on every call (exceptions are not cached)."""
+    check_parameters(np.array(A).reshape(3, 3), np.array(u), gamma, delta, Xi, condition=condition)
+
+
 def _set_P(p: HybridParams | VelocityFreeParams) -> dict[str, Any]:
     """The Gains values of Prop. 4.2's set P (A as a 3x3 matrix)."""
     return {"A": np.array(p.A, dtype=float).reshape(3, 3), "u": np.array(p.u), "gamma": p.gamma, "delta": p.delta, "Xi": p.Xi}
@@ -324,7 +333,7 @@ class HybridParams:
         delta = r.num(d["delta"], f"{fld}.delta", positive=True)
         Xi = angle_set(r, d["Xi"], f"{fld}.Xi", "0.08*pi")
         try:
-            check_parameters(A, np.array(u), gamma, delta, Xi)
+            _checked(tuple(A.ravel().tolist()), u, gamma, delta, Xi, "4.1")
         except DesignError as exc:
             raise r.err(f"{fld}.{exc.field}", exc.problem) from None
         un = np.array(u) / np.linalg.norm(u)
@@ -359,7 +368,7 @@ class VelocityFreeParams:
         delta_Q = r.num(d["delta_Q"], f"{fld}.delta_Q", positive=True)
         Pi = angle_set(r, d["Pi"], f"{fld}.Pi", "0.9*pi")
         try:
-            check_parameters(A, np.array(u), base[2], delta_Q, Pi, condition="5.1")
+            _checked(base[0], u, base[2], delta_Q, Pi, "5.1")
         except DesignError as exc:
             name = {"delta": "delta_Q", "Xi": "Pi"}.get(exc.field, exc.field)
             raise r.err(f"{fld}.{name}", exc.problem.replace("δ", "δ_Q̃").replace("Ξ", "Π")) from None

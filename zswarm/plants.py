@@ -5,6 +5,7 @@ implements the plants."""
 
 from __future__ import annotations
 
+import functools
 import typing
 from collections.abc import Mapping
 from types import MappingProxyType
@@ -119,9 +120,21 @@ def _inertia(c: _Ctx, v: Any, fld: str) -> tuple[float, ...]:
         J = np.array([[c.num(e, f"{fld}[{a}][{b}]") for b, e in enumerate(r)] for a, r in enumerate(v)])
     else:
         raise c.err(fld, "must be 3 principal moments or a 3x3 list of rows (kg m^2)", v)
+    Jt = tuple(J.ravel().tolist())
+    problem = _inertia_problem(Jt)
+    if problem is not None:
+        raise c.err(fld, problem, v)
+    return Jt
+
+
+@functools.lru_cache(maxsize=256)
+def _inertia_problem(Jt: tuple[float, ...]) -> str | None:
+    """What is wrong with the inertia ``Jt`` (row-major), None if nothing; remembered, as a
+    basin's draws read the same inertias once a draw."""
+    J = np.array(Jt).reshape(3, 3)
     if not np.allclose(J, J.T, rtol=1e-9, atol=1e-12):
-        raise c.err(fld, "must be symmetric", v)
+        return "must be symmetric"
     lam = np.linalg.eigvalsh(0.5 * (J + J.T))
     if lam[0] <= 0:
-        raise c.err(fld, f"must be positive definite (eigenvalues {np.round(lam, 6).tolist()})", v)
-    return tuple(J.ravel().tolist())
+        return f"must be positive definite (eigenvalues {np.round(lam, 6).tolist()})"
+    return None
