@@ -14,10 +14,11 @@
  *    J_inv tau is exact in any order.
  *  - exp_batch: zswarm/so3.py exp_batch, Rodrigues' formula for a stack of rotation vectors.
  *  - flow_xi: agent/algorithms/attitude_sync_terms.py flow_xi, Heun's method on (5.21) in n
- *    sub-steps for each of M draws.
+ *    sub-steps for each of M draws, with sin and cos of zswarm/trig.py (sincos4 below: 4 draws at once).
+ *  - sincos: zswarm/trig.py sincos.
  *  - flow_aux: the velocity-free law's (Q_i, zeta_i) filter (attitude_sync_velocity_free.py), Heun's
  *    method on SO(3) x R in n sub-steps for each of M draws.  Python's float arithmetic and numpy's ufuncs round every
- *    operation; sin and cos are the C library's, as Python's math and numpy call them.
+ *    operation; sin and cos are the C library's there, as Python's math and numpy call them.
  *
  * Built with -ffp-contract=off: the compiler must not fuse a*b + c on its own (that would
  * change the last bit against numpy); the fused products above are written out as fma().
@@ -95,31 +96,125 @@ void rigid_step(size_t n, const double *R, const double *w, const double *J_inv,
     }
 }
 
+/* ---- sin and cos of 4 numbers at once (zswarm/trig.py does the same operations in Python and numpy).
+ * glibc's sin and cos are one call per number (17 ns each on the xi filter's chain, a third of the batched
+ * hybrid law's time); these are straight-line IEEE operations on GCC's vector type, which the compiler turns
+ * into AVX2 instructions (the avx2 clone) or pairs of SSE2 ones (the default clone): the same operations
+ * in the same order, so every lane gives the same bits whatever the lane, the block or the clone, and a
+ * draw alone (sim) the same as in a stack of draws (the batched engine).
+ * x = n pi/2 + y: n the nearest integer (rounded by adding and subtracting 1.5 2^52), y by Cody and Waite's
+ * reduction with pi/2 in four parts (fdlibm's pio2_1, pio2_2, pio2_3 of 33 bits each, the first three
+ * products exact for |n| < 2^20, and pio2_3t); sin y and cos y by fdlibm's kernel polynomials on
+ * [-pi/4, pi/4] (k_sin.c, k_cos.c, without the tail of y); the quadrant n mod 4 picks and signs them.
+ * Measured against sinl/cosl (tests/unit/test_trig.py): at most 1.5 ulp for |x| <= TRIG_LIMIT.  Beyond it
+ * (and for inf, NaN) a lane is the C library's sin and cos. */
+#define TRIG_LIMIT 16.0
+static const double PIO2_1 = 1.57079632673412561417e+00, PIO2_2 = 6.07710050630396597660e-11, PIO2_3 = 2.02226624871116645580e-21,
+                    PIO2_3T = 8.47842766036889956997e-32, INVPIO2 = 6.36619772367581382433e-01, RND = 6755399441055744.0;
+static const double S1 = -1.66666666666666324348e-01, S2 = 8.33333333332248946124e-03, S3 = -1.98412698298579493134e-04,
+                    S4 = 2.75573137070700676789e-06, S5 = -2.50507602534068634195e-08, S6 = 1.58969099521155010221e-10;
+static const double C1 = 4.16666666666666019037e-02, C2 = -1.38888888888741095749e-03, C3 = 2.48015872894767294178e-05,
+                    C4 = -2.75573143513906633035e-07, C5 = 2.08757232129817482790e-09, C6 = -1.13596475577881948265e-11;
+
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4i __attribute__((vector_size(32)));
+
+static inline __attribute__((always_inline)) v4d pick(v4i m, v4d a, v4d b) { return (v4d)((m & (v4i)a) | (~m & (v4i)b)); }
+
+static inline __attribute__((always_inline)) void sincos4(v4d x, v4d *so, v4d *co)
+{
+    const v4d fn = (x * INVPIO2 + RND) - RND;
+    const v4d y = (((x - fn * PIO2_1) - fn * PIO2_2) - fn * PIO2_3) - fn * PIO2_3T;
+    const v4d f4 = fn * 0.25, r4 = (f4 + RND) - RND;
+    const v4d q = fn - 4.0 * pick(r4 > f4, r4 - 1.0, r4); /* n mod 4: 0, 1, 2 or 3 */
+    const v4d z = y * y, v = z * y;
+    const v4d s = y + v * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
+    const v4d r = z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));
+    const v4d c = 1.0 - (0.5 * z - z * r);
+    const v4i odd = (q == 1.0) | (q == 3.0);
+    const v4d ss = pick(odd, c, s), cc = pick(odd, s, c);
+    *so = pick(x == 0.0, x, pick(q >= 2.0, -ss, ss)); /* sin(-0) = -0 */
+    *co = pick((q == 1.0) | (q == 2.0), -cc, cc);
+    const v4i out = ~((x <= TRIG_LIMIT) & (x >= -TRIG_LIMIT));
+    if (out[0] | out[1] | out[2] | out[3])
+        for (int l = 0; l < 4; l++)
+            if (out[l]) {
+                (*so)[l] = sin(x[l]);
+                (*co)[l] = cos(x[l]);
+            }
+}
+
+/* sincos(x, s, c) for n numbers, in 4-lane blocks (the last padded with its first lane). */
+__attribute__((target_clones("avx2", "default")))
+void sincos_n(size_t n, const double *x, double *s, double *c)
+{
+    for (size_t i0 = 0; i0 < n; i0 += 4) {
+        v4d xv, sv, cv;
+        for (int l = 0; l < 4; l++)
+            xv[l] = x[i0 + l < n ? i0 + l : i0];
+        sincos4(xv, &sv, &cv);
+        for (int l = 0; l < 4 && i0 + l < n; l++) {
+            s[i0 + l] = sv[l];
+            c[i0 + l] = cv[l];
+        }
+    }
+}
+
 /* M draws of xi advanced in place by dt in n Heun sub-steps of
  * xi' = -k_xi (gamma xi + 2 (a + b sin xi + q (1 - cos xi))), (a, b, q) going linearly from
- * (a0, b0, q0) to (a1, b1, q1) over the interval. */
+ * (a0, b0, q0) to (a1, b1, q1) over the interval; sin and cos by sincos4.  The draws go in blocks of
+ * 4 K lanes (K chains side by side hide the polynomials' latency), K = 4 while 16 draws are left, then 1;
+ * a lane's numbers do not depend on its block. */
+#define XI_BLOCK(K)                                                                                                                 \
+    do {                                                                                                                            \
+        v4d xi[K], a0[K], b0[K], q0[K], da[K], db[K], dq[K], f[K], x1[K], s[K], c[K];                                              \
+        for (int k = 0; k < K; k++) {                                                                                               \
+            v4d a1, b1, q1;                                                                                                         \
+            for (int l = 0; l < 4; l++) {                                                                                           \
+                const size_t i = i0 + 4 * k + l < M ? i0 + 4 * k + l : i0;                                                         \
+                xi[k][l] = xv[i], a0[k][l] = a0v[i], b0[k][l] = b0v[i], q0[k][l] = q0v[i], a1[l] = a1v[i], b1[l] = b1v[i], q1[l] = q1v[i]; \
+            }                                                                                                                       \
+            da[k] = a1 - a0[k], db[k] = b1 - b0[k], dq[k] = q1 - q0[k];                                                             \
+            sincos4(xi[k], &s[k], &c[k]);                                                                                           \
+            f[k] = -kg * xi[k] - two_k * ((a0[k] + b0[k] * s[k]) + q0[k] * (1.0 - c[k]));                                           \
+        }                                                                                                                           \
+        for (long m = 0; m < n; m++) {                                                                                              \
+            const double s1 = (double)(m + 1) / (double)n;                                                                          \
+            for (int k = 0; k < K; k++) {                                                                                           \
+                x1[k] = xi[k] + h * f[k];                                                                                           \
+                sincos4(x1[k], &s[k], &c[k]);                                                                                       \
+            }                                                                                                                       \
+            for (int k = 0; k < K; k++) {                                                                                           \
+                const v4d a1 = a0[k] + s1 * da[k], b1 = b0[k] + s1 * db[k], q1 = q0[k] + s1 * dq[k];                                \
+                xi[k] = xi[k] + 0.5 * h * (f[k] + (-kg * x1[k] - two_k * ((a1 + b1 * s[k]) + q1 * (1.0 - c[k]))));                 \
+            }                                                                                                                       \
+            if (m + 1 == n)                                                                                                         \
+                break; /* the rate at the end of the last sub-step is not needed */                                                 \
+            for (int k = 0; k < K; k++) {                                                                                           \
+                const v4d a1 = a0[k] + s1 * da[k], b1 = b0[k] + s1 * db[k], q1 = q0[k] + s1 * dq[k];                                \
+                sincos4(xi[k], &s[k], &c[k]);                                                                                       \
+                f[k] = -kg * xi[k] - two_k * ((a1 + b1 * s[k]) + q1 * (1.0 - c[k]));                                                \
+            }                                                                                                                       \
+        }                                                                                                                           \
+        for (int k = 0; k < K; k++)                                                                                                 \
+            for (int l = 0; l < 4 && i0 + 4 * k + l < M; l++)                                                                       \
+                xv[i0 + 4 * k + l] = xi[k][l];                                                                                      \
+        i0 += 4 * K;                                                                                                                \
+    } while (0)
+
+__attribute__((target_clones("avx2", "default")))
 void flow_xi(size_t M, const double *a0v, const double *b0v, const double *q0v, const double *a1v, const double *b1v, const double *q1v,
              double *xv, double dt, double k_xi, double gamma, long n)
 {
     const double h = dt / (double)n, two_k = 2.0 * k_xi, kg = k_xi * gamma;
-    for (size_t i = 0; i < M; i++) {
-        double xi = xv[i];
-        const double a0 = a0v[i], b0 = b0v[i], q0 = q0v[i];
-        const double da = a1v[i] - a0, db = b1v[i] - b0, dq = q1v[i] - q0;
-        double f = -kg * xi - two_k * ((a0 + b0 * sin(xi)) + q0 * (1.0 - cos(xi)));
-        for (long m = 0; m < n; m++) {
-            const double s1 = (double)(m + 1) / (double)n;
-            const double a1 = a0 + s1 * da, b1 = b0 + s1 * db, q1 = q0 + s1 * dq;
-            const double x1 = xi + h * f;
-            const double f1 = -kg * x1 - two_k * ((a1 + b1 * sin(x1)) + q1 * (1.0 - cos(x1)));
-            xi = xi + 0.5 * h * (f + f1);
-            f = -kg * xi - two_k * ((a1 + b1 * sin(xi)) + q1 * (1.0 - cos(xi)));
-        }
-        xv[i] = xi;
-    }
+    size_t i0 = 0;
+    while (M - i0 >= 16)
+        XI_BLOCK(4);
+    while (i0 < M)
+        XI_BLOCK(1);
 }
 
-/* flow_xi of one draw (a ctypes call with numbers: sim's path, one agent and edge at a time). */
+/* flow_xi of one draw (sim's path, one agent and edge at a time). */
 double flow_xi_one(double a0, double b0, double q0, double a1, double b1, double q1, double xi, double dt, double k_xi, double gamma, long n)
 {
     flow_xi(1, &a0, &b0, &q0, &a1, &b1, &q1, &xi, dt, k_xi, gamma, n);
@@ -326,6 +421,22 @@ static PyObject *py_flow_xi_one(PyObject *Py_UNUSED(self), PyObject *const *a, P
     return PyFloat_FromDouble(flow_xi_one(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], n));
 }
 
+/* sincos(x (n), s (n) out, c (n) out) */
+static PyObject *py_sincos(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    Bufs B = {.n = 0};
+    if (want_nargs(nargs, 3, "sincos") < 0)
+        return NULL;
+    const Py_ssize_t n = take(&B, a[0], F64, 0, "x");
+    if (n < 0 || take(&B, a[1], F64, 1, "s") < 0 || want_items(&B.b[1], n, "s") < 0 || take(&B, a[2], F64, 1, "c") < 0 || want_items(&B.b[2], n, "c") < 0) {
+        release_all(&B);
+        return NULL;
+    }
+    sincos_n((size_t)n, D(0), D(1), D(2));
+    release_all(&B);
+    Py_RETURN_NONE;
+}
+
 /* flow_xi(a0, b0, q0, a1, b1, q1 (M) each, x (M) in/out, dt, k_xi, gamma, n) */
 static PyObject *py_flow_xi(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
 {
@@ -388,6 +499,7 @@ static PyObject *py_flow_aux(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
+    {"sincos", (PyCFunction)(void (*)(void))py_sincos, METH_FASTCALL, "sincos(x, s, c): sin and cos of each x into s and c (zswarm/trig.py)."},
     {"flow_xi", (PyCFunction)(void (*)(void))py_flow_xi, METH_FASTCALL, "flow_xi(a0, b0, q0, a1, b1, q1, x, dt, k_xi, gamma, n): Heun sub-steps of (5.21) for M draws, x in place."},
     {"flow_xi_one", (PyCFunction)(void (*)(void))py_flow_xi_one, METH_FASTCALL, "flow_xi_one(a0, b0, q0, a1, b1, q1, xi, dt, k_xi, gamma, n) -> xi: flow_xi of one draw."},
     {"flow_aux", (PyCFunction)(void (*)(void))py_flow_aux, METH_FASTCALL, "flow_aux(Qt, zeta, table, rows, h, A, K, K2, u2, k_Q, k_zeta, gamma): the velocity-free filter, Qt and zeta in place."},

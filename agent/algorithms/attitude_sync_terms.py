@@ -62,6 +62,7 @@ import numpy as np
 from zswarm import kernels
 from zswarm.algorithm import Field, View, number
 from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi, trace
+from zswarm.trig import sincos
 
 
 @dataclass(frozen=True, slots=True)
@@ -223,28 +224,30 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
     """ξ after ``dt`` of (5.21) (or (5.23)), ``ξ̇ = −k_ξ(γξ + 2(a + b sin ξ + c(1 − cos ξ)))``,
     with (a, b, c) going linearly from ``c0`` (R̄ at the step's start) to ``c1`` (at its
     end; linear in R̄, so this is R̄ on the chord between the two measurements, within
-    O(|ΔR̄|²) of the geodesic): Heun's method in sub-steps of at most XI_SUBSTEP_S."""
+    O(|ΔR̄|²) of the geodesic): Heun's method in sub-steps of at most XI_SUBSTEP_S, sin and cos
+    by zswarm/trig.py (four draws to an instruction when compiled)."""
     if dt <= 0:
         return xi
     n = max(1, math.ceil(dt / XI_SUBSTEP_S - 1e-9))
     if kernels.flow_xi is not None:  # the loop below, compiled (zswarm/_kernels.c): the same numbers
         return kernels.flow_xi(c0, c1, xi, dt, k_xi, gamma, n)
-    sin, cos = _trig(xi)
     h = dt / n
     a0, b0, q0 = c0
     da, db, dq = c1[0] - a0, c1[1] - b0, c1[2] - q0
     two_k = 2.0 * k_xi
     kg = k_xi * gamma
-    f = 0.0
+    s, c = sincos(xi)  # zswarm/trig.py: the compiled loop's sin and cos, bit for bit
+    f = -kg * xi - two_k * (a0 + b0 * s + q0 * (1.0 - c))
     for m in range(n):
-        if m == 0:
-            f = -kg * xi - two_k * (a0 + b0 * sin(xi) + q0 * (1.0 - cos(xi)))
         s1 = (m + 1) / n
         a1, b1, q1 = a0 + s1 * da, b0 + s1 * db, q0 + s1 * dq  # at the sub-step's end (both evaluations there)
         x1 = xi + h * f
-        f1 = -kg * x1 - two_k * (a1 + b1 * sin(x1) + q1 * (1.0 - cos(x1)))
+        s, c = sincos(x1)
+        f1 = -kg * x1 - two_k * (a1 + b1 * s + q1 * (1.0 - c))
         xi = xi + 0.5 * h * (f + f1)
-        f = -kg * xi - two_k * (a1 + b1 * sin(xi) + q1 * (1.0 - cos(xi)))
+        if m + 1 < n:  # the rate at the last sub-step's end is not needed
+            s, c = sincos(xi)
+            f = -kg * xi - two_k * (a1 + b1 * s + q1 * (1.0 - c))
     return xi
 
 
