@@ -39,63 +39,6 @@
 #define FMA_CLONES
 #endif
 
-static inline void mm3(const double *a, const double *b, double *c)
-{
-    for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 3; k++)
-            c[3 * i + k] = fma(a[3 * i + 2], b[6 + k], fma(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
-}
-
-/* Rodrigues' formula of one rotation vector W into E, as zswarm/so3.py exp_batch computes it. */
-static inline void rodrigues(const double W[3], double E[9])
-{
-    const double t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1]; /* einsum("ij,ij->i")'s order */
-    double a, b;
-    if (t2 < 1e-8) {
-        a = 1.0 - t2 / 6.0;
-        b = 0.5 - t2 / 24.0;
-    } else {
-        const double s = sqrt(t2);
-        a = sin(s) / s;
-        b = (1.0 - cos(s)) / t2;
-    }
-    const double K[9] = {0.0, -W[2], W[1], W[2], 0.0, -W[0], -W[1], W[0], 0.0};
-    double KK[9];
-    mm3(K, K, KK);
-    for (int q = 0; q < 9; q++)
-        E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
-}
-
-/* zswarm/so3.py exp_batch: n rotation vectors W (n,3) -> E (n,3,3). */
-FMA_CLONES
-void exp_batch(size_t n, const double *W, double *E)
-{
-    for (size_t m = 0; m < n; m++)
-        rodrigues(W + 3 * m, E + 9 * m);
-}
-
-/* n bodies: R (n,3,3) and w (n,3) advanced by h under the torques tau (n,3) held over the step,
- * into R_out and w_out; J_inv (n,3,3) the inverse inertias (isotropic: J = jI). */
-FMA_CLONES
-void rigid_step(size_t n, const double *R, const double *w, const double *J_inv, const double *tau, double h, double *R_out, double *w_out)
-{
-    const double hh = 0.5 * h;
-    for (size_t m = 0; m < n; m++) {
-        const double *Rm = R + 9 * m, *wm = w + 3 * m;
-        const double *J = J_inv + 9 * m, *t = tau + 3 * m;
-        double wb[3], W[3];
-        for (int r = 0; r < 3; r++)
-            wb[r] = wm[r] + hh * ((J[3 * r] * t[0] + J[3 * r + 1] * t[1]) + J[3 * r + 2] * t[2]);
-        for (int r = 0; r < 3; r++) {
-            w_out[3 * m + r] = 2.0 * wb[r] - wm[r];
-            W[r] = h * wb[r];
-        }
-        double E[9];
-        rodrigues(W, E);
-        mm3(Rm, E, R_out + 9 * m);
-    }
-}
-
 /* ---- sin and cos of 4 numbers at once (zswarm/trig.py does the same operations in Python and numpy).
  * glibc's sin and cos are one call per number (17 ns each on the xi filter's chain, a third of the batched
  * hybrid law's time); these are straight-line IEEE operations on GCC's vector type, which the compiler turns
@@ -142,6 +85,134 @@ static inline __attribute__((always_inline)) void sincos4(v4d x, v4d *so, v4d *c
                 (*so)[l] = sin(x[l]);
                 (*co)[l] = cos(x[l]);
             }
+}
+
+/* sincos4 of one number (lane 0): the same bits. */
+static inline __attribute__((always_inline)) void sincos1(double x, double *s, double *c)
+{
+    const v4d xv = {x, x, x, x};
+    v4d sv, cv;
+    sincos4(xv, &sv, &cv);
+    *s = sv[0];
+    *c = cv[0];
+}
+
+static inline void mm3(const double *a, const double *b, double *c)
+{
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            c[3 * i + k] = fma(a[3 * i + 2], b[6 + k], fma(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
+}
+
+/* Rodrigues' formula of one rotation vector W into E, as zswarm/so3.py exp_batch computes it. */
+static inline void rodrigues(const double W[3], double E[9])
+{
+    const double t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1]; /* einsum("ij,ij->i")'s order */
+    double a, b;
+    if (t2 < 1e-8) {
+        a = 1.0 - t2 / 6.0;
+        b = 0.5 - t2 / 24.0;
+    } else {
+        const double s = sqrt(t2);
+        double sn, cs;
+        sincos1(s, &sn, &cs);
+        a = sn / s;
+        b = (1.0 - cs) / t2;
+    }
+    const double K[9] = {0.0, -W[2], W[1], W[2], 0.0, -W[0], -W[1], W[0], 0.0};
+    double KK[9];
+    mm3(K, K, KK);
+    for (int q = 0; q < 9; q++)
+        E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
+}
+
+/* The same four at a time: lane l of W[r] is component r of a rotation vector. */
+static inline __attribute__((always_inline)) v4d fma4(v4d a, v4d b, v4d c)
+{
+    v4d r;
+    for (int l = 0; l < 4; l++)
+        r[l] = fma(a[l], b[l], c[l]); /* one vfmadd in the x86-64-v3 clone, the C library's fma in the default one */
+    return r;
+}
+
+static inline __attribute__((always_inline)) void mm3_4(const v4d *a, const v4d *b, v4d *c)
+{
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            c[3 * i + k] = fma4(a[3 * i + 2], b[6 + k], fma4(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
+}
+
+static inline __attribute__((always_inline)) void rodrigues4(const v4d W[3], v4d E[9])
+{
+    const v4d t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1];
+    v4d s, sn, cs;
+    for (int l = 0; l < 4; l++)
+        s[l] = sqrt(t2[l]); /* one vsqrtpd (correctly rounded either way) */
+    sincos4(s, &sn, &cs);
+    const v4i small = t2 < 1e-8;
+    const v4d a = pick(small, 1.0 - t2 / 6.0, sn / s), b = pick(small, 0.5 - t2 / 24.0, (1.0 - cs) / t2);
+    const v4d z = {0.0, 0.0, 0.0, 0.0};
+    const v4d K[9] = {z, -W[2], W[1], W[2], z, -W[0], -W[1], W[0], z};
+    v4d KK[9];
+    mm3_4(K, K, KK);
+    for (int q = 0; q < 9; q++)
+        E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
+}
+
+#define V3_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+
+/* zswarm/so3.py exp_batch: n rotation vectors W (n,3) -> E (n,3,3), four at a time (the last block
+ * padded with its first vector). */
+V3_CLONES
+void exp_batch(size_t n, const double *W, double *E)
+{
+    for (size_t m0 = 0; m0 < n; m0 += 4) {
+        v4d Wv[3], Ev[9];
+        for (int l = 0; l < 4; l++) {
+            const size_t m = m0 + l < n ? m0 + l : m0;
+            for (int r = 0; r < 3; r++)
+                Wv[r][l] = W[3 * m + r];
+        }
+        rodrigues4(Wv, Ev);
+        for (int l = 0; l < 4 && m0 + l < n; l++)
+            for (int q = 0; q < 9; q++)
+                E[9 * (m0 + l) + q] = Ev[q][l];
+    }
+}
+
+/* n bodies: R (n,3,3) and w (n,3) advanced by h under the torques tau (n,3) held over the step,
+ * into R_out and w_out; J_inv (n,3,3) the inverse inertias (isotropic: J = jI).  Four bodies at a time. */
+V3_CLONES
+void rigid_step(size_t n, const double *R, const double *w, const double *J_inv, const double *tau, double h, double *R_out, double *w_out)
+{
+    const double hh = 0.5 * h;
+    for (size_t m0 = 0; m0 < n; m0 += 4) {
+        v4d Rv[9], J[9], wm[3], t[3], wb[3], W[3], E[9], Rn[9];
+        for (int l = 0; l < 4; l++) {
+            const size_t m = m0 + l < n ? m0 + l : m0;
+            for (int q = 0; q < 9; q++) {
+                Rv[q][l] = R[9 * m + q];
+                J[q][l] = J_inv[9 * m + q];
+            }
+            for (int r = 0; r < 3; r++) {
+                wm[r][l] = w[3 * m + r];
+                t[r][l] = tau[3 * m + r];
+            }
+        }
+        for (int r = 0; r < 3; r++) {
+            wb[r] = wm[r] + hh * ((J[3 * r] * t[0] + J[3 * r + 1] * t[1]) + J[3 * r + 2] * t[2]);
+            W[r] = h * wb[r];
+        }
+        rodrigues4(W, E);
+        mm3_4(Rv, E, Rn);
+        for (int l = 0; l < 4 && m0 + l < n; l++) {
+            const size_t m = m0 + l;
+            for (int r = 0; r < 3; r++)
+                w_out[3 * m + r] = 2.0 * wb[r][l] - wm[r][l];
+            for (int q = 0; q < 9; q++)
+                R_out[9 * m + q] = Rn[q][l];
+        }
+    }
 }
 
 /* sincos(x, s, c) for n numbers, in 4-lane blocks (the last padded with its first lane). */
@@ -421,6 +492,16 @@ static PyObject *py_flow_xi_one(PyObject *Py_UNUSED(self), PyObject *const *a, P
     return PyFloat_FromDouble(flow_xi_one(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], n));
 }
 
+/* sincos1(x) -> (sin x, cos x): sincos of one number (zswarm/trig.py sincos of a float). */
+static PyObject *py_sincos1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double x, s, c;
+    if (want_nargs(nargs, 1, "sincos1") < 0 || doubles(a, 0, 1, &x) < 0)
+        return NULL;
+    sincos1(x, &s, &c);
+    return Py_BuildValue("(dd)", s, c);
+}
+
 /* sincos(x (n), s (n) out, c (n) out) */
 static PyObject *py_sincos(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
 {
@@ -499,6 +580,7 @@ static PyObject *py_flow_aux(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
+    {"sincos1", (PyCFunction)(void (*)(void))py_sincos1, METH_FASTCALL, "sincos1(x) -> (sin x, cos x) (zswarm/trig.py)."},
     {"sincos", (PyCFunction)(void (*)(void))py_sincos, METH_FASTCALL, "sincos(x, s, c): sin and cos of each x into s and c (zswarm/trig.py)."},
     {"flow_xi", (PyCFunction)(void (*)(void))py_flow_xi, METH_FASTCALL, "flow_xi(a0, b0, q0, a1, b1, q1, x, dt, k_xi, gamma, n): Heun sub-steps of (5.21) for M draws, x in place."},
     {"flow_xi_one", (PyCFunction)(void (*)(void))py_flow_xi_one, METH_FASTCALL, "flow_xi_one(a0, b0, q0, a1, b1, q1, xi, dt, k_xi, gamma, n) -> xi: flow_xi of one draw."},

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zswarm import kernels
+from zswarm.trig import sincos
 
 Vec3 = NDArray[np.float64]
 Mat3 = NDArray[np.float64]
@@ -104,8 +105,9 @@ def exp(w: Vec3) -> Mat3:
         b = 0.5 - t2 / 24.0
     else:
         t = math.sqrt(t2)
-        a = math.sin(t) / t
-        b = (1.0 - math.cos(t)) / t2
+        sn, cs = sincos(t)  # zswarm/trig.py: exp_batch's sin and cos
+        a = sn / t
+        b = (1.0 - cs) / t2
     # I + a[w]^x + b[w]^x², with [w]^x² = w wᵀ − |w|² I, written out (a third of
     # the cost of the matrix expression for one 3-vector).
     bxy, bxz, byz = b * x * y, b * x * z, b * y * z
@@ -119,15 +121,17 @@ def exp(w: Vec3) -> Mat3:
 
 
 def exp_batch(W: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rodrigues' formula for a stack of rotation vectors, shape (n, 3) -> (n, 3, 3)."""
+    """Rodrigues' formula for a stack of rotation vectors, shape (n, 3) -> (n, 3, 3); sin and cos
+    by zswarm/trig.py (four vectors to an instruction when compiled)."""
     W = np.asarray(W, dtype=np.float64)
     if kernels.exp_batch is not None:  # the lines below, compiled (zswarm/_kernels.c): the same numbers
         return kernels.exp_batch(W)
     t2 = np.einsum("ij,ij->i", W, W)
     small = t2 < 1e-8
     t = np.sqrt(np.where(small, 1.0, t2))
-    a = np.where(small, 1.0 - t2 / 6.0, np.sin(t) / t)
-    b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(t)) / np.where(small, 1.0, t2))
+    sn, cs = sincos(t)  # zswarm/trig.py, as the compiled loop's
+    a = np.where(small, 1.0 - t2 / 6.0, sn / t)
+    b = np.where(small, 0.5 - t2 / 24.0, (1.0 - cs) / np.where(small, 1.0, t2))
     K = np.zeros((W.shape[0], 3, 3))
     K[:, 0, 1] = -W[:, 2]
     K[:, 0, 2] = W[:, 1]

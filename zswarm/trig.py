@@ -22,7 +22,10 @@ from typing import overload
 
 import numpy as np
 
+from zswarm import kernels
+
 LIMIT = 16.0
+_one = getattr(kernels._lib, "sincos1", None)
 PIO2_1, PIO2_2, PIO2_3, PIO2_3T = 1.57079632673412561417e00, 6.07710050630396597660e-11, 2.02226624871116645580e-21, 8.47842766036889956997e-32
 INVPIO2, RND = 6.36619772367581382433e-01, 6755399441055744.0
 S1, S2, S3, S4, S5, S6 = (
@@ -51,6 +54,13 @@ def sincos(x):  # type: ignore[no-untyped-def]
     """``(sin x, cos x)`` of a float, or elementwise of a float64 array."""
     if isinstance(x, np.ndarray):
         return _sincos_array(x)
+    if _one is not None:
+        return _one(x)  # the compiled sincos1: the same bits, a tenth of the time
+    return sincos_py(x)
+
+
+def sincos_py(x: float) -> tuple[float, float]:
+    """:func:`sincos` of a float in Python's arithmetic."""
     x = float(x)
     if not -LIMIT <= x <= LIMIT:
         return (math.sin(x), math.cos(x)) if math.isfinite(x) else (math.nan, math.nan)
@@ -91,5 +101,5 @@ def _lanes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     out = ~((x <= LIMIT) & (x >= -LIMIT))
     if out.any():
         for i in zip(*np.nonzero(out), strict=True):
-            so[i], co[i] = sincos(float(x[i]))
+            so[i], co[i] = sincos_py(float(x[i]))
     return so, co

@@ -55,11 +55,11 @@ def test_within_their_error_of_the_truth():
 def test_beyond_the_limit_is_the_c_library():
     xs = [16.000000000000004, -17.5, 1e3, -123456.789, 1e300]
     for x in xs:
-        assert trig.sincos(x) == (math.sin(x), math.cos(x))
+        assert trig.sincos(x) == (math.sin(x), math.cos(x)) == trig.sincos_py(x)
     s, c = trig.sincos(np.array(xs))
     assert s.tolist() == [math.sin(x) for x in xs] and c.tolist() == [math.cos(x) for x in xs]
     for x in (math.inf, -math.inf, math.nan):
-        assert all(math.isnan(v) for v in trig.sincos(x))
+        assert all(math.isnan(v) for v in trig.sincos(x)) and all(math.isnan(v) for v in trig.sincos_py(x))
         assert all(np.isnan(v[0]) for v in trig.sincos(np.array([x])))
 
 
@@ -71,7 +71,9 @@ def test_compiled_python_and_numpy_give_the_same_bits():
     s, c = np.empty_like(x), np.empty_like(x)
     lib.sincos(x, s, c)
     sn, cn = trig.sincos(x)
-    one = [trig.sincos(float(v)) for v in x[:5000]]
+    one = [trig.sincos_py(float(v)) for v in x[:5000]]
+    assert trig._one is not None, NEEDED
+    assert np.array_equal(_bits(np.array([trig.sincos(float(v)) for v in x[:5000]])), _bits(np.array(one)))  # the compiled one-number call
     assert np.array_equal(np.isnan(s), np.isnan(x) | np.isinf(x))
     fin = np.isfinite(x)
     assert np.array_equal(_bits(s[fin]), _bits(sn[fin])) and np.array_equal(_bits(c[fin]), _bits(cn[fin]))
