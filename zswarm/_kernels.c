@@ -292,6 +292,80 @@ double flow_xi_one(double a0, double b0, double q0, double a1, double b1, double
     return xi;
 }
 
+/* ---- attitude_sync_terms: the prediction of R̄ and the Terms of the potential (4.23), as their numpy code
+ * computes them on a stack of draws (one draw goes the same way as a stack of one). */
+
+/* A^T B (numpy's T(A) @ B: the same chain of fused products over the inner index). */
+static inline void mtm3(const double *a, const double *b, double *c)
+{
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            c[3 * i + k] = fma(a[6 + i], b[6 + k], fma(a[3 + i], b[3 + k], a[i] * b[k]));
+}
+
+/* zswarm/so3.py log_batch of one matrix: its rotation vector into w, 1; 0 when theta >= pi - 1e-4 (so3.log's
+ * branch near pi: the caller does it). */
+static inline int log_mid(const double D[9], double w[3])
+{
+    const double c = (((D[0] + D[4]) + D[8]) - 1.0) * 0.5;
+    const double s[3] = {(D[7] - D[5]) * 0.5, (D[2] - D[6]) * 0.5, (D[3] - D[1]) * 0.5};
+    const double theta = atan2(sqrt((s[0] * s[0] + s[2] * s[2]) + s[1] * s[1]), c);
+    double f;
+    if (theta < 1e-6)
+        f = 1.0 + theta * theta / 6.0;
+    else if (theta < M_PI - 1e-4)
+        f = theta / sin(theta);
+    else
+        return 0;
+    for (int r = 0; r < 3; r++)
+        w[r] = s[r] * f;
+    return 1;
+}
+
+/* attitude_sync_terms.predict for M draws: out = R_now exp(ratio log(R_prev^T R_now)); a draw whose
+ * log is near pi is left as NaN (the caller computes it).  Returns how many were. */
+FMA_CLONES
+long predict(size_t M, const double *Rp, const double *Rn, double ratio, double *out)
+{
+    long left = 0;
+    for (size_t m = 0; m < M; m++) {
+        double D[9], w[3], E[9];
+        mtm3(Rp + 9 * m, Rn + 9 * m, D);
+        if (!log_mid(D, w)) {
+            for (int q = 0; q < 9; q++)
+                out[9 * m + q] = NAN;
+            left++;
+            continue;
+        }
+        for (int r = 0; r < 3; r++)
+            w[r] = ratio * w[r];
+        rodrigues(w, E);
+        mm3(Rn + 9 * m, E, out + 9 * m);
+    }
+    return left;
+}
+
+/* attitude_sync_terms.Terms for M draws of R̄ (M,3,3): with X = A R̄, XK = X K, XK2 = XK K, the row
+ * (psi(X), psi(XK), psi(XK2), tr X, tr XK, tr XK2, u.psi(X), u.psi(XK), u.psi(XK2)) of out (M,15). */
+FMA_CLONES
+void terms(size_t M, const double *A, const double *K, const double *u, const double *R, double *out)
+{
+    for (size_t m = 0; m < M; m++) {
+        double X[3][9];
+        double *o = out + 15 * m;
+        mm3(A, R + 9 * m, X[0]);
+        mm3(X[0], K, X[1]);
+        mm3(X[1], K, X[2]);
+        for (int j = 0; j < 3; j++) {
+            const double *Y = X[j];
+            const double p0 = (Y[7] - Y[5]) * 0.5, p1 = (Y[2] - Y[6]) * 0.5, p2 = (Y[3] - Y[1]) * 0.5;
+            o[3 * j] = p0, o[3 * j + 1] = p1, o[3 * j + 2] = p2;
+            o[9 + j] = (Y[0] + Y[4]) + Y[8];
+            o[12 + j] = fma(p2, u[2], fma(p1, u[1], p0 * u[0]));
+        }
+    }
+}
+
 /* (k_Q h_i, zeta') of agent_sync_velocity_free _Rates for one draw: Z = Ra(zeta, u) from K = [u]^x and
  * K2 = K K, p = psi((A Qt) Z), k_Q Z p and -k_zeta (gamma zeta + p . 2u), the products Z p and p . 2u
  * summed (x0 y0 + x1 y1) + x2 y2. */
@@ -492,6 +566,46 @@ static PyObject *py_flow_xi_one(PyObject *Py_UNUSED(self), PyObject *const *a, P
     return PyFloat_FromDouble(flow_xi_one(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], n));
 }
 
+/* predict(R_prev (M,3,3), R_now (M,3,3), ratio, out (M,3,3) out) -> draws left (near pi) */
+static PyObject *py_predict(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    Bufs B = {.n = 0};
+    double ratio;
+    if (want_nargs(nargs, 4, "predict") < 0 || doubles(a, 2, 1, &ratio) < 0)
+        return NULL;
+    const Py_ssize_t n = take(&B, a[1], F64, 0, "R_now");
+    if (n < 0 || n % 9 || take(&B, a[0], F64, 0, "R_prev") < 0 || want_items(&B.b[1], n, "R_prev") < 0 || take(&B, a[3], F64, 1, "out") < 0 ||
+        want_items(&B.b[2], n, "out") < 0) {
+        if (n >= 0 && n % 9 && !PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "R_now: not a stack of 3x3 matrices");
+        release_all(&B);
+        return NULL;
+    }
+    const long left = predict((size_t)(n / 9), D(1), D(0), ratio, D(2));
+    release_all(&B);
+    return PyLong_FromLong(left);
+}
+
+/* terms(A (3,3), K (3,3), u (3), R (M,3,3), out (M,15) out) */
+static PyObject *py_terms(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    Bufs B = {.n = 0};
+    if (want_nargs(nargs, 5, "terms") < 0)
+        return NULL;
+    Py_ssize_t n = -1;
+    if (take(&B, a[0], F64, 0, "A") < 0 || want_items(&B.b[0], 9, "A") < 0 || take(&B, a[1], F64, 0, "K") < 0 || want_items(&B.b[1], 9, "K") < 0 ||
+        take(&B, a[2], F64, 0, "u") < 0 || want_items(&B.b[2], 3, "u") < 0 || (n = take(&B, a[3], F64, 0, "R")) < 0 || n % 9 ||
+        take(&B, a[4], F64, 1, "out") < 0 || want_items(&B.b[4], n / 9 * 15, "out") < 0) {
+        if (n >= 0 && n % 9 && !PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "R: not a stack of 3x3 matrices");
+        release_all(&B);
+        return NULL;
+    }
+    terms((size_t)(n / 9), D(0), D(1), D(2), D(3), D(4));
+    release_all(&B);
+    Py_RETURN_NONE;
+}
+
 /* sincos1(x) -> (sin x, cos x): sincos of one number (zswarm/trig.py sincos of a float). */
 static PyObject *py_sincos1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
 {
@@ -580,6 +694,8 @@ static PyObject *py_flow_aux(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
+    {"predict", (PyCFunction)(void (*)(void))py_predict, METH_FASTCALL, "predict(R_prev, R_now, ratio, out) -> left: R_now exp(ratio log(R_prev^T R_now)) of M draws (NaN and counted near pi)."},
+    {"terms", (PyCFunction)(void (*)(void))py_terms, METH_FASTCALL, "terms(A, K, u, R, out): the Terms of M draws of R (attitude_sync_terms), rows of 15."},
     {"sincos1", (PyCFunction)(void (*)(void))py_sincos1, METH_FASTCALL, "sincos1(x) -> (sin x, cos x) (zswarm/trig.py)."},
     {"sincos", (PyCFunction)(void (*)(void))py_sincos, METH_FASTCALL, "sincos(x, s, c): sin and cos of each x into s and c (zswarm/trig.py)."},
     {"flow_xi", (PyCFunction)(void (*)(void))py_flow_xi, METH_FASTCALL, "flow_xi(a0, b0, q0, a1, b1, q1, x, dt, k_xi, gamma, n): Heun sub-steps of (5.21) for M draws, x in place."},

@@ -1,7 +1,8 @@
 """zswarm's compiled loops (zswarm/_kernels.c), for the hot spots that the batched engine's
 profile shows and numpy cannot make cheap: the rigid-body step of every body and world step,
-Rodrigues' formula on stacks, the ξ_k filter's Heun sub-steps and the velocity-free law's
-(Q_i, ζ_i) filter (agent/batched.py, issue 31).
+Rodrigues' formula on stacks, the ξ_k filter's Heun sub-steps, the velocity-free law's
+(Q_i, ζ_i) filter, and the Chapter 5 laws' R̄ prediction and potential Terms (agent/batched.py,
+issue 31).
 
 Each does the operations of the numpy or Python code it replaces in the same order, so the
 numbers are the same with or without it (tests/unit/test_kernels.py checks it bit for bit,
@@ -48,6 +49,8 @@ exp_batch: Callable[[np.ndarray], np.ndarray] | None = None
 rigid_step: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]] | None = None
 flow_xi: Callable[..., Any] | None = None
 flow_aux: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
+predict: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None
+terms: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
 
 if _lib is not None:
     lib: Any = _lib
@@ -88,4 +91,19 @@ if _lib is not None:
         lib.flow_aux(Q_out, z_out, tab, r, h, _f64(A, (3, 3)), _f64(K, (3, 3)), _f64(K2, (3, 3)), _f64(u2, (3,)), k_Q, k_zeta, gamma)
         return Q_out, z_out
 
-    exp_batch, rigid_step, flow_xi, flow_aux = _exp_batch, _rigid_step, _flow_xi, _flow_aux
+    def _predict(R_prev: np.ndarray, R_now: np.ndarray, ratio: float) -> np.ndarray:
+        """attitude_sync_terms.predict of M draws (stacks (M, 3, 3)): a new array, NaN for a draw
+        whose log(R_prev^T R_now) is near π (the caller's numpy does those)."""
+        shape = R_now.shape
+        out = np.empty(shape)
+        lib.predict(_f64(R_prev, shape), _f64(R_now, shape), ratio, out)
+        return out
+
+    def _terms(A: np.ndarray, K: np.ndarray, u: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """attitude_sync_terms.Terms of M draws of R̄ (M, 3, 3): rows (ψ(X), ψ(XK), ψ(XK²),
+        tr X, tr XK, tr XK², u·ψ(X), u·ψ(XK), u·ψ(XK²)), X = A R̄, (M, 15)."""
+        out = np.empty((R.shape[0], 15))
+        lib.terms(_f64(A, (3, 3)), _f64(K, (3, 3)), _f64(u, (3,)), _f64(R, R.shape), out)
+        return out
+
+    exp_batch, rigid_step, flow_xi, flow_aux, predict, terms = _exp_batch, _rigid_step, _flow_xi, _flow_aux, _predict, _terms

@@ -61,7 +61,7 @@ import numpy as np
 
 from zswarm import kernels
 from zswarm.algorithm import Field, View, number
-from zswarm.so3 import Mat3, T, Vec3, exp, hat, log, psi, trace
+from zswarm.so3 import Mat3, T, Vec3, exp, exp_batch, hat, log, log_batch, psi, trace
 from zswarm.trig import sincos
 
 
@@ -132,16 +132,25 @@ class Terms:
 
     def __init__(self, A: Mat3, u: Vec3, R_bar: Mat3) -> None:
         K, K2, trA = _geometry(A, u)
-        M = A @ R_bar
-        MK = M @ K
-        MK2 = MK @ K
-        self.p0, self.p1, self.p2 = psi(M), psi(MK), psi(MK2)
-        if R_bar.ndim == 2:
-            self.t0, self.t1, self.t2 = float(M.trace()), float(MK.trace()), float(MK2.trace())
-            self.abc = (float(u @ self.p0), float(u @ self.p1), float(u @ self.p2))
+        one = R_bar.ndim == 2
+        R = R_bar[None] if one else R_bar  # one draw goes the way of a stack of one: the same numbers
+        if kernels.terms is not None:
+            o = kernels.terms(A, K, u, R)  # the lines below, compiled (zswarm/_kernels.c)
         else:
-            self.t0, self.t1, self.t2 = trace(M), trace(MK), trace(MK2)
-            self.abc = (self.p0 @ u, self.p1 @ u, self.p2 @ u)
+            M = A @ R
+            MK = M @ K
+            MK2 = MK @ K
+            p = (psi(M), psi(MK), psi(MK2))
+            o = np.concatenate([*p, *(trace(X)[:, None] for X in (M, MK, MK2)), *((q @ u)[:, None] for q in p)], axis=1)
+        if one:
+            r = o[0]
+            self.p0, self.p1, self.p2 = r[0:3], r[3:6], r[6:9]
+            self.t0, self.t1, self.t2 = float(r[9]), float(r[10]), float(r[11])
+            self.abc = (float(r[12]), float(r[13]), float(r[14]))
+        else:
+            self.p0, self.p1, self.p2 = o[:, 0:3], o[:, 3:6], o[:, 6:9]
+            self.t0, self.t1, self.t2 = o[:, 9], o[:, 10], o[:, 11]
+            self.abc = (o[:, 12], o[:, 13], o[:, 14])
         self.K, self.K2, self.trA = K, K2, trA
 
     def U(self, xi: float, gamma: float) -> float:
@@ -274,10 +283,25 @@ def jump(A: Mat3, u: Vec3, gamma: float, delta: float, S: tuple[float, ...], R_b
 def predict(R_prev: Mat3 | None, R_now: Mat3, dt: float, lead: float) -> Mat3:
     """R̄ ``lead`` seconds after its newest measurement, on the geodesic through the last two
     (``dt`` apart): ``R̄ exp((lead/dt) log(R̄_prev^T R̄))`` (first order in the rate).
-    Broadcasts over stacks (M, 3, 3)."""
+    Broadcasts over stacks (M, 3, 3); one draw goes the way of a stack of one, compiled
+    (zswarm/_kernels.c) or in numpy: the same numbers."""
     if R_prev is None or dt <= 0 or lead <= 0:
         return R_now
-    return R_now @ exp((lead / dt) * log(T(R_prev) @ R_now))
+    one = R_now.ndim == 2
+    Rp, Rn = (R_prev[None], R_now[None]) if one else (np.broadcast_to(R_prev, R_now.shape), R_now)
+    ratio = lead / dt
+    if kernels.predict is not None:
+        out = kernels.predict(Rp, Rn, ratio)
+        near_pi = np.isnan(out[:, 0, 0])  # left to numpy (so3.log's branch near π)
+        if near_pi.any():
+            out[near_pi] = _predict(Rp[near_pi], Rn[near_pi], ratio)
+    else:
+        out = _predict(Rp, Rn, ratio)
+    return out[0] if one else out
+
+
+def _predict(Rp: np.ndarray, Rn: np.ndarray, ratio: float) -> np.ndarray:
+    return Rn @ exp_batch(ratio * log_batch(T(Rp) @ Rn, libm=True))
 
 
 def published_xi(view: View, xi: Mapping[int, float]) -> dict[int, dict[str, Any]]:

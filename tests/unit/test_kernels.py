@@ -116,6 +116,10 @@ def test_the_module_refuses_arrays_it_cannot_read():
         (ValueError, lambda: k.exp_batch(np.zeros(4), np.empty((2, 3, 3)))),  # not a stack of 3-vectors
         (ValueError, lambda: k.flow_xi(*([np.zeros(3)] * 5), np.zeros(2), np.zeros(3), 1e-2, 20.0, 1.9, 4)),  # a coefficient of 2 draws for 3
         (ValueError, lambda: k.flow_xi_one(*([0.0] * 10), -1)),  # a negative sub-step count
+        (ValueError, lambda: k.predict(np.zeros((2, 3, 3)), np.zeros((3, 3, 3)), 0.5, np.empty((3, 3, 3)))),  # 2 draws for 3
+        (ValueError, lambda: k.predict(np.zeros(8), np.zeros(8), 0.5, np.empty(8))),  # not 3x3 matrices
+        (ValueError, lambda: k.terms(np.eye(3), np.eye(3), np.zeros(3), np.zeros((2, 3, 3)), np.empty((2, 14)))),  # rows of 14
+        (TypeError, lambda: k.terms(np.eye(3), np.eye(3), np.zeros(3, dtype=np.float32), np.zeros((2, 3, 3)), np.empty((2, 15)))),
         (IndexError, lambda: k.flow_aux(np.tile(np.eye(3), (2, 1, 1)), np.zeros(2), np.zeros((2, 2, 3)), np.array([0, 2]), 1e-3, *([np.eye(3)] * 3), np.zeros(3), 1.0, 1.0, 1.0)),
         (TypeError, lambda: k.flow_aux(np.tile(np.eye(3), (2, 1, 1)), np.zeros(2), np.zeros((2, 2, 3)), np.array([0.0, 1.0]), 1e-3, *([np.eye(3)] * 3), np.zeros(3), 1.0, 1.0, 1.0)),  # float rows
     ]
@@ -126,3 +130,50 @@ def test_the_module_refuses_arrays_it_cannot_read():
         ro = np.empty_like(w)
         ro.flags.writeable = False
         k.rigid_step(R, w, J, tau, 1e-3, Ro, ro)
+
+
+def _pairs(rng: np.random.Generator, M: int) -> tuple[np.ndarray, np.ndarray]:
+    """R̄ at two steps: changes of every size (the small-angle branch of log, ordinary ones,
+    near and at π, where numpy takes over)."""
+    scale = np.concatenate([np.full(M // 4, 1e-8), np.full(M // 4, 1e-3), np.full(M // 4, 0.5), np.full(M - 3 * (M // 4), 2.0)])
+    R_prev = exp_batch(rng.normal(size=(M, 3)) * 2.0)
+    R_now = R_prev @ exp_batch(rng.normal(size=(M, 3)) * scale[:, None])
+    axis = rng.normal(size=(3, 3))
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    R_now[-3:] = R_prev[-3:] @ exp_batch(axis * np.array([np.pi, np.pi - 2e-5, np.pi - 1e-3])[:, None])
+    return R_prev, R_now
+
+
+def test_predict_is_the_numpy_predict(monkeypatch):
+    """R̄ predicted half a step ahead (attitude_sync_terms.predict): compiled or numpy, a stack
+    or each draw alone (sim's path), the same bits; near π numpy's branch for those draws."""
+    assert kernels.predict is not None, NEEDED
+    R_prev, R_now = _pairs(np.random.default_rng(13), 400)
+    raw = kernels.predict(R_prev, R_now, 0.5)
+    assert np.isnan(raw[-3:-1, 0, 0]).all() and np.isfinite(raw[:-3]).all() and np.isfinite(raw[-1]).all()  # π and π − 2e-5 are numpy's
+    fast = terms.predict(R_prev, R_now, 0.01, 0.005)
+    one = [terms.predict(R_prev[m], R_now[m], 0.01, 0.005) for m in range(len(R_now))]
+    monkeypatch.setattr(kernels, "predict", None)
+    slow = terms.predict(R_prev, R_now, 0.01, 0.005)
+    assert np.array_equal(fast, slow) and np.array_equal(np.array(one), fast)
+    assert np.all(np.isfinite(fast)) and not np.array_equal(fast, R_now)
+
+
+def test_terms_are_the_numpy_terms(monkeypatch):
+    assert kernels.terms is not None, NEEDED
+    _, R = _pairs(np.random.default_rng(17), 300)
+    A, u = np.diag([5.0, 8.57, 12.0]), np.array([0.0, 0.6455, 0.7638]) / np.linalg.norm([0.0, 0.6455, 0.7638])
+    fields = ("p0", "p1", "p2", "t0", "t1", "t2")
+
+    def every(t: terms.Terms) -> list[np.ndarray]:
+        return [np.asarray(getattr(t, f)) for f in fields] + [np.asarray(x) for x in t.abc]
+
+    fast = every(terms.Terms(A, u, R))
+    one = [every(terms.Terms(A, u, R[m])) for m in range(len(R))]
+    monkeypatch.setattr(kernels, "terms", None)
+    slow = every(terms.Terms(A, u, R))
+    slow_one = [every(terms.Terms(A, u, R[m])) for m in range(len(R))]
+    for n in range(len(fast)):
+        assert np.array_equal(fast[n], slow[n])
+        assert np.array_equal(np.array([o[n] for o in one]), fast[n]) and np.array_equal(np.array([o[n] for o in slow_one]), fast[n])
+    assert isinstance(terms.Terms(A, u, R[0]).t0, float) and isinstance(terms.Terms(A, u, R[0]).abc[0], float)
