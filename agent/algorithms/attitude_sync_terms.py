@@ -61,7 +61,7 @@ import numpy as np
 
 from zswarm import kernels
 from zswarm.algorithm import Field, View, number
-from zswarm.so3 import Mat3, T, Vec3, exp, exp_batch, hat, log, log_batch, psi, trace
+from zswarm.so3 import Mat3, T, Vec3, exp_batch, hat, log_batch, psi, trace
 from zswarm.trig import sincos
 
 
