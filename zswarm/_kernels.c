@@ -17,8 +17,10 @@
  *    sub-steps for each of M draws, with sin and cos of zswarm/trig.py (sincos4 below: 4 draws at once).
  *  - sincos: zswarm/trig.py sincos.
  *  - flow_aux: the velocity-free law's (Q_i, zeta_i) filter (attitude_sync_velocity_free.py), Heun's
- *    method on SO(3) x R in n sub-steps for each of M draws.  Python's float arithmetic and numpy's ufuncs round every
- *    operation; sin and cos are the C library's there, as Python's math and numpy call them.
+ *    method on SO(3) x R in n sub-steps for each of M draws, four at a time.
+ *  - predict, terms: attitude_sync_terms.predict and Terms.
+ *  Python's float arithmetic and numpy's ufuncs round every operation; sin and cos are zswarm/trig.py's
+ *  (sincos4), but for the few that numpy's code takes from the C library (atan2 and sin in log).
  *
  * Built with -ffp-contract=off: the compiler must not fuse a*b + c on its own (that would
  * change the last bit against numpy); the fused products above are written out as fma().
@@ -366,19 +368,20 @@ void terms(size_t M, const double *A, const double *K, const double *u, const do
     }
 }
 
-/* (k_Q h_i, zeta') of agent_sync_velocity_free _Rates for one draw: Z = Ra(zeta, u) from K = [u]^x and
- * K2 = K K, p = psi((A Qt) Z), k_Q Z p and -k_zeta (gamma zeta + p . 2u), the products Z p and p . 2u
- * summed (x0 y0 + x1 y1) + x2 y2. */
-static inline void aux_rates(const double Qt[9], double z, const double A[9], const double K[9], const double K2[9], const double u2[3], double k_Q,
-                             double nk_zeta, double gamma, double kh[3], double *zd)
+/* (k_Q h_i, zeta') of attitude_sync_velocity_free _Rates for four draws: Z = Ra(zeta, u) from K = [u]^x and
+ * K2 = K K (sin and cos by sincos4), p = psi((A Qt) Z), k_Q Z p and -k_zeta (gamma zeta + p . 2u), the products
+ * Z p and p . 2u summed (x0 y0 + x1 y1) + x2 y2. */
+static inline __attribute__((always_inline)) void aux_rates4(const v4d Qt[9], v4d z, const v4d A[9], const double K[9], const double K2[9],
+                                                             const double u2[3], double k_Q, double nk_zeta, double gamma, v4d kh[3], v4d *zd)
 {
-    const double s = sin(z), c = 1.0 - cos(z);
-    double Z[9], X[9], Y[9];
+    v4d s, c, Z[9], X[9], Y[9];
+    sincos4(z, &s, &c);
+    c = 1.0 - c;
     for (int q = 0; q < 9; q++)
         Z[q] = ((q % 4 == 0 ? 1.0 : 0.0) + s * K[q]) + c * K2[q];
-    mm3(A, Qt, X);
-    mm3(X, Z, Y);
-    const double p0 = (Y[7] - Y[5]) * 0.5, p1 = (Y[2] - Y[6]) * 0.5, p2 = (Y[3] - Y[1]) * 0.5;
+    mm3_4(A, Qt, X);
+    mm3_4(X, Z, Y);
+    const v4d p0 = (Y[7] - Y[5]) * 0.5, p1 = (Y[2] - Y[6]) * 0.5, p2 = (Y[3] - Y[1]) * 0.5;
     for (int r = 0; r < 3; r++)
         kh[r] = k_Q * ((Z[3 * r] * p0 + Z[3 * r + 1] * p1) + Z[3 * r + 2] * p2);
     *zd = nk_zeta * (gamma * z + ((p0 * u2[0] + p1 * u2[1]) + p2 * u2[2]));
@@ -386,35 +389,53 @@ static inline void aux_rates(const double Qt[9], double z, const double A[9], co
 
 /* agent/algorithms/attitude_sync_velocity_free.py flow_aux's sub-steps for M draws: Heun's method on
  * (Qt, zeta) (thesis (5.14), (5.23)), Qt (M,3,3) and zeta (M) advanced in place by n sub-steps of h;
- * sub-step m reads the body rate table[rows[m]] (table (rows, M, 3)). */
-FMA_CLONES
+ * sub-step m reads the body rate table[rows[m]] (table (rows, M, 3)).  Four draws at a time (the last
+ * block padded with its first draw); the rates after the last sub-step, which nothing reads, are not
+ * computed. */
+V3_CLONES
 void flow_aux(size_t M, long n, double *Qt_all, double *z_all, const double *table, const int64_t *rows, double h, const double *A, const double *K,
               const double *K2, const double *u2, double k_Q, double k_zeta, double gamma)
 {
     const double hh = 0.5 * h, nk = -k_zeta;
-    for (size_t m = 0; m < M; m++) {
-        double *Qt = Qt_all + 9 * m;
-        double z = z_all[m], z1, z2, kh1[3], kh2[3], v1[3], W[3], E[9], Q1[9], Qn[9];
-        aux_rates(Qt, z, A, K, K2, u2, k_Q, nk, gamma, kh1, &z1);
+    v4d Av[9];
+    for (int q = 0; q < 9; q++)
+        Av[q] = (v4d){A[q], A[q], A[q], A[q]};
+    for (size_t m0 = 0; m0 < M; m0 += 4) {
+        size_t lane[4];
+        v4d Qt[9], z, z1, z2, kh1[3], kh2[3], w[3], v1[3], W[3], E[9], Q1[9];
+        for (int l = 0; l < 4; l++) {
+            lane[l] = m0 + l < M ? m0 + l : m0;
+            for (int q = 0; q < 9; q++)
+                Qt[q][l] = Qt_all[9 * lane[l] + q];
+            z[l] = z_all[lane[l]];
+        }
+        aux_rates4(Qt, z, Av, K, K2, u2, k_Q, nk, gamma, kh1, &z1);
         for (long k = 0; k < n; k++) {
-            const double *w = table + 3 * ((size_t)rows[k] * M + m);
+            for (int l = 0; l < 4; l++)
+                for (int r = 0; r < 3; r++)
+                    w[r][l] = table[3 * ((size_t)rows[k] * M + lane[l]) + r];
             for (int r = 0; r < 3; r++) {
                 v1[r] = w[r] - kh1[r];
                 W[r] = h * v1[r];
             }
-            rodrigues(W, E);
-            mm3(Qt, E, Q1);
-            aux_rates(Q1, z + h * z1, A, K, K2, u2, k_Q, nk, gamma, kh2, &z2);
+            rodrigues4(W, E);
+            mm3_4(Qt, E, Q1);
+            aux_rates4(Q1, z + h * z1, Av, K, K2, u2, k_Q, nk, gamma, kh2, &z2);
             for (int r = 0; r < 3; r++)
                 W[r] = hh * ((v1[r] + w[r]) - kh2[r]);
-            rodrigues(W, E);
-            mm3(Qt, E, Qn);
+            rodrigues4(W, E);
+            mm3_4(Qt, E, Q1);
             for (int q = 0; q < 9; q++)
-                Qt[q] = Qn[q];
+                Qt[q] = Q1[q];
             z = z + hh * (z1 + z2);
-            aux_rates(Qt, z, A, K, K2, u2, k_Q, nk, gamma, kh1, &z1);
+            if (k + 1 < n)
+                aux_rates4(Qt, z, Av, K, K2, u2, k_Q, nk, gamma, kh1, &z1);
         }
-        z_all[m] = z;
+        for (int l = 0; l < 4 && m0 + l < M; l++) {
+            for (int q = 0; q < 9; q++)
+                Qt_all[9 * (m0 + l) + q] = Qt[q][l];
+            z_all[m0 + l] = z[l];
+        }
     }
 }
 

@@ -12,6 +12,8 @@ command-line override is at fault).
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Mapping
 from typing import Any, TypeVar
 
@@ -63,6 +65,10 @@ class _Ctx:
 
     def num(self, v: Any, fld: str, *, positive: bool = False, nonneg: bool = False, maxv: float | None = None, minv: float | None = None) -> float:
         """A finite number within the bounds, worded as the schema words them (zswarm.schema.Bounds)."""
+        if (type(v) is float or type(v) is int) and not (positive or nonneg) and maxv is None and minv is None:
+            x = float(v)
+            if math.isfinite(x):  # the common case, without building a Bounds (a basin loads thousands of numbers a second)
+                return x
         problem = Bounds(positive=positive, nonneg=nonneg, maxv=maxv, minv=minv).problem(v)
         if problem is not None:
             raise self.err(fld, problem, v)

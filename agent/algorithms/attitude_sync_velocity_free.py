@@ -46,6 +46,7 @@ from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Ter
 from zswarm import hybrid, kernels
 from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Ra, T, Vec3, exp, hat, log, psi
+from zswarm.trig import sincos
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
 
@@ -130,7 +131,8 @@ class _Rates:
         """``(k_Q h_i, ζ̇)`` of M draws, Q̃ (M, 3, 3) and ζ (M,): Q̃̇ = Q̃ [ω_i − k_Q h_i]^x
         (5.14), equivalent to (5.22) for Q_i, and (5.23).  The operations of
         zswarm/_kernels.c's flow_aux, in its order."""
-        Z = _EYE + np.sin(zeta)[:, None, None] * self.K + (1.0 - np.cos(zeta))[:, None, None] * self.K2
+        sn, cs = sincos(zeta)  # zswarm/trig.py, as the compiled loop's
+        Z = _EYE + sn[:, None, None] * self.K + (1.0 - cs)[:, None, None] * self.K2
         p = psi(self.A @ Qt @ Z)
         return self.k_Q * _mv(Z, p), -self.k_zeta * (self.gamma * zeta + _dot(p, self.u2))
 
