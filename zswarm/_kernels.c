@@ -324,6 +324,19 @@ static inline int log_mid(const double D[9], double w[3])
     return 1;
 }
 
+/* zswarm/so3.py log_batch of M matrices R (M,3,3) into w (M,3); a matrix near pi is left as NaN (the caller does
+ * it).  Returns how many were. */
+long log_stack(size_t M, const double *R, double *w)
+{
+    long left = 0;
+    for (size_t m = 0; m < M; m++)
+        if (!log_mid(R + 9 * m, w + 3 * m)) {
+            w[3 * m] = w[3 * m + 1] = w[3 * m + 2] = NAN;
+            left++;
+        }
+    return left;
+}
+
 /* attitude_sync_terms.predict for M draws: out = R_now exp(ratio log(R_prev^T R_now)); a draw whose
  * log is near pi is left as NaN (the caller computes it).  Returns how many were. */
 FMA_CLONES
@@ -607,6 +620,24 @@ static PyObject *py_predict(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ss
     return PyLong_FromLong(left);
 }
 
+/* log_stack(R (M,3,3), w (M,3) out) -> matrices left (near pi) */
+static PyObject *py_log_stack(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    Bufs B = {.n = 0};
+    if (want_nargs(nargs, 2, "log_stack") < 0)
+        return NULL;
+    const Py_ssize_t n = take(&B, a[0], F64, 0, "R");
+    if (n < 0 || n % 9 || take(&B, a[1], F64, 1, "w") < 0 || want_items(&B.b[1], n / 3, "w") < 0) {
+        if (n >= 0 && n % 9 && !PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "R: not a stack of 3x3 matrices");
+        release_all(&B);
+        return NULL;
+    }
+    const long left = log_stack((size_t)(n / 9), D(0), D(1));
+    release_all(&B);
+    return PyLong_FromLong(left);
+}
+
 /* terms(A (3,3), K (3,3), u (3), R (M,3,3), out (M,15) out) */
 static PyObject *py_terms(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
 {
@@ -716,6 +747,7 @@ static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
     {"predict", (PyCFunction)(void (*)(void))py_predict, METH_FASTCALL, "predict(R_prev, R_now, ratio, out) -> left: R_now exp(ratio log(R_prev^T R_now)) of M draws (NaN and counted near pi)."},
+    {"log_stack", (PyCFunction)(void (*)(void))py_log_stack, METH_FASTCALL, "log_stack(R, w) -> left: so3.log_batch of M matrices (NaN and counted near pi)."},
     {"terms", (PyCFunction)(void (*)(void))py_terms, METH_FASTCALL, "terms(A, K, u, R, out): the Terms of M draws of R (attitude_sync_terms), rows of 15."},
     {"sincos1", (PyCFunction)(void (*)(void))py_sincos1, METH_FASTCALL, "sincos1(x) -> (sin x, cos x) (zswarm/trig.py)."},
     {"sincos", (PyCFunction)(void (*)(void))py_sincos, METH_FASTCALL, "sincos(x, s, c): sin and cos of each x into s and c (zswarm/trig.py)."},

@@ -50,6 +50,7 @@ rigid_step: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float], tu
 flow_xi: Callable[..., Any] | None = None
 flow_aux: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
 predict: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None
+log_stack: Callable[[np.ndarray], np.ndarray] | None = None
 terms: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
 
 if _lib is not None:
@@ -99,6 +100,13 @@ if _lib is not None:
         lib.predict(_f64(R_prev, shape), _f64(R_now, shape), ratio, out)
         return out
 
+    def _log_stack(R: np.ndarray) -> np.ndarray:
+        """zswarm.so3.log_batch of a stack (M, 3, 3): (M, 3), NaN for a matrix near a half turn
+        (the caller's numpy does those)."""
+        out = np.empty((R.shape[0], 3))
+        lib.log_stack(_f64(R, R.shape), out)
+        return out
+
     def _terms(A: np.ndarray, K: np.ndarray, u: np.ndarray, R: np.ndarray) -> np.ndarray:
         """attitude_sync_terms.Terms of M draws of R̄ (M, 3, 3): rows (ψ(X), ψ(XK), ψ(XK²),
         tr X, tr XK, tr XK², u·ψ(X), u·ψ(XK), u·ψ(XK²)), X = A R̄, (M, 15)."""
@@ -106,4 +114,4 @@ if _lib is not None:
         lib.terms(_f64(A, (3, 3)), _f64(K, (3, 3)), _f64(u, (3,)), _f64(R, R.shape), out)
         return out
 
-    exp_batch, rigid_step, flow_xi, flow_aux, predict, terms = _exp_batch, _rigid_step, _flow_xi, _flow_aux, _predict, _terms
+    exp_batch, rigid_step, flow_xi, flow_aux, predict, terms, log_stack = _exp_batch, _rigid_step, _flow_xi, _flow_aux, _predict, _terms, _log_stack

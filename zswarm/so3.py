@@ -147,10 +147,16 @@ def log(R: Mat3) -> Vec3:
 
     Near ``theta = pi`` the antisymmetric part vanishes, so the axis is taken
     from the symmetric part ``(R + I)/2 = v v^T`` instead.  A stack (..., 3, 3) gives
-    (..., 3) (:func:`log_batch`, the same branches).
+    (..., 3); one matrix goes the way of a stack of one (:func:`log_batch`), so that sim's
+    one draw and the batched engine's stack do the same arithmetic.
     """
     if R.ndim > 2:
         return log_batch(R.reshape(-1, 3, 3)).reshape(R.shape[:-2] + (3,))
+    return log_batch(np.asarray(R, dtype=np.float64)[None])[0]
+
+
+def _log_near_pi(R: Mat3) -> Vec3:
+    """:func:`log` of one matrix, with its branch near π."""
     c = (float(np.trace(R)) - 1.0) * 0.5
     s = psi(R)  # = sin(theta) * v
     # atan2, not acos: near theta = pi, acos(c) loses half the digits (an error
@@ -160,7 +166,9 @@ def log(R: Mat3) -> Vec3:
         return s * (1.0 + theta * theta / 6.0)
     if theta < math.pi - 1e-4:
         return s * (theta / math.sin(theta))
-    B = 0.5 * (R + _EYE)
+    # The symmetric part: (R_s + I)/2 = cos²(θ/2) I + sin²(θ/2) v v^T.  R's skew part, sin θ [v]^x,
+    # is not zero this near π (up to 1e-4): left in, it turned the axis by up to ~1e-5 rad.
+    B = 0.5 * (0.5 * (R + R.T) + _EYE)
     k = int(np.argmax(np.diag(B)))
     v = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
     v = v / np.linalg.norm(v)
@@ -169,21 +177,26 @@ def log(R: Mat3) -> Vec3:
     return theta * v
 
 
-def log_batch(R: NDArray[np.float64], libm: bool = False) -> NDArray[np.float64]:
-    """:func:`log` of each of a stack (n, 3, 3) -> (n, 3): its branches, element by element.
-    ``libm``: θ by the C library's atan2 (math.atan2, as the compiled loops call it) instead of
-    numpy's own (which differs in the last bit for ~3 % of arguments)."""
-    c = (trace(R) - 1.0) * 0.5
-    s = psi(R)
-    r = np.sqrt(np.einsum("ij,ij->i", s, s))
-    theta = np.fromiter(map(math.atan2, r.tolist(), c.tolist()), float, len(r)) if libm else np.arctan2(r, c)
-    small = theta < 1e-6
-    mid = ~small & (theta < math.pi - 1e-4)
-    out = np.empty_like(s)
-    out[small] = s[small] * (1.0 + theta[small, None] ** 2 / 6.0)
-    out[mid] = s[mid] * (theta[mid] / np.sin(theta[mid]))[:, None]
-    for n in np.flatnonzero(~small & ~mid):  # near π: rare, each as log does it
-        out[n] = log(R[n])
+def log_batch(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`log` of each of a stack (n, 3, 3) -> (n, 3): its branches, element by element,
+    θ by the C library's atan2 (math.atan2, as the compiled loop calls it; numpy's own differs
+    in the last bit for ~3 % of arguments)."""
+    if kernels.log_stack is not None:  # the lines below, compiled (zswarm/_kernels.c): the same numbers
+        out = kernels.log_stack(R)
+        near_pi = np.isnan(out[:, 0])
+    else:
+        c = (trace(R) - 1.0) * 0.5
+        s = psi(R)
+        r = np.sqrt(np.einsum("ij,ij->i", s, s))
+        theta = np.fromiter(map(math.atan2, r.tolist(), c.tolist()), float, len(r))
+        small = theta < 1e-6
+        mid = ~small & (theta < math.pi - 1e-4)
+        out = np.empty_like(s)
+        out[small] = s[small] * (1.0 + theta[small, None] ** 2 / 6.0)
+        out[mid] = s[mid] * (theta[mid] / np.sin(theta[mid]))[:, None]
+        near_pi = ~small & ~mid
+    for n in np.flatnonzero(near_pi):  # near π: rare, each on its own
+        out[n] = _log_near_pi(R[n])
     return out
 
 

@@ -301,7 +301,7 @@ def predict(R_prev: Mat3 | None, R_now: Mat3, dt: float, lead: float) -> Mat3:
 
 
 def _predict(Rp: np.ndarray, Rn: np.ndarray, ratio: float) -> np.ndarray:
-    return Rn @ exp_batch(ratio * log_batch(T(Rp) @ Rn, libm=True))
+    return Rn @ exp_batch(ratio * log_batch(T(Rp) @ Rn))
 
 
 def published_xi(view: View, xi: Mapping[int, float]) -> dict[int, dict[str, Any]]:

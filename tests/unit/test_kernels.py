@@ -16,7 +16,7 @@ from agent.algorithms import attitude_sync_terms as terms
 from agent.algorithms import attitude_sync_velocity_free as vf
 from world.dynamics import RigidBodies
 from zswarm import kernels
-from zswarm.so3 import exp_batch
+from zswarm.so3 import exp_batch, log
 
 NEEDED = "zswarm._kernels was not built (no C compiler at install?): pip install -e . with gcc"
 
@@ -177,3 +177,22 @@ def test_terms_are_the_numpy_terms(monkeypatch):
         assert np.array_equal(fast[n], slow[n])
         assert np.array_equal(np.array([o[n] for o in one]), fast[n]) and np.array_equal(np.array([o[n] for o in slow_one]), fast[n])
     assert isinstance(terms.Terms(A, u, R[0]).t0, float) and isinstance(terms.Terms(A, u, R[0]).abc[0], float)
+
+
+def test_log_is_the_numpy_log(monkeypatch):
+    """so3.log of a stack or of one matrix (sim's path): compiled or numpy, the same bits, the
+    branches near 0, in between and near π (numpy's, for those matrices) all taken."""
+    assert kernels.log_stack is not None, NEEDED
+    R_prev, R_now = _pairs(np.random.default_rng(19), 400)
+    R = np.swapaxes(R_prev, -1, -2) @ R_now
+    raw = kernels.log_stack(R)
+    assert np.isnan(raw[-3:-1, 0]).all() and np.isfinite(raw[:-3]).all()
+    fast = log(R)
+    one = [log(R[m]) for m in range(len(R))]
+    monkeypatch.setattr(kernels, "log_stack", None)
+    slow = log(R)
+    assert np.array_equal(fast, slow) and np.array_equal(np.array(one), fast)
+    # exp undoes log: to round-off, but near π, where the axis comes from the symmetric part,
+    # (R_s + I)/2 = cos²(θ/2) I + sin²(θ/2) v v^T: the first term tilts it by up to
+    # cot²(θ/2) ≈ (π − θ)²/4 <= 2.5e-9 for π − θ <= 1e-4 (so3.log's branch).
+    assert np.allclose(exp_batch(fast[:-3]), R[:-3], atol=1e-12) and np.allclose(exp_batch(fast[-3:]), R[-3:], atol=3e-9)
