@@ -360,23 +360,23 @@ long predict(size_t M, const double *Rp, const double *Rn, double ratio, double 
     return left;
 }
 
-/* attitude_sync_terms.Terms for M draws of R̄ (M,3,3): with X = A R̄, XK = X K, XK2 = XK K, the row
- * (psi(X), psi(XK), psi(XK2), tr X, tr XK, tr XK2, u.psi(X), u.psi(XK), u.psi(XK2)) of out (M,15). */
+/* attitude_sync_terms.Terms for M draws of R̄ (M,3,3): with X = A R̄, XK = X K, XK2 = XK K, the column
+ * (psi(X), psi(XK), psi(XK2), tr X, tr XK, tr XK2, u.psi(X), u.psi(XK), u.psi(XK2)) of out (15,M): each
+ * quantity a row of M, contiguous for the numpy and the flow_xi that read it. */
 FMA_CLONES
 void terms(size_t M, const double *A, const double *K, const double *u, const double *R, double *out)
 {
     for (size_t m = 0; m < M; m++) {
         double X[3][9];
-        double *o = out + 15 * m;
         mm3(A, R + 9 * m, X[0]);
         mm3(X[0], K, X[1]);
         mm3(X[1], K, X[2]);
         for (int j = 0; j < 3; j++) {
             const double *Y = X[j];
             const double p0 = (Y[7] - Y[5]) * 0.5, p1 = (Y[2] - Y[6]) * 0.5, p2 = (Y[3] - Y[1]) * 0.5;
-            o[3 * j] = p0, o[3 * j + 1] = p1, o[3 * j + 2] = p2;
-            o[9 + j] = (Y[0] + Y[4]) + Y[8];
-            o[12 + j] = fma(p2, u[2], fma(p1, u[1], p0 * u[0]));
+            out[(3 * j) * M + m] = p0, out[(3 * j + 1) * M + m] = p1, out[(3 * j + 2) * M + m] = p2;
+            out[(9 + j) * M + m] = (Y[0] + Y[4]) + Y[8];
+            out[(12 + j) * M + m] = fma(p2, u[2], fma(p1, u[1], p0 * u[0]));
         }
     }
 }
@@ -638,7 +638,7 @@ static PyObject *py_log_stack(PyObject *Py_UNUSED(self), PyObject *const *a, Py_
     return PyLong_FromLong(left);
 }
 
-/* terms(A (3,3), K (3,3), u (3), R (M,3,3), out (M,15) out) */
+/* terms(A (3,3), K (3,3), u (3), R (M,3,3), out (15,M) out) */
 static PyObject *py_terms(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
 {
     Bufs B = {.n = 0};
@@ -748,7 +748,7 @@ static PyMethodDef methods[] = {
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
     {"predict", (PyCFunction)(void (*)(void))py_predict, METH_FASTCALL, "predict(R_prev, R_now, ratio, out) -> left: R_now exp(ratio log(R_prev^T R_now)) of M draws (NaN and counted near pi)."},
     {"log_stack", (PyCFunction)(void (*)(void))py_log_stack, METH_FASTCALL, "log_stack(R, w) -> left: so3.log_batch of M matrices (NaN and counted near pi)."},
-    {"terms", (PyCFunction)(void (*)(void))py_terms, METH_FASTCALL, "terms(A, K, u, R, out): the Terms of M draws of R (attitude_sync_terms), rows of 15."},
+    {"terms", (PyCFunction)(void (*)(void))py_terms, METH_FASTCALL, "terms(A, K, u, R, out): the Terms of M draws of R (attitude_sync_terms), 15 rows of M."},
     {"sincos1", (PyCFunction)(void (*)(void))py_sincos1, METH_FASTCALL, "sincos1(x) -> (sin x, cos x) (zswarm/trig.py)."},
     {"sincos", (PyCFunction)(void (*)(void))py_sincos, METH_FASTCALL, "sincos(x, s, c): sin and cos of each x into s and c (zswarm/trig.py)."},
     {"flow_xi", (PyCFunction)(void (*)(void))py_flow_xi, METH_FASTCALL, "flow_xi(a0, b0, q0, a1, b1, q1, x, dt, k_xi, gamma, n): Heun sub-steps of (5.21) for M draws, x in place."},

@@ -108,9 +108,9 @@ if _lib is not None:
         return out
 
     def _terms(A: np.ndarray, K: np.ndarray, u: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """attitude_sync_terms.Terms of M draws of R̄ (M, 3, 3): rows (ψ(X), ψ(XK), ψ(XK²),
-        tr X, tr XK, tr XK², u·ψ(X), u·ψ(XK), u·ψ(XK²)), X = A R̄, (M, 15)."""
-        out = np.empty((R.shape[0], 15))
+        """attitude_sync_terms.Terms of M draws of R̄ (M, 3, 3): the rows ψ(X) (3), ψ(XK) (3),
+        ψ(XK²) (3), tr X, tr XK, tr XK², u·ψ(X), u·ψ(XK), u·ψ(XK²) of (15, M), X = A R̄."""
+        out = np.empty((15, R.shape[0]))
         lib.terms(_f64(A, (3, 3)), _f64(K, (3, 3)), _f64(u, (3,)), _f64(R, R.shape), out)
         return out
 

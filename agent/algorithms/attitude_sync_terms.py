@@ -141,16 +141,17 @@ class Terms:
             MK = M @ K
             MK2 = MK @ K
             p = (psi(M), psi(MK), psi(MK2))
-            o = np.concatenate([*p, *(trace(X)[:, None] for X in (M, MK, MK2)), *((q @ u)[:, None] for q in p)], axis=1)
+            o = np.concatenate([*(q.T for q in p), *(trace(X)[None] for X in (M, MK, MK2)), *((q @ u)[None] for q in p)])
+        # o: (15, M), a row per quantity
         if one:
-            r = o[0]
+            r = o[:, 0]
             self.p0, self.p1, self.p2 = r[0:3], r[3:6], r[6:9]
             self.t0, self.t1, self.t2 = float(r[9]), float(r[10]), float(r[11])
             self.abc = (float(r[12]), float(r[13]), float(r[14]))
         else:
-            self.p0, self.p1, self.p2 = o[:, 0:3], o[:, 3:6], o[:, 6:9]
-            self.t0, self.t1, self.t2 = o[:, 9], o[:, 10], o[:, 11]
-            self.abc = (o[:, 12], o[:, 13], o[:, 14])
+            self.p0, self.p1, self.p2 = o[0:3].T, o[3:6].T, o[6:9].T
+            self.t0, self.t1, self.t2 = o[9], o[10], o[11]
+            self.abc = (o[12], o[13], o[14])
         self.K, self.K2, self.trA = K, K2, trA
 
     def U(self, xi: float, gamma: float) -> float:
