@@ -297,14 +297,6 @@ double flow_xi_one(double a0, double b0, double q0, double a1, double b1, double
 /* ---- attitude_sync_terms: the prediction of R̄ and the Terms of the potential (4.23), as their numpy code
  * computes them on a stack of draws (one draw goes the same way as a stack of one). */
 
-/* A^T B (numpy's T(A) @ B: the same chain of fused products over the inner index). */
-static inline void mtm3(const double *a, const double *b, double *c)
-{
-    for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 3; k++)
-            c[3 * i + k] = fma(a[6 + i], b[6 + k], fma(a[3 + i], b[3 + k], a[i] * b[k]));
-}
-
 /* zswarm/so3.py log_batch of one matrix: its rotation vector into w, 1; 0 when theta >= pi - 1e-4 (so3.log's
  * branch near pi: the caller does it). */
 static inline int log_mid(const double D[9], double w[3])
@@ -338,24 +330,42 @@ long log_stack(size_t M, const double *R, double *w)
 }
 
 /* attitude_sync_terms.predict for M draws: out = R_now exp(ratio log(R_prev^T R_now)); a draw whose
- * log is near pi is left as NaN (the caller computes it).  Returns how many were. */
-FMA_CLONES
+ * log is near pi is left as NaN (the caller computes it).  Returns how many were.  Four draws at a time:
+ * the products and Rodrigues' formula on the vector type, the log's atan2 and sin a lane at a time. */
+V3_CLONES
 long predict(size_t M, const double *Rp, const double *Rn, double ratio, double *out)
 {
     long left = 0;
-    for (size_t m = 0; m < M; m++) {
-        double D[9], w[3], E[9];
-        mtm3(Rp + 9 * m, Rn + 9 * m, D);
-        if (!log_mid(D, w)) {
+    for (size_t m0 = 0; m0 < M; m0 += 4) {
+        v4d P[9], N[9], D[9], W[3], E[9], O[9];
+        int ok[4];
+        for (int l = 0; l < 4; l++) {
+            const size_t m = m0 + l < M ? m0 + l : m0;
+            for (int q = 0; q < 9; q++) {
+                P[q][l] = Rp[9 * m + q];
+                N[q][l] = Rn[9 * m + q];
+            }
+        }
+        for (int i = 0; i < 3; i++) /* R_prev^T R_now, numpy's T(R_prev) @ R_now: the same chain over the inner index */
+            for (int k = 0; k < 3; k++)
+                D[3 * i + k] = fma4(P[6 + i], N[6 + k], fma4(P[3 + i], N[3 + k], P[i] * N[k]));
+        for (int l = 0; l < 4; l++) {
+            double Dl[9], w[3];
             for (int q = 0; q < 9; q++)
-                out[9 * m + q] = NAN;
-            left++;
-            continue;
+                Dl[q] = D[q][l];
+            ok[l] = log_mid(Dl, w);
+            for (int r = 0; r < 3; r++)
+                W[r][l] = ok[l] ? w[r] : 0.0;
         }
         for (int r = 0; r < 3; r++)
-            w[r] = ratio * w[r];
-        rodrigues(w, E);
-        mm3(Rn + 9 * m, E, out + 9 * m);
+            W[r] = ratio * W[r];
+        rodrigues4(W, E);
+        mm3_4(N, E, O);
+        for (int l = 0; l < 4 && m0 + l < M; l++) {
+            for (int q = 0; q < 9; q++)
+                out[9 * (m0 + l) + q] = ok[l] ? O[q][l] : NAN;
+            left += !ok[l];
+        }
     }
     return left;
 }
