@@ -268,10 +268,16 @@ def _read_A(r: Any, d: dict[str, Any], f: str) -> NDArray[np.float64]:
     else:
         raise r.err(f"{f}.A", "must be 3 eigenvalues (a diagonal A) or a 3x3 list of rows", a)
     try:
-        check_A(A, "A")
+        _checked_A(tuple(A.ravel().tolist()))
     except DesignError as exc:
         raise r.err(f"{f}.{exc.field}", exc.problem) from None
     return A
+
+
+@functools.lru_cache(maxsize=64)
+def _checked_A(A: tuple[float, ...]) -> None:
+    """:func:`check_A` of a scenario's A, remembered as :func:`_checked` is."""
+    check_A(np.array(A).reshape(3, 3), "A")
 
 
 def angle_set(r: Any, v: Any, fld: str, example: str) -> tuple[float, ...]:

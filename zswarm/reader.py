@@ -120,10 +120,10 @@ class _Ctx:
             theta = float(self.expr(v["angle"], f"{fld}.angle")(0.0))
             return tuple(so3.Ra(theta, self.axis(v["axis"], f"{fld}.axis")).ravel().tolist())
         if isinstance(v, list) and len(v) == 3 and all(isinstance(r, list) and len(r) == 3 for r in v):
-            R = np.array([[self.num(e, f"{fld}[{a}][{b}]") for b, e in enumerate(r)] for a, r in enumerate(v)])
-            if not so3.is_rotation(R, 1e-6):
+            R = [self.num(e, f"{fld}[{a}][{b}]") for a, r in enumerate(v) for b, e in enumerate(r)]
+            if not _is_rotation(R, 1e-6):
                 raise self.err(fld, "is not a rotation matrix (R^T R = I, det R = 1 within 1e-6)", v)
-            return tuple(R.ravel().tolist())
+            return tuple(R)
         raise self.err(fld, "must be {angle, axis} or a 3x3 list of rows", v)
 
 
@@ -137,3 +137,15 @@ def _user_code(c: _Ctx, fld: str, call: Any) -> Any:
         raise
     except Exception as exc:  # noqa: BLE001 - a user's code may raise anything
         raise c.err(fld, f"the algorithm's own check failed: {type(exc).__name__}: {exc}") from None
+
+
+def _is_rotation(R: list[float], tol: float) -> bool:
+    """so3.is_rotation of a 3x3 matrix given as 9 finite floats, row-major, in Python's arithmetic
+    (a basin loads 14 rotations a draw; numpy's small-array calls were most of it)."""
+    for i in range(3):
+        for j in range(i, 3):
+            d = R[i] * R[j] + R[3 + i] * R[3 + j] + R[6 + i] * R[6 + j] - (1.0 if i == j else 0.0)
+            if not abs(d) <= tol:
+                return False
+    det = R[0] * (R[4] * R[8] - R[5] * R[7]) - R[1] * (R[3] * R[8] - R[5] * R[6]) + R[2] * (R[3] * R[7] - R[4] * R[6])
+    return abs(det - 1.0) <= tol
