@@ -51,7 +51,7 @@ from zswarm import cluster as zswarm_cluster
 from zswarm import procutil, report
 from zswarm.report import family
 from zswarm.report.series import leave_time, settle_time
-from zswarm.scenario import Override, Scenario, load, loads, parse_override
+from zswarm.scenario import Override, Scenario, load, loads, parse_override, with_rotations
 from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 
 # Draws stepped together at most (a chunk: one task of the pool; resume reruns a whole chunk).
@@ -133,7 +133,7 @@ def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold:
 
     t0 = time.monotonic()
     base = _load(topology)
-    sc = _load(topology, draw_overrides(base, seed, draw, near))
+    sc = with_rotations(base, draw_overrides(base, seed, draw, near))
     msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
     rec = report.load_recording(msgs)
     fam = family.of(sc)
@@ -170,7 +170,7 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
     t0 = time.monotonic()
     batched = plugins.engine("batched")
     base = _load(topology)
-    scs = [_load(topology, draw_overrides(base, seed, d, near)) for d in draws]
+    scs = [with_rotations(base, draw_overrides(base, seed, d, near)) for d in draws]  # as _load(topology, overrides) loads them
     fam = family.of(base)
     told = [time.monotonic()]
 

@@ -101,22 +101,34 @@ class Formation:
 
 
 class ScenarioText:
-    """A scenario's TOML: the file's text, or with overrides the TOML of the result, written
-    when first read (a basin's draws are loaded by the thousand and never written out)."""
+    """A scenario's TOML: the file's text, or with overrides the TOML of the result (the file's
+    document with the overrides applied), written when first read (a basin's draws are loaded by
+    the thousand and never written out)."""
 
-    __slots__ = ("_doc", "_overrides", "_path", "_text")
+    __slots__ = ("_overrides", "_path", "_rendered", "_text")
 
-    def __init__(self, text: str | None, doc: dict[str, Any] | None = None, path: str = "", overrides: Sequence[Override] = ()) -> None:
-        # The document as it is now, pickled: what reads it later cannot change it.
-        self._doc = None if doc is None else pickle.dumps(doc, protocol=pickle.HIGHEST_PROTOCOL)
+    def __init__(self, text: str, path: str = "", overrides: Sequence[Override] = ()) -> None:
         self._text, self._path, self._overrides = text, path, tuple(overrides)
+        self._rendered: str | None = None if overrides else text
 
     @property
     def text(self) -> str:
-        if self._text is None:
-            assert self._doc is not None
-            self._text = render(pickle.loads(self._doc), self._path, self._overrides)
-            self._doc = None
+        if self._rendered is None:
+            doc = pickle.loads(_toml(self._text))
+            self._rendered = render(doc, self._path, _apply_overrides(doc, self._path, self._overrides))
+        return self._rendered
+
+    def with_more(self, overrides: Sequence[Override]) -> ScenarioText:
+        """The TOML of this scenario with ``overrides`` applied after its own."""
+        return ScenarioText(self._text, self._path, self._overrides + tuple(overrides))
+
+    @property
+    def plain(self) -> bool:
+        """True when this is a file's text as it is (no overrides)."""
+        return not self._overrides
+
+    @property
+    def file_text(self) -> str:
         return self._text
 
     def __eq__(self, other: object) -> bool:
@@ -271,6 +283,51 @@ def load(path: str | Path, overrides: Sequence[Override] = ()) -> Scenario:
     return loads(text, p, overrides)
 
 
+def with_rotations(sc: Scenario, overrides: Sequence[Override]) -> Scenario:
+    """``sc`` with ``overrides`` that each set a rotation of an agent's start, ``agents[n].R``
+    or an ``agents[n].estimate.NAME`` that its algorithm declares a rotation: the Scenario that
+    :func:`loads` gives for the file's text and those overrides (the same errors too), without
+    reading the rest of the file again: a basin loads a draw a few milliseconds at a time.
+    Anything else (another field, a scenario that was itself loaded with overrides, a plant or
+    graph whose checks read the attitudes) is loaded in full."""
+    if not overrides:
+        return sc
+    fast = sc.source.plain and sc.info.graph == "tree" and sc.plant in ("rigid_body", "prescribed")
+    order = _agent_order(sc.source.file_text) if fast else ()
+    c = _Ctx(sc.path, {o.field: o.label for o in overrides})
+    by_id = {a.id: a for a in sc.agents}
+    for o in overrides if fast else ():
+        k = o.keys
+        n = k[1] if len(k) >= 3 and k[0] == "agents" and isinstance(k[1], int) else -1
+        if not 0 <= n < len(order) or order[n] not in by_id:
+            fast = False
+            break
+        a = by_id[order[n]]
+        fi = sc.info.initial.get(str(k[3])) if len(k) == 4 and k[2] == "estimate" else None
+        if len(k) == 3 and k[2] == "R":
+            by_id[a.id] = replace(a, R=c.rotation(o.value, o.field))
+        elif fi is not None and fi.kind == "rotation" and fi.table == "estimate" and a.role != "leader":
+            name = str(k[3])
+            values = dict(a.estimate.values)
+            values[name] = c.rotation(o.value, o.field)
+            by_id[a.id] = replace(a, estimate=Estimate(MappingProxyType(values), a.estimate.stated | {name}))
+        else:
+            fast = False
+            break
+    if not fast:
+        return loads(sc.source.file_text if sc.source.plain else sc.text, sc.path, overrides)
+    return replace(sc, agents=tuple(by_id[a.id] for a in sc.agents), source=sc.source.with_more(overrides))
+
+
+@functools.lru_cache(maxsize=16)
+def _agent_order(text: str) -> tuple[int | None, ...]:
+    """The ids of a scenario file's [[agents]] in the file's order (what agents[n] names)."""
+    agents = pickle.loads(_toml(text)).get("agents")
+    if not isinstance(agents, list):
+        return ()
+    return tuple(a.get("id") if isinstance(a, dict) and isinstance(a.get("id"), int) else None for a in agents)
+
+
 # A bound that keeps a run finite: 1e6 s is 11.6 days of world time (an hour's soak is 3600 s).
 MAX_DURATION_S = 1e6
 SAFE_NAME = re.compile(r"[\w.\-]{1,100}")
@@ -328,6 +385,22 @@ def _toml(text: str) -> bytes:
     return pickle.dumps(tomllib.loads(text), protocol=pickle.HIGHEST_PROTOCOL)
 
 
+def _apply_overrides(doc: dict[str, Any], path: str, overrides: Sequence[Override]) -> list[Override]:
+    """``overrides`` applied to ``doc`` in place; returned as placed (a --fault named by its index)."""
+    placed = []
+    for o in overrides:
+        if o.keys == APPEND_FAULT:  # --fault: one more [[faults]] entry, named by its index
+            faults = doc.setdefault("faults", [])
+            if not isinstance(faults, list):
+                raise ScenarioError(f"{shown(path)}: faults: must be an array of tables ([[faults]])")
+            o = replace(o, field=f"faults[{len(faults)}]", keys=("faults", len(faults)))
+            faults.append(o.value)
+        else:
+            _apply(doc, o)
+        placed.append(o)
+    return placed
+
+
 def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ()) -> Scenario:
     """Parse and validate scenario TOML ``text``; ``path`` is used in errors.
 
@@ -338,21 +411,8 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
         doc = pickle.loads(_toml(text))
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{shown(path)}: TOML syntax: {exc}") from None
-    source = ScenarioText(text)
-    if overrides:
-        placed = []
-        for o in overrides:
-            if o.keys == APPEND_FAULT:  # --fault: one more [[faults]] entry, named by its index
-                faults = doc.setdefault("faults", [])
-                if not isinstance(faults, list):
-                    raise ScenarioError(f"{shown(path)}: faults: must be an array of tables ([[faults]])")
-                o = replace(o, field=f"faults[{len(faults)}]", keys=("faults", len(faults)))
-                faults.append(o.value)
-            else:
-                _apply(doc, o)
-            placed.append(o)
-        overrides = placed
-        source = ScenarioText(None, doc, path, overrides)
+    source = ScenarioText(text, path, overrides)
+    overrides = _apply_overrides(doc, path, overrides)
     c = _Ctx(path, {o.field: o.label for o in overrides})
 
     sf = c.typed(doc, "", ScenarioFile)

@@ -14,7 +14,7 @@ import pytest
 
 from tests.conftest import ROOT, TOPO
 from zswarm import basin
-from zswarm.scenario import load
+from zswarm.scenario import ScenarioError, load, parse_override, with_rotations
 
 
 def test_uniform_rotations_are_haar():
@@ -196,3 +196,25 @@ def test_ctrl_c_keeps_the_rows_and_reaps_the_workers(tmp_path, engine):
             break
         assert time.monotonic() < deadline, subprocess.run(["ps", "-o", "pid,stat,args", "-g", str(p.pid)], capture_output=True, text=True).stdout
         time.sleep(0.1)
+
+
+@pytest.mark.parametrize("stem", ["thesis-5.6-velocity-free7", "thesis-5.6-hybrid7-noisy", "thesis-4.5-hybrid5"])
+def test_a_draw_is_the_scenario_its_overrides_load(stem):
+    """scenario.with_rotations (a draw's starts set on the loaded scenario, as the basin does) is
+    the Scenario that loading the file with the draw's overrides gives: every field, its TOML,
+    and the error of a matrix that is not a rotation."""
+    path = str(TOPO / f"{stem}.toml")
+    base = load(path)
+    for d, near in ((1, None), (2, None), (3, 0.3)):
+        ovs = basin.draw_overrides(base, 5, d, near)
+        assert with_rotations(base, ovs) == load(path, ovs)
+        assert with_rotations(base, ovs).text == load(path, ovs).text
+    bad = [parse_override("agents[1].R=[[1,0,0],[0,1,0],[0,0,2]]")]
+    errors = []
+    for f in (lambda: with_rotations(base, bad), lambda: load(path, bad)):
+        with pytest.raises(ScenarioError) as exc:
+            f()
+        errors.append(str(exc.value))
+    assert errors[0] == errors[1] and "agents[1].R: is not a rotation matrix" in errors[0]
+    other = [parse_override("algorithm.gains.k_R=2")]  # not a start: loaded in full
+    assert with_rotations(base, other) == load(path, other)
