@@ -299,10 +299,11 @@ def with_rotations(sc: Scenario, overrides: Sequence[Override]) -> Scenario:
     for o in overrides if fast else ():
         k = o.keys
         n = k[1] if len(k) >= 3 and k[0] == "agents" and isinstance(k[1], int) else -1
-        if not 0 <= n < len(order) or order[n] not in by_id:
+        aid = order[n] if 0 <= n < len(order) else None
+        if aid is None or aid not in by_id:
             fast = False
             break
-        a = by_id[order[n]]
+        a = by_id[aid]
         fi = sc.info.initial.get(str(k[3])) if len(k) == 4 and k[2] == "estimate" else None
         if len(k) == 3 and k[2] == "R":
             by_id[a.id] = replace(a, R=c.rotation(o.value, o.field))
