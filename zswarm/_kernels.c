@@ -31,14 +31,20 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* The loops that multiply matrices come in two builds chosen at load time (GCC's target_clones): with
- * the FMA instructions where the CPU has them, and a default one where fma() is the C library's call.
- * fma() rounds once either way, so both give the same bits; the first is ~3x faster (measured on the
- * velocity-free filter, where the library call was most of the time). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+/* The loops come in two builds chosen at load time (GCC's target_clones): with the AVX2 and FMA
+ * instructions where the CPU has them, and a default one (SSE2: a vector of four is two instructions,
+ * fma() the C library's call).  Every operation rounds the same way in both (fma() once), so both give
+ * the same bits; the first is ~3x faster (measured on the velocity-free filter, where the library call
+ * was most of the time).  -DZSWARM_DEFAULT_ONLY builds the default one alone (tests/unit/test_kernels.py
+ * builds it to compare with the numpy code on a machine that would pick the other). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && __GNUC__ >= 11 && !defined(ZSWARM_DEFAULT_ONLY)
 #define FMA_CLONES __attribute__((target_clones("fma", "default")))
+#define V3_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#define AVX2_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define FMA_CLONES
+#define V3_CLONES
+#define AVX2_CLONES
 #endif
 
 /* ---- sin and cos of 4 numbers at once (zswarm/trig.py does the same operations in Python and numpy).
@@ -161,8 +167,6 @@ static inline __attribute__((always_inline)) void rodrigues4(const v4d W[3], v4d
         E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
 }
 
-#define V3_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-
 /* zswarm/so3.py exp_batch: n rotation vectors W (n,3) -> E (n,3,3), four at a time (the last block
  * padded with its first vector). */
 V3_CLONES
@@ -218,7 +222,7 @@ void rigid_step(size_t n, const double *R, const double *w, const double *J_inv,
 }
 
 /* sincos(x, s, c) for n numbers, in 4-lane blocks (the last padded with its first lane). */
-__attribute__((target_clones("avx2", "default")))
+AVX2_CLONES
 void sincos_n(size_t n, const double *x, double *s, double *c)
 {
     for (size_t i0 = 0; i0 < n; i0 += 4) {
@@ -275,7 +279,7 @@ void sincos_n(size_t n, const double *x, double *s, double *c)
         i0 += 4 * K;                                                                                                                \
     } while (0)
 
-__attribute__((target_clones("avx2", "default")))
+AVX2_CLONES
 void flow_xi(size_t M, const double *a0v, const double *b0v, const double *q0v, const double *a1v, const double *b1v, const double *q1v,
              double *xv, double dt, double k_xi, double gamma, long n)
 {

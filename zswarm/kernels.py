@@ -16,6 +16,7 @@ function here is None and the callers use numpy.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 from collections.abc import Callable
 from types import ModuleType
@@ -29,6 +30,14 @@ _F8 = np.dtype(np.float64)
 def _load() -> ModuleType | None:
     if os.environ.get("ZSWARM_KERNELS", "1") == "0":
         return None
+    other = os.environ.get("ZSWARM_KERNELS_FILE")
+    if other:  # another build of zswarm/_kernels.c (tests/unit/test_kernels.py: the default one alone)
+        spec = importlib.util.spec_from_file_location("zswarm._kernels", other)
+        if spec is None or spec.loader is None:
+            raise ImportError(f"ZSWARM_KERNELS_FILE={other}: not a Python extension module")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
     try:
         return importlib.import_module("zswarm._kernels")
     except ImportError:  # not built (no C compiler at install)

@@ -9,6 +9,8 @@ zswarm without the kernels; these tests then fail, saying so, rather than pass v
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -196,3 +198,31 @@ def test_log_is_the_numpy_log(monkeypatch):
     # (R_s + I)/2 = cos²(θ/2) I + sin²(θ/2) v v^T: the first term tilts it by up to
     # cot²(θ/2) ≈ (π − θ)²/4 <= 2.5e-9 for π − θ <= 1e-4 (so3.log's branch).
     assert np.allclose(exp_batch(fast[:-3]), R[:-3], atol=1e-12) and np.allclose(exp_batch(fast[-3:]), R[-3:], atol=3e-9)
+
+
+def test_the_default_build_gives_the_same_numbers(tmp_path):
+    """A CPU without AVX2 and FMA runs the default clones (SSE2, fma() the C library's): built
+    alone here (-DZSWARM_DEFAULT_ONLY) and loaded in another interpreter (ZSWARM_KERNELS_FILE),
+    it passes these bit-for-bit tests against numpy and gives the golden sim runs' numbers."""
+    import shutil
+    import subprocess
+    import sys
+    import sysconfig
+
+    from tests.conftest import ROOT
+
+    gcc = shutil.which("gcc")
+    assert gcc is not None, "gcc is needed to build zswarm._kernels (pyproject.toml ext-modules)"
+    so = tmp_path / "_kernels_default.so"
+    flags = ["-O2", "-ffp-contract=off", "-fno-math-errno", "-Wno-psabi", "-DZSWARM_DEFAULT_ONLY", "-shared", "-fPIC"]
+    subprocess.run([gcc, *flags, "-I", sysconfig.get_paths()["include"], str(ROOT / "zswarm" / "_kernels.c"), "-o", str(so), "-lm"], check=True, timeout=120)
+    assert b"vfmadd" not in subprocess.run(["objdump", "-d", str(so)], capture_output=True, check=True, timeout=60).stdout  # no FMA instruction in it
+    env = {**os.environ, "ZSWARM_KERNELS_FILE": str(so)}
+    check = f"import zswarm.kernels as k; assert k._lib.__file__ == {str(so)!r}, k._lib.__file__"
+    subprocess.run([sys.executable, "-c", check], env=env, check=True, timeout=60, cwd=ROOT)
+    # The golden runs of the scenarios whose numbers these loops make most of (noise, the filters).
+    pick = "not default_build and (not test_sim_numbers_are_the_references or hybrid7-noisy or velocity-free7 or continuous5-noisy)"
+    files = ["tests/unit/test_kernels.py", "tests/unit/test_trig.py", "tests/component/test_golden_sim.py"]
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *files, "-k", pick], env=env, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+    assert "22 passed, 13 deselected" in r.stdout, r.stdout[-500:]  # 18 kernel and trig tests and 4 golden runs (of 16)
