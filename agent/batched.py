@@ -37,7 +37,7 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -45,8 +45,9 @@ from agent.runtime import setup
 from world.motion import prescribed
 from world.plant import RigidBodyPlant
 from zswarm import timing
+from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
-from zswarm.scenario import Scenario
+from zswarm.scenario import Scenario, ScenarioText
 from zswarm.so3 import exp
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world measures so far
@@ -232,20 +233,90 @@ def _truth(sc: Scenario) -> tuple[Any, ...]:
     return (sc.step, sc.sensor_rate, None if f is None else (tuple(f.axis), f.rate), agents)
 
 
-def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, progress: Callable[[float], None] | None = None) -> Result:
+_NO_TEXT = ScenarioText("")
+
+
+def _schedule(sc: Scenario) -> Scenario:
+    """What the draws of one batch must share: the scenario without what may differ per draw (its
+    agents' starts R_i(0), ω_i(0), J_i and initial estimates, the noise variances, the seed, its
+    TOML)."""
+    agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate()) for a in sc.agents)
+    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, gyro_var=0.0, rel_att_var=0.0, attitude_var=0.0, seed=0)
+
+
+class _Noise:
+    """The world's sensor noise of one agent for M draws, in the world's order at every sample
+    (world/sensors.py: gyro, then rel_att per neighbour, then attitude, each drawn only where its
+    variance is > 0) from the world's generator of that agent and seed: each draw gets the numbers
+    its own sim run gets.  Draws of one seed and variances share one generator and its numbers;
+    otherwise each draw has its own, read ahead ``AHEAD`` samples at a time (a block of standard
+    normals is the sequence the sample-by-sample calls draw, and ``0 + σ z`` is numpy's normal)."""
+
+    AHEAD = 128
+
+    def __init__(self, seeds: Sequence[int], i: int, std: Mapping[str, np.ndarray], want: frozenset[str], n_nbrs: int) -> None:
+        self.on = {f: bool(std[f][0] > 0) and f in want for f in ("gyro", "rel_att", "attitude")}
+        self.n_nbrs = n_nbrs
+        self.shared = len(set(seeds)) == 1 and all(np.all(v == v[0]) for v in std.values())
+        self.std: dict[str, Any]
+        if self.shared:
+            self.rng = np.random.default_rng([seeds[0] % (1 << 63), i])
+            self.std = {f: float(v[0]) for f, v in std.items()}
+        else:
+            self.rngs = [np.random.default_rng([s % (1 << 63), i]) for s in seeds]
+            self.std = {f: v[:, None] for f, v in std.items()}
+            self.width = 3 * (int(self.on["gyro"]) + n_nbrs * int(self.on["rel_att"]) + int(self.on["attitude"]))
+            self.buf = np.zeros((len(seeds), 0, self.width))
+            self.k = 0
+
+    def next(self, nbrs: Sequence[int]) -> tuple[Any, dict[int, Any] | None, Any]:
+        """(gyro noise, rel_att noise per neighbour, attitude noise) of this sample, None where not drawn."""
+        on = self.on
+        if self.shared:
+            rng, std = self.rng, self.std
+            n_gyro = rng.normal(0.0, std["gyro"], 3) if on["gyro"] else None
+            n_rel = {j: rng.normal(0.0, std["rel_att"], 3) for j in nbrs} if on["rel_att"] else None
+            n_att = rng.normal(0.0, std["attitude"], 3) if on["attitude"] else None
+            return n_gyro, n_rel, n_att
+        if self.width == 0:
+            return None, None, None
+        if self.k == self.buf.shape[1]:
+            self.buf = np.stack([r.standard_normal((self.AHEAD, self.width)) for r in self.rngs])
+            self.k = 0
+        z = self.buf[:, self.k]
+        self.k += 1
+        c = 0
+        out: list[Any] = []
+        for f, count in (("gyro", 1), ("rel_att", len(nbrs)), ("attitude", 1)):
+            if not on[f]:
+                out.append(None)
+                continue
+            parts = [0.0 + self.std[f] * z[:, c + 3 * q : c + 3 * q + 3] for q in range(count)]
+            c += 3 * count
+            out.append(dict(zip(nbrs, parts, strict=True)) if f == "rel_att" else parts[0])
+        return out[0], out[1], out[2]
+
+
+def run(
+    draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, progress: Callable[[float], None] | None = None, seeds: Sequence[int] | None = None
+) -> Result:
     """Step the draws (scenarios that differ only in their agents' starts, or for a prescribed
-    truth in their initial estimates) together for ``duration`` s of world time; max_k |R̄_k|_I
-    on a grid of ``grid_s`` (the report family's, zswarm.report.family.Family.basin_grid_s)."""
+    truth in their initial estimates, and on rigid bodies in their noise variances) together for
+    ``duration`` s of world time; max_k |R̄_k|_I on a grid of ``grid_s`` (the report family's,
+    zswarm.report.family.Family.basin_grid_s).  ``seeds``: each draw's seed (its noise, as sim's
+    World draws it with that seed); by default every draw has ``seed``."""
     sc = draws[0]
     why = problem(sc)
     if why is not None:
         raise Unsupported(f"{sc.name}: the batched engine cannot run it: {why}")
     M, ids = len(draws), sc.ids
     n = len(ids)
-    agent_gains = [dict(a.gains) for a in sc.agents]
-    for d in draws[1:]:
-        if d.ids != ids or d.oriented != sc.oriented or dict(d.gains) != dict(sc.gains) or d.module is not sc.module or [dict(a.gains) for a in d.agents] != agent_gains:
-            raise Unsupported("draws that differ in more than their agents' starts")
+    seeds = [seed] * M if seeds is None else list(seeds)
+    if len(seeds) != M:
+        raise ValueError(f"{len(seeds)} seeds for {M} draws")
+    common = _schedule(sc)
+    if any(_schedule(d) != common for d in draws[1:]):
+        raise Unsupported("draws that differ in more than their agents' starts, noise variances and seeds")
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
     torques = _Torques(M * n)
@@ -261,8 +332,15 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
         J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
         plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
     bias = np.array([a.gyro_bias for a in sc.agents])
-    std = {"gyro": math.sqrt(sc.gyro_var), "rel_att": math.sqrt(sc.rel_att_var), "attitude": math.sqrt(sc.attitude_var)}
-    rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in ids}  # as World's
+    std = {
+        "gyro": np.sqrt([d.gyro_var for d in draws]),
+        "rel_att": np.sqrt([d.rel_att_var for d in draws]),
+        "attitude": np.sqrt([d.attitude_var for d in draws]),
+    }
+    if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
+        raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
+    if shared and (len(set(seeds)) > 1 or any(np.any(v != v[0]) for v in std.values())):
+        raise Unsupported("draws of several seeds or noise variances on the shared truth (prescribed motion: its measurements are the same for every draw)")
 
     modules: dict[int, ModuleType] = {}
     gains: dict[int, Any] = {}
@@ -274,8 +352,9 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
     kept = ("attitude", "gyro") if shared else ("attitude",)  # the sensor fields whose history a view keeps
     histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {f: deque(maxlen=HISTORY) for f in kept if f in want[i]} for i in ids}
     rel_histories: dict[int, dict[int, deque[tuple[float, np.ndarray]]]] = {i: {j: deque(maxlen=HISTORY) for j in nbrs[i]} for i in ids if shared and "rel_att" in want[i]}
+    noise = {i: _Noise(seeds, i, std, want[i], len(nbrs[i])) for i in ids}  # the world's generators
     for i in ids:
-        per = [setup(d, i, seed) for d in draws]
+        per = [setup(d, i, s) for d, s in zip(draws, seeds, strict=True)]
         modules[i], gains[i], tree_edges, _ = per[0]
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
         views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], rel_histories.get(i) if shared else None)
@@ -321,12 +400,8 @@ def run(draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, pr
             a = col[i]
             need = want[i] if tick or shared else histories[i].keys()
             # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
-            # then attitude) from its generator per agent: a basin's draws share the scenario's
-            # seed, so each draw gets the numbers its own sim run gets.
-            rng, want_i = rngs[i], want[i]
-            n_gyro = rng.normal(0.0, std["gyro"], 3) if "gyro" in want_i and std["gyro"] > 0 else None
-            n_rel = {j: rng.normal(0.0, std["rel_att"], 3) for j in nbrs[i]} if "rel_att" in want_i and std["rel_att"] > 0 else None
-            n_att = rng.normal(0.0, std["attitude"], 3) if "attitude" in want_i and std["attitude"] > 0 else None
+            # then attitude) from its generator per agent and seed (_Noise).
+            n_gyro, n_rel, n_att = noise[i].next(nbrs[i])
             sense: dict[str, Any] = {"t": t}
             if "gyro" in need:
                 sense["gyro"] = _body(W, a, shared) + bias[a] if n_gyro is None else _body(W, a, shared) + bias[a] + n_gyro

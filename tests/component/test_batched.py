@@ -94,8 +94,43 @@ def test_the_engine_says_what_it_cannot_run():
 def test_draws_must_share_their_schedule():
     base, scs = _draws("thesis-5.6-continuous7")
     other = dataclasses.replace(scs[1], gains={**scs[1].gains, "k_R": 1.0})
-    with pytest.raises(batched.Unsupported, match="more than their agents' starts"):
+    with pytest.raises(batched.Unsupported, match="more than their agents' starts, noise variances and seeds"):
         batched.run([scs[0], other], 0.1, base.seed, 0.01)
+
+
+@pytest.mark.parametrize("stem", ["thesis-5.6-hybrid7-noisy", "thesis-5.6-velocity-free7-noisy"])
+def test_draws_of_their_own_seeds_and_noise_are_sim_draw_by_draw(stem):
+    """Draws that differ in their seed and noise variances (a sweep's repeats and noise levels)
+    stepped together: each draw's noise comes from the world's generators of its own seed, so it
+    is its own sim run, within the same bound as above (measured: 1.6e-15 for the hybrid law,
+    2.4e-15 for the velocity-free one: here each draw's noise rotation exp([n]^x) goes through
+    the stacked Rodrigues formula, on sim through the one-vector one); repeats of one seed give
+    the same numbers, and other seeds other numbers."""
+    topo = TOPO / f"{stem}.toml"
+    base = load(topo)
+    runs = [(0.01, 11), (0.02, 12), (0.005, 11), (0.01, 11), (0.01, 13)]  # (rel_att_var, seed)
+    scs = [load(topo, [parse_override(f"noise.rel_att_var={v}"), parse_override(f"noise.gyro_var={v / 2}")]) for v, _ in runs]
+    fam = family.of(base)
+    res = batched.run(scs, 2.0, 0, fam.basin_grid_s, seeds=[s for _, s in runs])
+    for n, (sc, (_, seed)) in enumerate(zip(scs, runs, strict=True)):
+        rec = report.load_recording(simulate(sc, Path("."), 2.0, seed, lean=True, record=False))
+        t, mx = fam.basin_series(sc, rec)
+        assert np.array_equal(t, res.t)
+        assert np.max(np.abs(mx**2 - res.max_rel[n] ** 2)) <= TOL, (stem, n)
+        assert res.jumps[n] == len(rec.jumps) and res.agent_jumps[n] == len(rec.agent_jumps)
+    assert np.array_equal(res.max_rel[0], res.max_rel[3]) and not np.array_equal(res.max_rel[0], res.max_rel[4])
+
+
+def test_noise_per_draw_is_refused_where_it_cannot_be_drawn():
+    topo = TOPO / "thesis-5.6-hybrid7-noisy.toml"
+    some = [load(topo), load(topo, [parse_override("noise.rel_att_var=0")])]
+    with pytest.raises(batched.Unsupported, match="some have a sensor's noise and others not"):
+        batched.run(some, 0.1, 1, 0.01)
+    shared = load(TOPO / "thesis-4.5-hybrid5-noisy.toml")
+    with pytest.raises(batched.Unsupported, match="shared truth"):
+        batched.run([shared, shared], 0.1, 1, 0.01, seeds=[1, 2])
+    with pytest.raises(ValueError, match="2 seeds for 1 draws"):
+        batched.run([shared], 0.1, 1, 0.01, seeds=[1, 2])
 
 
 def test_draws_of_a_shared_truth_must_share_it():
