@@ -57,6 +57,8 @@ SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world m
 # measured by the estimates' max_k |R̄_k|_I.
 MEASURES = {"sync": "rigid_body", "tree": "prescribed"}
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
+COARSE_S = 0.1  # zswarm.report.base.GRID_S: the grid a sweep's convergence times are judged on
+FINAL_WINDOW_S = 1.0  # zswarm.report.series.final_of_grid's window: a run's "final" error
 
 
 class Unsupported(ValueError):
@@ -214,6 +216,12 @@ class Result:
     jumps: np.ndarray  # (M,) ξ_k jumps of every edge
     agent_jumps: np.ndarray  # (M,) jumps of the agents' own hybrid variables
     steps: int  # agent steps taken (per draw)
+    # For a sweep's rows (truth per draw only; None on a shared truth):
+    edge_final: np.ndarray | None = None  # (M, edges) |R̄_k|_I averaged over the grid's last second (the report's final)
+    t_coarse: np.ndarray | None = None  # the report's 0.1 s grid up to the duration (zswarm.report.base.grid)
+    max_rel_coarse: np.ndarray | None = None  # (M, len(t_coarse)) max over edges of |R̄_k|_I as edges.csv writes it (%.6e), newest at or before each point
+    edge_messages: int = 0  # agent -> agent messages sent (each delivered: lockstep), per draw
+    commands: int = 0  # commands sent to the world, per draw
 
 
 class _Torques:
@@ -298,13 +306,21 @@ class _Noise:
 
 
 def run(
-    draws: Sequence[Scenario], duration: float, seed: int, grid_s: float, progress: Callable[[float], None] | None = None, seeds: Sequence[int] | None = None
+    draws: Sequence[Scenario],
+    duration: float,
+    seed: int,
+    grid_s: float,
+    progress: Callable[[float], None] | None = None,
+    seeds: Sequence[int] | None = None,
+    rows: bool = False,
 ) -> Result:
     """Step the draws (scenarios that differ only in their agents' starts, or for a prescribed
     truth in their initial estimates, and on rigid bodies in their noise variances) together for
     ``duration`` s of world time; max_k |R̄_k|_I on a grid of ``grid_s`` (the report family's,
     zswarm.report.family.Family.basin_grid_s).  ``seeds``: each draw's seed (its noise, as sim's
-    World draws it with that seed); by default every draw has ``seed``."""
+    World draws it with that seed); by default every draw has ``seed``.  ``rows``: also what a
+    sweep's row reads (Result.edge_final, max_rel_coarse; a truth per draw only).  Message and
+    command counts are counted either way."""
     sc = draws[0]
     why = problem(sc)
     if why is not None:
@@ -339,7 +355,7 @@ def run(
     }
     if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
         raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
-    if shared and (len(set(seeds)) > 1 or any(np.any(v != v[0]) for v in std.values())):
+    if shared and any(v[0] > 0 for v in std.values()) and (len(set(seeds)) > 1 or any(np.any(v != v[0]) for v in std.values())):
         raise Unsupported("draws of several seeds or noise variances on the shared truth (prescribed motion: its measurements are the same for every draw)")
 
     modules: dict[int, ModuleType] = {}
@@ -365,7 +381,19 @@ def run(
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
     grid_every = max(1, round(grid_s * sc.sensor_rate))
     n_samples = math.floor(duration * sc.sensor_rate + 1e-9) + 1
-    grid_t, grid_v = [], []
+    grid_t: list[float] = []
+    grid_v: list[np.ndarray] = []
+    # The report's finals and coarse grid (sweep rows): the grid's times are known ahead.
+    grid_all = np.round(np.arange(0.0, (n_samples - 1) // grid_every * grid_every * sample_dt + 1e-9, grid_s), 9)
+    coarse_t = np.round(np.arange(0.0, duration + 1e-9, COARSE_S), 6)
+    coarse_at = np.clip(np.searchsorted(grid_all, coarse_t, side="right") - 1, 0, len(grid_all) - 1) if len(grid_all) else np.zeros(0, dtype=int)
+    coarse_v: dict[int, np.ndarray] = {}
+    final_from = grid_all[-1] - FINAL_WINDOW_S if len(grid_all) else 0.0
+    final_v: list[np.ndarray] = []
+    coarse_set = set(coarse_at.tolist()) if rows else set()
+    if not rows:
+        final_from = math.inf
+    edge_messages = commands = 0
     ticks, tick_v = [], []  # the estimates' measure at every tick (shared truth)
     jumps = np.zeros(M, dtype=np.int64)
     agent_jumps = np.zeros(M, dtype=np.int64)
@@ -387,8 +415,14 @@ def run(
                 # tr R̄_k = tr(R_t^T R_h) = Σ_ji (R_t)_ji (R_h)_ji, without forming R̄_k (a third of the cost;
                 # the report's trace of the product differs by round-off, ~1e-15)
                 tr = np.einsum("mnji,mnji->mn", R[:, t_idx], R[:, h_idx])
+                rel = np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0))  # (M, edges)
+                g = len(grid_t)
                 grid_t.append(t)
-                grid_v.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)).max(axis=1))
+                grid_v.append(rel.max(axis=1))
+                if grid_all[g] >= final_from:
+                    final_v.append(rel)
+                if g in coarse_set:
+                    coarse_v[g] = np.array(np.char.mod("%.6e", rel), dtype=float).max(axis=1)
             W = plant.omega_now().reshape(M, n, 3)
         RT = np.swapaxes(R, -1, -2)
         # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
@@ -434,6 +468,8 @@ def run(
                 v.dt = t - last
                 outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
             pub = mod.publish(states[i], outputs, v)
+            edge_messages += len(pub.edges)
+            commands += pub.command is not None
             if pub.command is not None and "tau" in pub.command:
                 torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
             t_stamp = t if pub.t is None else pub.t
@@ -462,8 +498,15 @@ def run(
         return Result(t_grid, np.array(tick_v)[idx].T if len(tk) else np.zeros((M, 0)), jumps, agent_jumps, steps)
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
-    assert len(t_grid) == len(grid_t)
-    return Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps)
+    assert len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all)
+    res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands)
+    if rows and grid_t:
+        fin = np.array(final_v)  # (window, M, edges)
+        # zswarm.report.series.final_of_grid of each edge: nanmean over the window, each a 1-D array as the report's
+        res.edge_final = np.array([[float(np.nanmean(np.ascontiguousarray(fin[:, m, e]))) for e in range(fin.shape[2])] for m in range(M)])
+        res.t_coarse = coarse_t
+        res.max_rel_coarse = np.array([coarse_v[g] for g in coarse_at]).T
+    return res
 
 
 def _body(X: np.ndarray, a: int, shared: bool) -> np.ndarray:

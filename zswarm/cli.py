@@ -100,10 +100,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="a field and its values, e.g. links.delay_ms=0,50,100 or links.drop=0:0.5:0.1 (START:STOP:STEP); repeatable",
     )
     sw.add_argument("--repeats", type=procutil.positive_int, default=1, help="runs per grid point, seeds differing (default 1)")
-    sw.add_argument("--engine", choices=("sim", "run"), default="sim", help="zswarm sim (default) or zswarm run (real processes over Zenoh)")
-    sw.add_argument("--jobs", type=procutil.positive_int, default=None, help="runs at a time (default: the number of cores for sim, 1 for run)")
+    sw.add_argument(
+        "--engine",
+        choices=("auto", "batched", "sim", "run"),
+        default="auto",
+        help="batched: the runs that share a schedule (differing in seeds, noise variances, starts) stepped together on arrays, the same rows as sim; "
+        "sim: each run a zswarm sim; run: real processes over Zenoh; auto (default): batched where it applies (the Chapter 5 laws on one clock, perfect links, no faults), else sim, saying why",
+    )
+    sw.add_argument("--chunk", type=procutil.positive_int, default=None, help="runs stepped together per task of the batched engine (default: shared out among the jobs, at most 1000)")
+    sw.add_argument("--jobs", type=procutil.positive_int, default=None, help="runs (or batches) at a time (default: the number of cores for sim and batched, 1 for run)")
     sw.add_argument("--out", type=Path, default=None, help="sweep folder (default sweeps/<scenario>-<timestamp>/); the same folder resumes")
-    sw.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the runs (engine sim) on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port)")
+    sw.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the runs (engines auto, batched, sim) on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port)")
     sw.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help="a fixed override for every run (repeatable)")
     sw.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds per run (default: the scenario's)")
     sw.add_argument("--seed", type=int, default=None, help="seed of repeat 0 (default: the scenario's); repeat r uses seed + r")

@@ -503,6 +503,170 @@ def run_sweep_cluster(
     return ok, failed, interrupted
 
 
+# --------------------------------------------------------------------------- the batched engine
+
+BATCHED_FAMILIES = ("sync",)  # report families whose sweep rows the batched engine computes
+
+
+def batched_problem(sc: Scenario) -> str | None:
+    """Why ``sc``'s runs cannot go on the batched engine (None: they can)."""
+    from zswarm import plugins
+
+    if sc.info.report not in BATCHED_FAMILIES:
+        return f"the batched engine computes sweep rows for the Chapter 5 laws (report family 'sync'), not yet for the {sc.info.report!r} family"
+    why: str | None = plugins.engine("batched").problem(sc)
+    return why
+
+
+def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: int) -> tuple[list[list[Job]], list[tuple[Job, str]]]:
+    """The jobs that the batched engine can step together, in batches (runs that share their
+    scenario but for seeds, noise variances and starts; a batch has one pattern of which
+    sensors are noisy), and the others with the reason.  A batch holds at most ``chunk`` runs
+    (default: each group shared out among ``n_jobs`` tasks, at most 1000)."""
+    from agent.batched import _schedule
+
+    groups: list[tuple[Scenario, tuple[bool, ...], list[Job]]] = []
+    rest: list[tuple[Job, str]] = []
+    loaded: dict[tuple[Override, ...], Scenario] = {}
+    for j in jobs:
+        sc = loaded.get(j.overrides)
+        if sc is None:
+            sc = loaded[j.overrides] = load(topology, j.overrides)
+        why = batched_problem(sc)
+        if why is not None:
+            rest.append((j, why))
+            continue
+        key, noisy = _schedule(sc), (sc.gyro_var > 0, sc.rel_att_var > 0, sc.attitude_var > 0)
+        for g in groups:
+            if g[1] == noisy and g[0] == key:
+                g[2].append(j)
+                break
+        else:
+            groups.append((key, noisy, [j]))
+    batches = []
+    for _, _, members in groups:
+        size = chunk or min(1000, max(1, math.ceil(len(members) / max(1, n_jobs))))
+        batches += [members[i : i + size] for i in range(0, len(members), size)]
+    return batches, rest
+
+
+def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, thresholds: tuple[float, float]) -> list[dict[str, Any]]:
+    """A batch of runs stepped together on the batched engine (in a worker's process): each
+    run's sweep.csv columns, as :func:`summarize_run` reads them from a sim run's files (the
+    report's final |R̄_k|_I per edge, the max over edges on the 0.1 s grid as edges.csv holds it,
+    the messages and commands sent: lockstep delivers each at once, so none is lost, late or
+    expired)."""
+    from zswarm import plugins
+    from zswarm.report import convergence_time
+
+    t0 = time.monotonic()
+    text, path = source
+    loaded: dict[tuple[Override, ...], Scenario] = {}
+    scs = []
+    for j in batch:
+        if j.overrides not in loaded:
+            loaded[j.overrides] = loads(text, path, j.overrides)
+        scs.append(loaded[j.overrides])
+    sc = scs[0]
+    res = plugins.engine("batched").run(scs, duration, 0, family.of(sc).basin_grid_s, seeds=[j.seed for j in batch], rows=True)
+    wall = round((time.monotonic() - t0) / len(batch), 3)
+    hybrid = bool(getattr(sc.params, "Xi", ()))  # the sync family's jumps_total: the hybrid laws' ξ_k
+    rows = []
+    for n, _job in enumerate(batch):
+        att = res.max_rel_coarse[n]
+        sent, cmds = res.edge_messages, res.commands
+        rows.append(
+            {
+                "final_attitude_error": float(np.mean(res.edge_final[n])),
+                "final_position_error": None,
+                "conv_attitude_s": convergence_time(res.t_coarse, att, thresholds[0]),
+                "conv_position_s": None,
+                "edge_sent": sent,
+                "edge_delivered": sent,
+                "edge_dropped": 0,
+                "edge_drop_ratio": 0.0 if sent else None,
+                "edge_latency_p50_ms": 0.0 if sent else None,
+                "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1),
+                "sensor_dropped": 0,
+                "cmd_sent": cmds,
+                "cmd_dropped": 0,
+                "cmd_drop_ratio": 0.0 if cmds else None,
+                "cmd_latency_p50_ms": 0.0 if cmds else None,
+                "cmd_expired": 0,
+                "jumps": int(res.jumps[n]) if hybrid else None,
+                "stale_terms": 0,
+                "missed_deadlines": 0,
+                "wall_s": wall,
+            }
+        )
+    return rows
+
+
+def run_sweep_batched(
+    topology: str,
+    jobs: list[Job],
+    batches: list[list[Job]],
+    varies: Sequence[Vary],
+    out: Path,
+    duration: float,
+    thresholds: tuple[float, float],
+    n_jobs: int,
+    cluster: str | None = None,
+    stop: Callable[[], bool] = lambda: False,
+) -> tuple[int, int, bool]:
+    """The batches on the batched engine, ``n_jobs`` local processes or the Dask cluster at
+    ``cluster`` (each task a batch, :func:`run_batch`); a row per run appended to sweep.csv as
+    its batch ends (a batch that fails makes each of its runs a failed row).  Returns (ok,
+    failed, interrupted)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    from zswarm import cluster as zswarm_cluster
+
+    source = (Path(topology).read_text(encoding="utf-8"), topology)
+    f, w, _todo, prog = _open(out, jobs, varies)
+    ok = failed = 0
+    interrupted = False
+    try:
+        with zswarm_cluster.executor(n_jobs, cluster) as runner:
+            queue = list(batches)
+            pending: dict[Any, list[Job]] = {}
+            while queue or pending:
+                if stop():
+                    interrupted = True
+                    runner.abort()
+                    break
+                while queue and len(pending) < runner.slots:
+                    batch = queue.pop(0)
+                    pending[runner.pool.submit(run_batch, source, batch, duration, thresholds)] = batch
+                finished, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    batch = pending.pop(fut)
+                    try:
+                        results: list[dict[str, Any]] | None = fut.result()
+                        error = ""
+                    except Exception as exc:  # noqa: BLE001 - a failed batch is recorded, the sweep goes on
+                        results, error = None, f"{type(exc).__name__}: {exc}"[:400]
+                    for n, job in enumerate(batch):
+                        row = _job_row(job, varies)
+                        if results is not None:
+                            row.update(results[n])
+                            row["status"], row["error"] = "ok", ""
+                            ok += 1
+                        else:
+                            row["status"], row["error"] = "failed", error
+                            failed += 1
+                            prog.failed += 1
+                        w.writerow({k: _fmt(v) for k, v in row.items()})
+                        prog.done += 1
+                        prog.update(job, row["status"])
+                    f.flush()
+                    os.fsync(f.fileno())
+    finally:
+        f.close()
+        prog.close()
+    return ok, failed, interrupted
+
+
 def _not_completed(folder: Path) -> list[str] | None:
     """The ``problems`` of a run that wrote its summary and is not completed, else None."""
     try:
@@ -758,36 +922,60 @@ def command(args: argparse.Namespace) -> int:
             "thresholds": list(thresholds),
         },
     )
+    n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine != "run" else 1)
+    if args.cluster is not None and args.engine == "run":
+        procutil.fail_usage("--cluster: the runs of a sweep on a cluster use the sim or the batched engine (zswarm run's processes stay on this host)")
+    todo = [j for j in jobs if j.run_id not in sweep.read_done(out / "sweep.csv")]
+    batches: list[list[sweep.Job]] = []
+    on_sim = todo
+    if args.engine in ("auto", "batched"):
+        try:
+            batches, rest = sweep.plan_batches(args.topology, todo, args.chunk, n_jobs)
+        except ScenarioError as exc:
+            procutil.fail_usage(str(exc))
+        if rest and args.engine == "batched":
+            procutil.fail_usage(f"--engine batched: run {rest[0][0].run_id}: {rest[0][1]} (--engine auto runs such runs on sim)")
+        if rest:
+            print(f"{len(rest)} of {len(todo)} runs on sim: {rest[0][1]}", file=sys.stderr)
+        on_sim = [j for j, _ in rest]
     spec_path = out / "sweep.json"
     if spec_path.exists():
         old = json.loads(spec_path.read_text())
-        diff = sorted(k for k in set(old) | set(spec) if k != "topology" and old.get(k) != spec.get(k))
+        # The engines whose rows agree (batched and sim: tests/component/test_sweep.py) may resume each other's sweeps.
+        same_rows = {old.get("engine"), spec.get("engine")} <= {"auto", "batched", "sim"}
+        diff = sorted(k for k in set(old) | set(spec) if k != "topology" and not (k == "engine" and same_rows) and old.get(k) != spec.get(k))
         if diff:
             procutil.fail_usage(f"--out {out}: holds a different sweep (differs in: {', '.join(diff)}); use another --out to start a new one")
     else:
         spec_path.write_text(json.dumps(spec, indent=2) + "\n")
-    if args.cluster is not None and args.engine != "sim":
-        procutil.fail_usage("--cluster: the runs of a sweep on a cluster use the sim engine (zswarm run's processes stay on this host)")
-    n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine == "sim" else 1)
-    timeout = args.timeout or (max(120.0, 10.0 * duration) if args.engine == "sim" else duration + 180.0)
+    sim_engine = "run" if args.engine == "run" else "sim"
+    timeout = args.timeout or (max(120.0, 10.0 * duration) if sim_engine == "sim" else duration + 180.0)
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
     n_points = len(jobs) // args.repeats
     where = f"the Dask cluster at {args.cluster}" if args.cluster else f"{n_jobs} at a time"
-    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs on {args.engine}, {where}; {out}", file=sys.stderr)
+    n_batched = sum(len(b) for b in batches)
+    engines = (f"{n_batched} batched in {len(batches)} batches" if batches else "") + (", " if batches and on_sim else "") + (f"{len(on_sim)} on {sim_engine}" if on_sim else "")
+    print(f"sweep of {sc.name}: {n_points} grid points x {args.repeats} repeats = {len(jobs)} runs ({engines or 'all done'}), {where}; {out}", file=sys.stderr)
     t0 = time.monotonic()
-    if args.cluster is not None:
-        from zswarm.cluster import ClusterError
+    from zswarm.cluster import ClusterError
 
-        try:
-            ok, _failed, interrupted = sweep.run_sweep_cluster(args.topology, jobs, varies, out, duration, thresholds, args.cluster, stop.is_set)
-        except ClusterError as exc:
-            print(f"zswarm sweep: {exc}", file=sys.stderr)
-            return 1
-    else:
-        ok, _failed, interrupted = sweep.run_sweep(
-            args.topology, sc, jobs, varies, out, args.engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
-        )
+    ok = 0
+    interrupted = False
+    try:
+        if batches:
+            ok, _failed, interrupted = sweep.run_sweep_batched(args.topology, jobs, batches, varies, out, duration, thresholds, n_jobs, args.cluster, stop.is_set)
+        if on_sim and not interrupted:
+            if args.cluster is not None:
+                ok2, _failed, interrupted = sweep.run_sweep_cluster(args.topology, jobs, varies, out, duration, thresholds, args.cluster, stop.is_set)
+            else:
+                ok2, _failed, interrupted = sweep.run_sweep(
+                    args.topology, sc, jobs, varies, out, sim_engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
+                )
+            ok += ok2
+    except ClusterError as exc:
+        print(f"zswarm sweep: {exc}", file=sys.stderr)
+        return 1
     wall = time.monotonic() - t0
     rows = sweep.load_rows(out / "sweep.csv")
     if interrupted:

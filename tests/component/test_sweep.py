@@ -111,3 +111,58 @@ def test_failed_runs_are_recorded_and_the_sweep_goes_on(tmp_path):
     assert len(rs) == 3
     assert all(r["status"] == "failed" and "timed out after 0.05 s" in r["error"] for r in rs)
     assert "3 failed in all" in p.stdout
+
+
+def _sweep_of(topology, *args, timeout=600):
+    return subprocess.run([sys.executable, "-m", "zswarm", "sweep", str(TOPO / topology), *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
+
+
+@pytest.mark.parametrize(
+    ("topology", "vary"),
+    [
+        ("thesis-5.6-hybrid7-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # noise levels and repeats (seeds) in one batch
+        ("thesis-5.6-velocity-free7-noisy.toml", "algorithm.gains.k_R=0.2,0.4"),  # a batch per gain
+        ("thesis-5.6-continuous7.toml", "algorithm.gains.k_omega=0.1,0.2"),  # no jumps, no noise
+    ],
+)
+def test_batched_rows_are_sims(tmp_path, topology, vary):
+    """The same sweep on the batched engine and on sim, run by run: every column as written
+    (six significant digits: the two engines differ by round-off, ~1e-15 relative, see
+    tests/component/test_batched.py), but the wall time.  A threshold of 0.7 makes the
+    convergence times of the hybrid laws' 3 s runs numbers, not blanks."""
+    args = ["--vary", vary, "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "2"]
+    got = {}
+    for engine in ("batched", "sim"):
+        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
+        assert p.returncode == 0, p.stderr
+        got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
+    assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4
+    for rid, sim_row in got["sim"].items():
+        b = got["batched"][rid]
+        assert {k: v for k, v in b.items() if k != "wall_s"} == {k: v for k, v in sim_row.items() if k != "wall_s"}, rid
+    if "continuous" not in topology:  # the continuous law stays near its undesired start for these 3 s
+        assert any(r["conv_attitude_s"] for r in got["sim"].values())
+    assert not (tmp_path / "batched" / "runs").exists()  # no run folders: the rows come from the engine's arrays
+
+
+def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):
+    """auto: the grid point without links is batched, the one with a link delay runs on sim and
+    says why; --engine batched refuses that sweep before it starts (exit 2); a resumed sweep runs
+    only what its sweep.csv lacks, whichever engine wrote the rest."""
+    args = ["--vary", "links.delay_ms=0,5", "--duration", "1", "--jobs", "2"]
+    out = tmp_path / "auto"
+    p = _sweep_of("thesis-5.6-hybrid7.toml", *args, "--out", str(out))
+    assert p.returncode == 0, p.stderr
+    assert "1 of 2 runs on sim: emulated links" in p.stderr and "1 batched in 1 batches, 1 on sim" in p.stderr
+    rs = rows(out)
+    assert len(rs) == 2 and all(r["status"] == "ok" for r in rs)
+    assert (out / "runs" / "p001-r0").is_dir() and not (out / "runs" / "p000-r0").exists()
+    p = _sweep_of("thesis-5.6-hybrid7.toml", *args, "--engine", "batched", "--out", str(tmp_path / "b"))
+    assert p.returncode == 2 and "--engine batched: run p001-r0: emulated links" in p.stderr, p.stderr
+    assert not (tmp_path / "b" / "sweep.csv").exists()
+    lines = (out / "sweep.csv").read_text().splitlines()
+    (out / "sweep.csv").write_text("\n".join(line for line in lines if not line.startswith("p000-r0")) + "\n")
+    p = _sweep_of("thesis-5.6-hybrid7.toml", *args, "--engine", "sim", "--out", str(out))  # sim may resume what auto began
+    assert p.returncode == 0, p.stderr
+    assert "1 on sim" in p.stderr and "2 runs (1 run now" in p.stdout
+    assert sorted(r["run_id"] for r in rows(out)) == ["p000-r0", "p001-r0"]

@@ -132,3 +132,17 @@ def test_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path):
     assert len(local) == 4 and all(r["status"] == "ok" for r in local)
     # each run's files came back into the sweep's folder
     assert all((tmp_path / "cluster" / "runs" / r["run_id"] / "summary.json").exists() for r in remote)
+
+
+def test_batched_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path):
+    """The batched engine's batches as the cluster's tasks: the rows of the local pool."""
+
+    def batched_rows(out: Path, *extra: str) -> list[dict[str, str]]:
+        args = ("--vary", "noise.rel_att_var=0.005,0.02", "--repeats", "2", "--duration", "2", "--engine", "batched", "--chunk", "2", "--out", str(out))
+        _zswarm("sweep", str(TOPO / "thesis-5.6-hybrid7-noisy.toml"), *args, *extra)
+        with open(out / "sweep.csv", newline="") as f:
+            return sorted(({k: v for k, v in row.items() if k != "wall_s"} for row in csv.DictReader(f)), key=lambda row: row["run_id"])
+
+    local = batched_rows(tmp_path / "local", "--jobs", "2")
+    remote = batched_rows(tmp_path / "cluster", "--cluster", cluster[0])
+    assert remote == local and len(local) == 4 and all(r["status"] == "ok" for r in local)
