@@ -166,3 +166,39 @@ def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "1 on sim" in p.stderr and "2 runs (1 run now" in p.stdout
     assert sorted(r["run_id"] for r in rows(out)) == ["p000-r0", "p001-r0"]
+
+
+def test_ctrl_c_on_the_batched_engine_keeps_the_rows_and_resumes(tmp_path):
+    """Ctrl-C reaches the whole process group: the rows of the batches that ended are kept, the
+    workers are killed (their batches rerun on resume) and the command exits 130; the same
+    command then runs only the runs that sweep.csv lacks."""
+    out = tmp_path / "s"
+    cmd = [sys.executable, "-m", "zswarm", "sweep", str(TOPO / "thesis-5.6-hybrid7.toml"), "--vary", "algorithm.gains.k_R=0.5:2:0.1"]
+    cmd += ["--engine", "batched", "--chunk", "1", "--duration", "6", "--jobs", "2", "--out", str(out)]
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "sweep.csv").exists() or len(rows(out)) < 1:
+            assert p.poll() is None, p.communicate()
+            assert time.monotonic() < deadline, "no row in 300 s"
+            time.sleep(0.2)
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == 130 and "interrupted:" in err and "Traceback" not in err, err
+    kept = rows(out)
+    assert 1 <= len(kept) < 16 and all(r["status"] == "ok" for r in kept)  # interrupted after the first row, before the 16th
+    deadline = time.monotonic() + 15
+    while True:  # nothing of the group is left (the pool's workers and resource tracker included)
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline
+        time.sleep(0.1)
+    again = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
+    assert again.returncode == 0, again.stderr
+    assert f"{16 - len(kept)} batched" in again.stderr and len(rows(out)) == 16
