@@ -1,4 +1,8 @@
 import os
+import signal
+import subprocess
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -50,3 +54,33 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in BACKGROUND and item.path.parent.name == "component":
             item.add_marker(pytest.mark.background)
+
+
+def interrupt_when(cmd: list[str], ready: Callable[[], bool], timeout: float = 300.0) -> tuple[int, str]:
+    """Run ``cmd`` (a zswarm command) in its own process group, send the group SIGINT once
+    ``ready()`` (Ctrl-C in a terminal reaches the whole group), and return its exit code and
+    stderr once nothing of the group is left (its pool's workers and resource tracker
+    included; the tracker exits after its parent, so init reaps it: a few seconds are allowed).
+    The group is killed and reaped if anything fails on the way."""
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + timeout
+        while not ready():
+            assert p.poll() is None, p.communicate()
+            assert time.monotonic() < deadline, f"not ready in {timeout:g} s"
+            time.sleep(0.2)
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    deadline = time.monotonic() + 15
+    while True:
+        try:
+            os.killpg(p.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, subprocess.run(["ps", "-o", "pid,stat,args", "-g", str(p.pid)], capture_output=True, text=True, check=False).stdout
+        time.sleep(0.1)
+    return p.returncode, err

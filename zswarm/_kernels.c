@@ -614,6 +614,16 @@ static PyObject *py_flow_xi_one(PyObject *Py_UNUSED(self), PyObject *const *a, P
     return PyFloat_FromDouble(flow_xi_one(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], n));
 }
 
+/* The buffers released and NULL returned, the exception set: the one raised, or that `name` (n values)
+ * is not a stack of 3x3 matrices. */
+static PyObject *fail_stack(Bufs *B, Py_ssize_t n, const char *name)
+{
+    if (!PyErr_Occurred())
+        PyErr_Format(PyExc_ValueError, "%s: not a stack of 3x3 matrices (%zd values)", name, n);
+    release_all(B);
+    return NULL;
+}
+
 /* predict(R_prev (M,3,3), R_now (M,3,3), ratio, out (M,3,3) out) -> draws left (near pi) */
 static PyObject *py_predict(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
 {
@@ -623,12 +633,8 @@ static PyObject *py_predict(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ss
         return NULL;
     const Py_ssize_t n = take(&B, a[1], F64, 0, "R_now");
     if (n < 0 || n % 9 || take(&B, a[0], F64, 0, "R_prev") < 0 || want_items(&B.b[1], n, "R_prev") < 0 || take(&B, a[3], F64, 1, "out") < 0 ||
-        want_items(&B.b[2], n, "out") < 0) {
-        if (n >= 0 && n % 9 && !PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "R_now: not a stack of 3x3 matrices");
-        release_all(&B);
-        return NULL;
-    }
+        want_items(&B.b[2], n, "out") < 0)
+        return fail_stack(&B, n, "R_now");
     const long left = predict((size_t)(n / 9), D(1), D(0), ratio, D(2));
     release_all(&B);
     return PyLong_FromLong(left);
@@ -641,12 +647,8 @@ static PyObject *py_log_stack(PyObject *Py_UNUSED(self), PyObject *const *a, Py_
     if (want_nargs(nargs, 2, "log_stack") < 0)
         return NULL;
     const Py_ssize_t n = take(&B, a[0], F64, 0, "R");
-    if (n < 0 || n % 9 || take(&B, a[1], F64, 1, "w") < 0 || want_items(&B.b[1], n / 3, "w") < 0) {
-        if (n >= 0 && n % 9 && !PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "R: not a stack of 3x3 matrices");
-        release_all(&B);
-        return NULL;
-    }
+    if (n < 0 || n % 9 || take(&B, a[1], F64, 1, "w") < 0 || want_items(&B.b[1], n / 3, "w") < 0)
+        return fail_stack(&B, n, "R");
     const long left = log_stack((size_t)(n / 9), D(0), D(1));
     release_all(&B);
     return PyLong_FromLong(left);
@@ -661,12 +663,8 @@ static PyObject *py_terms(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssiz
     Py_ssize_t n = -1;
     if (take(&B, a[0], F64, 0, "A") < 0 || want_items(&B.b[0], 9, "A") < 0 || take(&B, a[1], F64, 0, "K") < 0 || want_items(&B.b[1], 9, "K") < 0 ||
         take(&B, a[2], F64, 0, "u") < 0 || want_items(&B.b[2], 3, "u") < 0 || (n = take(&B, a[3], F64, 0, "R")) < 0 || n % 9 ||
-        take(&B, a[4], F64, 1, "out") < 0 || want_items(&B.b[4], n / 9 * 15, "out") < 0) {
-        if (n >= 0 && n % 9 && !PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "R: not a stack of 3x3 matrices");
-        release_all(&B);
-        return NULL;
-    }
+        take(&B, a[4], F64, 1, "out") < 0 || want_items(&B.b[4], n / 9 * 15, "out") < 0)
+        return fail_stack(&B, n, "R");
     terms((size_t)(n / 9), D(0), D(1), D(2), D(3), D(4));
     release_all(&B);
     Py_RETURN_NONE;

@@ -3,16 +3,13 @@
 import csv
 import json
 import math
-import os
-import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 
-from tests.conftest import ROOT, TOPO
+from tests.conftest import ROOT, TOPO, interrupt_when
 from zswarm import basin
 from zswarm.scenario import ScenarioError, load, parse_override, with_rotations
 
@@ -170,32 +167,11 @@ def test_ctrl_c_keeps_the_rows_and_reaps_the_workers(tmp_path, engine):
     out = tmp_path / "b"
     size = ["--draws", "40"] if engine == "sim" else ["--draws", "400", "--chunk", "4"]
     cmd = [sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-4.5-hybrid5.toml"), *size, "--engine", engine, "--duration", "20", "--jobs", "2", "--out", str(out)]
-    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 300
-        while time.monotonic() < deadline and len(basin.read_rows(out / "basin.csv")) < 1:
-            assert p.poll() is None, p.communicate()
-            time.sleep(0.2)
-        os.killpg(p.pid, signal.SIGINT)
-        _, err = p.communicate(timeout=60)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
-    assert p.returncode == 130 and "interrupted:" in err and "Traceback" not in err, err
+    code, err = interrupt_when(cmd, lambda: len(basin.read_rows(out / "basin.csv")) >= 1)  # nothing of the group left after it
+    assert code == 130 and "interrupted:" in err and "Traceback" not in err, err
     rows = basin.read_rows(out / "basin.csv")
     # Interrupted after the first rows and before the last: fewer rows than draws asked (not a tolerance).
     assert 1 <= len(rows) < (40 if engine == "sim" else 400) and all(r["status"] == "ok" for r in rows)  # no draw recorded as failed
-    # Nothing of the group is left (the executor's workers and resource tracker included). The
-    # tracker exits after its parent, so init reaps it: allow it a few seconds.
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            os.killpg(p.pid, 0)
-        except ProcessLookupError:
-            break
-        assert time.monotonic() < deadline, subprocess.run(["ps", "-o", "pid,stat,args", "-g", str(p.pid)], capture_output=True, text=True).stdout
-        time.sleep(0.1)
 
 
 @pytest.mark.parametrize("stem", ["thesis-5.6-velocity-free7", "thesis-5.6-hybrid7-noisy", "thesis-4.5-hybrid5"])

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from tests.conftest import ROOT, TOPO
+from tests.conftest import ROOT, TOPO, interrupt_when
 
 FIXED8 = str(TOPO / "thesis-3.2-fixed8.toml")
 
@@ -175,30 +175,10 @@ def test_ctrl_c_on_the_batched_engine_keeps_the_rows_and_resumes(tmp_path):
     out = tmp_path / "s"
     cmd = [sys.executable, "-m", "zswarm", "sweep", str(TOPO / "thesis-5.6-hybrid7.toml"), "--vary", "algorithm.gains.k_R=0.5:2:0.1"]
     cmd += ["--engine", "batched", "--chunk", "1", "--duration", "6", "--jobs", "2", "--out", str(out)]
-    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 300
-        while not (out / "sweep.csv").exists() or len(rows(out)) < 1:
-            assert p.poll() is None, p.communicate()
-            assert time.monotonic() < deadline, "no row in 300 s"
-            time.sleep(0.2)
-        os.killpg(p.pid, signal.SIGINT)
-        _, err = p.communicate(timeout=60)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
-    assert p.returncode == 130 and "interrupted:" in err and "Traceback" not in err, err
+    code, err = interrupt_when(cmd, lambda: (out / "sweep.csv").exists() and len(rows(out)) >= 1)  # nothing of the group left after it
+    assert code == 130 and "interrupted:" in err and "Traceback" not in err, err
     kept = rows(out)
     assert 1 <= len(kept) < 16 and all(r["status"] == "ok" for r in kept)  # interrupted after the first row, before the 16th
-    deadline = time.monotonic() + 15
-    while True:  # nothing of the group is left (the pool's workers and resource tracker included)
-        try:
-            os.killpg(p.pid, 0)
-        except ProcessLookupError:
-            break
-        assert time.monotonic() < deadline
-        time.sleep(0.1)
     again = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
     assert again.returncode == 0, again.stderr
     assert f"{16 - len(kept)} batched" in again.stderr and len(rows(out)) == 16
