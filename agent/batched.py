@@ -244,7 +244,7 @@ def _truth(sc: Scenario) -> tuple[Any, ...]:
 _NO_TEXT = ScenarioText("")
 
 
-def _schedule(sc: Scenario) -> Scenario:
+def schedule(sc: Scenario) -> Scenario:
     """What the draws of one batch must share: the scenario without what may differ per draw (its
     agents' starts R_i(0), ω_i(0), J_i and initial estimates, the noise variances, the seed, its
     TOML)."""
@@ -330,8 +330,8 @@ def run(
     seeds = [seed] * M if seeds is None else list(seeds)
     if len(seeds) != M:
         raise ValueError(f"{len(seeds)} seeds for {M} draws")
-    common = _schedule(sc)
-    if any(_schedule(d) != common for d in draws[1:]):
+    common = schedule(sc)
+    if any(schedule(d) != common for d in draws[1:]):
         raise Unsupported("draws that differ in more than their agents' starts, noise variances and seeds")
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}

@@ -523,8 +523,9 @@ def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: 
     scenario but for seeds, noise variances and starts; a batch has one pattern of which
     sensors are noisy), and the others with the reason.  A batch holds at most ``chunk`` runs
     (default: each group shared out among ``n_jobs`` tasks, at most 1000)."""
-    from agent.batched import _schedule
+    from zswarm import plugins
 
+    schedule = plugins.engine("batched").schedule
     groups: list[tuple[Scenario, tuple[bool, ...], list[Job]]] = []
     rest: list[tuple[Job, str]] = []
     loaded: dict[tuple[Override, ...], Scenario] = {}
@@ -536,7 +537,7 @@ def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: 
         if why is not None:
             rest.append((j, why))
             continue
-        key, noisy = _schedule(sc), (sc.gyro_var > 0, sc.rel_att_var > 0, sc.attitude_var > 0)
+        key, noisy = schedule(sc), (sc.gyro_var > 0, sc.rel_att_var > 0, sc.attitude_var > 0)
         for g in groups:
             if g[1] == noisy and g[0] == key:
                 g[2].append(j)
