@@ -47,6 +47,8 @@ from world.plant import RigidBodyPlant
 from zswarm import timing
 from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
+from zswarm.report.base import grid as coarse_grid
+from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
 from zswarm.scenario import Scenario, ScenarioText
 from zswarm.so3 import exp
 
@@ -57,8 +59,6 @@ SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world m
 # measured by the estimates' max_k |R̄_k|_I.
 MEASURES = {"sync": "rigid_body", "tree": "prescribed"}
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
-COARSE_S = 0.1  # zswarm.report.base.GRID_S: the grid a sweep's convergence times are judged on
-FINAL_WINDOW_S = 1.0  # zswarm.report.series.final_of_grid's window: a run's "final" error
 
 
 class Unsupported(ValueError):
@@ -262,10 +262,9 @@ class _Noise:
 
     AHEAD = 128
 
-    def __init__(self, seeds: Sequence[int], i: int, std: Mapping[str, np.ndarray], want: frozenset[str], n_nbrs: int) -> None:
+    def __init__(self, seeds: Sequence[int], i: int, std: Mapping[str, np.ndarray], want: frozenset[str], n_nbrs: int, shared: bool) -> None:
         self.on = {f: bool(std[f][0] > 0) and f in want for f in ("gyro", "rel_att", "attitude")}
-        self.n_nbrs = n_nbrs
-        self.shared = len(set(seeds)) == 1 and all(np.all(v == v[0]) for v in std.values())
+        self.shared = shared
         self.std: dict[str, Any]
         if self.shared:
             self.rng = np.random.default_rng([seeds[0] % (1 << 63), i])
@@ -355,7 +354,8 @@ def run(
     }
     if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
         raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
-    if shared and any(v[0] > 0 for v in std.values()) and (len(set(seeds)) > 1 or any(np.any(v != v[0]) for v in std.values())):
+    one_noise = len(set(seeds)) == 1 and all(np.all(v == v[0]) for v in std.values())  # every draw the same noise
+    if shared and any(v[0] > 0 for v in std.values()) and not one_noise:
         raise Unsupported("draws of several seeds or noise variances on the shared truth (prescribed motion: its measurements are the same for every draw)")
 
     modules: dict[int, ModuleType] = {}
@@ -368,7 +368,7 @@ def run(
     kept = ("attitude", "gyro") if shared else ("attitude",)  # the sensor fields whose history a view keeps
     histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {f: deque(maxlen=HISTORY) for f in kept if f in want[i]} for i in ids}
     rel_histories: dict[int, dict[int, deque[tuple[float, np.ndarray]]]] = {i: {j: deque(maxlen=HISTORY) for j in nbrs[i]} for i in ids if shared and "rel_att" in want[i]}
-    noise = {i: _Noise(seeds, i, std, want[i], len(nbrs[i])) for i in ids}  # the world's generators
+    noise = {i: _Noise(seeds, i, std, want[i], len(nbrs[i]), one_noise) for i in ids}  # the world's generators
     for i in ids:
         per = [setup(d, i, s) for d, s in zip(draws, seeds, strict=True)]
         modules[i], gains[i], tree_edges, _ = per[0]
@@ -385,14 +385,12 @@ def run(
     grid_v: list[np.ndarray] = []
     # The report's finals and coarse grid (sweep rows): the grid's times are known ahead.
     grid_all = np.round(np.arange(0.0, (n_samples - 1) // grid_every * grid_every * sample_dt + 1e-9, grid_s), 9)
-    coarse_t = np.round(np.arange(0.0, duration + 1e-9, COARSE_S), 6)
+    coarse_t = coarse_grid(duration)
     coarse_at = np.clip(np.searchsorted(grid_all, coarse_t, side="right") - 1, 0, len(grid_all) - 1) if len(grid_all) else np.zeros(0, dtype=int)
     coarse_v: dict[int, np.ndarray] = {}
-    final_from = grid_all[-1] - FINAL_WINDOW_S if len(grid_all) else 0.0
-    final_v: list[np.ndarray] = []
     coarse_set = set(coarse_at.tolist()) if rows else set()
-    if not rows:
-        final_from = math.inf
+    final_from = grid_all[-1] - FINAL_WINDOW_S if rows and len(grid_all) else math.inf
+    final_v: list[np.ndarray] = []
     edge_messages = commands = 0
     ticks, tick_v = [], []  # the estimates' measure at every tick (shared truth)
     jumps = np.zeros(M, dtype=np.int64)
@@ -502,8 +500,8 @@ def run(
     res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands)
     if rows and grid_t:
         fin = np.array(final_v)  # (window, M, edges)
-        # zswarm.report.series.final_of_grid of each edge: nanmean over the window, each a 1-D array as the report's
-        res.edge_final = np.array([[float(np.nanmean(np.ascontiguousarray(fin[:, m, e]))) for e in range(fin.shape[2])] for m in range(M)])
+        t_fin = grid_all[grid_all >= final_from]
+        res.edge_final = np.array([[final_of_grid(t_fin, fin[:, m, e]) for e in range(fin.shape[2])] for m in range(M)])  # the report's final, edge by edge
         res.t_coarse = coarse_t
         res.max_rel_coarse = np.array([coarse_v[g] for g in coarse_at]).T
     return res

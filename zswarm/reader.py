@@ -13,7 +13,6 @@ command-line override is at fault).
 from __future__ import annotations
 
 import math
-
 from collections.abc import Mapping
 from typing import Any, TypeVar
 

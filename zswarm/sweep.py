@@ -926,7 +926,8 @@ def command(args: argparse.Namespace) -> int:
     n_jobs = args.jobs or ((os.cpu_count() or 1) if args.engine != "run" else 1)
     if args.cluster is not None and args.engine == "run":
         procutil.fail_usage("--cluster: the runs of a sweep on a cluster use the sim or the batched engine (zswarm run's processes stay on this host)")
-    todo = [j for j in jobs if j.run_id not in sweep.read_done(out / "sweep.csv")]
+    done = sweep.read_done(out / "sweep.csv")
+    todo = [j for j in jobs if j.run_id not in done]
     batches: list[list[sweep.Job]] = []
     on_sim = todo
     if args.engine in ("auto", "batched"):

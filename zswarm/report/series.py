@@ -49,7 +49,10 @@ def final(t: np.ndarray, v: np.ndarray, t_end: float, window: float = 1.0) -> fl
     return float(np.mean(w)) if len(w) else float("nan")
 
 
-def final_of_grid(t: np.ndarray, v: np.ndarray, window: float = 1.0) -> float:
+FINAL_WINDOW_S = 1.0  # a run's "final" error: its mean over the last second
+
+
+def final_of_grid(t: np.ndarray, v: np.ndarray, window: float = FINAL_WINDOW_S) -> float:
     """Mean of ``v`` over the last ``window`` of its own grid ``t``, NaN left out."""
     sel = t >= t[-1] - window
     return float(np.nanmean(v[sel])) if np.any(sel) else float("nan")
