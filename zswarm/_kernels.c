@@ -112,29 +112,7 @@ static inline void mm3(const double *a, const double *b, double *c)
             c[3 * i + k] = fma(a[3 * i + 2], b[6 + k], fma(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
 }
 
-/* Rodrigues' formula of one rotation vector W into E, as zswarm/so3.py exp_batch computes it. */
-static inline void rodrigues(const double W[3], double E[9])
-{
-    const double t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1]; /* einsum("ij,ij->i")'s order */
-    double a, b;
-    if (t2 < 1e-8) {
-        a = 1.0 - t2 / 6.0;
-        b = 0.5 - t2 / 24.0;
-    } else {
-        const double s = sqrt(t2);
-        double sn, cs;
-        sincos1(s, &sn, &cs);
-        a = sn / s;
-        b = (1.0 - cs) / t2;
-    }
-    const double K[9] = {0.0, -W[2], W[1], W[2], 0.0, -W[0], -W[1], W[0], 0.0};
-    double KK[9];
-    mm3(K, K, KK);
-    for (int q = 0; q < 9; q++)
-        E[q] = ((q % 4 == 0 ? 1.0 : 0.0) + a * K[q]) + b * KK[q];
-}
-
-/* The same four at a time: lane l of W[r] is component r of a rotation vector. */
+/* Four at a time: lane l of a v4d is draw (or body) l. */
 static inline __attribute__((always_inline)) v4d fma4(v4d a, v4d b, v4d c)
 {
     v4d r;
@@ -150,6 +128,8 @@ static inline __attribute__((always_inline)) void mm3_4(const v4d *a, const v4d 
             c[3 * i + k] = fma4(a[3 * i + 2], b[6 + k], fma4(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
 }
 
+/* Rodrigues' formula of four rotation vectors (lane l of W[r]: component r of vector l) into E, as
+ * zswarm/so3.py exp_batch computes it (einsum("ij,ij->i")'s order for |W|²). */
 static inline __attribute__((always_inline)) void rodrigues4(const v4d W[3], v4d E[9])
 {
     const v4d t2 = (W[0] * W[0] + W[2] * W[2]) + W[1] * W[1];
