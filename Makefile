@@ -41,8 +41,8 @@ bench: $(STAMP)
 bench-sim: $(STAMP)
 	$(PY) bench/bench_sim.py
 
-## make bench-batched: CPU per draw of a basin, zswarm sim against the batched engine (the §5.6 laws and
-## §4.5 observers, 3 s per draw, 10/100/1000 draws together; about a minute on a quiet machine)
+## make bench-batched: CPU per draw of a basin and per run of a sweep, zswarm sim against the batched engine (the §5.6 laws,
+## §4.5 observers and §3 observers, 3 s per draw, 10/100/1000 draws together; about a minute and a half on a quiet machine)
 bench-batched: $(STAMP)
 	$(PY) bench/bench_batched.py --duration 3 --draws 10,100,1000
 

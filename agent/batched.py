@@ -19,14 +19,16 @@ So a draw here and the same draw on ``sim`` differ by round-off only (the batche
 algebra sums in another order), which the dynamics then carries: tests/component/test_batched.py.
 
 Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
-its ticks on the sensor grid, perfect links, no faults, sensors of the kinds implemented here
-(gyro, rel_att, attitude, with their noise: drawn from the world's generators in the world's
-order, and a basin's draws share the scenario's seed, so each draw gets its sim run's
-numbers), the plant its report family is measured on here (MEASURES: the rigid-body plant for
-the §5.6 laws; for the §4.5 observers the prescribed motion, the same in every draw, so it is
-simulated once and its measurements are shared), and an algorithm whose SPEC says its
-functions broadcast (``batched=True``).  :func:`problem` says which of these a scenario
-lacks; the commands then run it on ``sim`` per draw.
+its ticks on the sensor grid, perfect links, no faults, leaders (if any) that only publish,
+sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), the
+plant its report family is measured on here (MEASURES: the rigid-body plant for the §5.6
+laws, a truth per draw; for the §4.5 and §3 observers the prescribed motion, the same in every
+draw, so it is simulated and measured once, by the world's own Sensing, and its measurements
+are shared), and an algorithm whose SPEC says its functions broadcast (``batched=True``).
+The noise is drawn from the world's generators in the world's order: on a truth per draw each
+draw's from its own seed, on a shared truth once for all (draws of one seed and variances).
+:func:`problem` says which of these a scenario lacks; the commands then run it on ``sim`` per
+draw.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ import numpy as np
 
 from agent.runtime import setup
 from world.motion import prescribed
+from world.node import PLAN_SAMPLES, Sensing
 from world.plant import RigidBodyPlant
 from zswarm import timing
 from zswarm.agent_config import Estimate
@@ -52,12 +55,15 @@ from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
 from zswarm.scenario import Scenario, ScenarioText
 from zswarm.so3 import exp
 
-SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # what the batched world measures so far
+SENSORS = frozenset({"gyro", "rel_att", "attitude", "bearings", "position", "velocity"})  # what the batched world measures
+PER_DRAW_SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # ... on a truth per draw (rigid bodies)
 # Report family -> the plant its draws run on here.  "sync" (§5.6): rigid bodies (5.1), a truth
 # per draw, measured by the truth's max_k |R̄_k|_I.  "tree" (§4.5 observers): the prescribed
 # motion, the same truth for every draw (simulated once, its measurements shared by the draws),
 # measured by the estimates' max_k |R̄_k|_I.
-MEASURES = {"sync": "rigid_body", "tree": "prescribed"}
+# "leader_follower" (§3 observers): the prescribed motion, shared, measured by each follower's
+# own errors |R̃_i|_I and ||p̃_i|| (zswarm.report.recording.errors).
+MEASURES = {"sync": "rigid_body", "tree": "prescribed", "leader_follower": "prescribed"}
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
 
 
@@ -71,15 +77,20 @@ def problem(sc: Scenario) -> str | None:
     if not getattr(spec, "batched", False):
         return f"{sc.algorithm}'s functions are not declared to broadcast over draws (SPEC.batched)"
     if sc.leader_module is not None:
-        return "leaders run another algorithm"
+        lead = sc.module_for("leader").SPEC
+        if not getattr(lead, "batched", False):
+            return f"the leaders' {sc.leader_module}: its functions are not declared to broadcast over draws (SPEC.batched)"
+        if lead.parts:
+            return f"the leaders' {sc.leader_module} steps (the batched engine runs leaders that only publish)"
     measure = MEASURES.get(spec.report)
     if measure is None:
         return f"the {spec.report!r} report family (the batched engine measures {', '.join(sorted(MEASURES))} runs)"
     if sc.plant != measure:
         return f"the {sc.plant!r} plant with the {spec.report!r} family (the batched engine runs it on the {measure!r} plant)"
     need = frozenset().union(*(sc.sensors_of(i) for i in sc.ids))
-    if need - SENSORS:
-        return f"the sensor(s) {', '.join(sorted(need - SENSORS))} (the batched world measures {', '.join(sorted(SENSORS))})"
+    have = SENSORS if measure == "prescribed" else PER_DRAW_SENSORS
+    if need - have:
+        return f"the sensor(s) {', '.join(sorted(need - have))} (the batched world measures {', '.join(sorted(have))} on the {measure!r} plant)"
     if len(spec.parts) != 1 or spec.parts[0].rate is not None:
         return "an algorithm of several parts or with a part rate of its own"
     clocks = {a.clock for a in sc.agents}
@@ -116,12 +127,13 @@ class BatchedView(timing.HistoryReads):
     """zswarm.algorithm.View for M draws of one agent: every message and state value has a
     leading draw axis; the measurements too on a truth per draw (rigid bodies), not on a
     shared one (prescribed motion: the same for every draw, so no draw axis).  Steps end at
-    sensor packets (lockstep).  On a shared truth the sensor history is kept as the runtime's
-    inbox keeps it (``HISTORY`` packets) and read as the runtime reads it (timing.HistoryReads,
-    timing.relative_attitude_at), so body_rate, rotation and relative_attitude give the
-    runtime's numbers; on a truth per draw they say they are not available."""
+    sensor packets (lockstep).  On a shared truth the sensor packets are kept as the runtime's
+    inbox keeps them (``HISTORY`` of them) and read as the runtime reads them (timing.HistoryReads,
+    timing.relative_attitude_at, timing.body_vector_at), so body_rate, rotation,
+    relative_attitude and body_vector give the runtime's numbers; on a truth per draw only the
+    history of the fields in ``history`` is kept, and the rest say they are not available."""
 
-    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]], rel_history: Mapping[int, deque[tuple[float, np.ndarray]]] | None = None) -> None:
+    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]], packets: deque[dict[str, Any]] | None = None) -> None:
         a = sc.agent(i)
         self.id = i
         self.role = a.role
@@ -137,11 +149,11 @@ class BatchedView(timing.HistoryReads):
         self.first = False
         self.sense: Mapping[str, Any] = {}
         self.sense_t = self.sense_t_world = 0.0
-        self.align = np.eye(3)
+        self.align = np.eye(3)  # steps end at the packet: nothing to turn
         self.stale_read: set[int] = set()
         self._inbox = inbox
         self._history = history
-        self._rel = rel_history
+        self._packets = packets
         self._cache: dict[Any, Any] = {}
 
     def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
@@ -159,29 +171,43 @@ class BatchedView(timing.HistoryReads):
         return all(j in self._inbox for j in self.neighbors)
 
     def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
-        if name not in self._history:
-            raise Unsupported(f"the batched engine keeps no history of {name!r} here")
         key = ("s", name)
         if key not in self._cache:
-            self._cache[key] = list(self._history[name])
+            if self._packets is not None:  # as the runtime's inbox.series
+                self._cache[key] = [(p["t"], p[name]) for p in self._packets if name in p]
+            elif name in self._history:
+                self._cache[key] = list(self._history[name])
+            else:
+                raise Unsupported(f"the batched engine keeps no history of {name!r} here")
         return self._cache[key]  # type: ignore[no-any-return]
 
+    def _shared(self, what: str) -> deque[dict[str, Any]]:
+        if self._packets is None:
+            raise Unsupported(f"{what} need the shared truth (prescribed motion)")
+        return self._packets
+
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
-        if self._rel is None:
-            raise Unsupported("relative attitudes between samples need the shared truth (prescribed motion)")
         key = ("R", j, t_world)
         if key not in self._cache:
-            self._cache[key] = timing.relative_attitude_at(list(self._rel.get(j, ())), self._rates("gyro"), t_world)
+            hist = [(p["t"], p["rel_att"][j]) for p in self._shared("relative attitudes between samples") if j in p.get("rel_att", ())]
+            self._cache[key] = timing.relative_attitude_at(hist, self._rates("gyro"), t_world)
         return self._cache[key]  # type: ignore[no-any-return]
 
     def _rates(self, name: str) -> list[tuple[float, np.ndarray]]:
         """The samples that body_rate, rotation and mean_rate integrate: only a shared truth's."""
-        if self._rel is None:
-            raise Unsupported(f"integrals of {name!r} between samples need the shared truth (prescribed motion)")
+        self._shared(f"integrals of {name!r} between samples")
         return self._samples(name)
 
-    def body_vector(self, *_: Any, **__: Any) -> Any:
-        raise Unsupported("the batched engine measures no bearings")
+    def body_vector(self, key: int | str, t_world: float, unit: bool = True) -> np.ndarray | None:
+        ck = ("b", key, t_world, unit)
+        if ck not in self._cache:
+            packets = self._shared("body-frame vectors between samples")
+            if isinstance(key, int):  # as the runtime's inbox.vectors
+                hist = [(p["t"], p["bearings"][key], p["gyro"]) for p in packets if key in p.get("bearings", ())]
+            else:
+                hist = [(p["t"], p[key], p["gyro"]) for p in packets if key in p]
+            self._cache[ck] = timing.body_vector_at(hist, t_world, unit=unit)
+        return self._cache[ck]  # type: ignore[no-any-return]
 
 
 def stack(values: Sequence[Any]) -> Any:
@@ -208,18 +234,21 @@ def stack(values: Sequence[Any]) -> Any:
 
 @dataclass
 class Result:
-    """What a basin or a sweep reads of M draws: the truth's max_k |R̄_k|_I on the report's
-    grid (as zswarm.report.families.sync measures it on a sim recording) and the jumps."""
+    """What a basin or a sweep reads of M draws: the family's basin measure on its grid (the
+    sync family's max_k |R̄_k|_I of the truth, the tree family's of the estimates, the largest
+    follower attitude error |R̃_i|_I for the leader–follower family) and the jumps."""
 
     t: np.ndarray  # (T,) world times of the grid
-    max_rel: np.ndarray  # (M, T)
+    max_rel: np.ndarray  # (M, T) the basin measure
     jumps: np.ndarray  # (M,) ξ_k jumps of every edge
     agent_jumps: np.ndarray  # (M,) jumps of the agents' own hybrid variables
     steps: int  # agent steps taken (per draw)
-    # For a sweep's rows (truth per draw only; None on a shared truth):
-    edge_final: np.ndarray | None = None  # (M, edges) |R̄_k|_I averaged over the grid's last second (the report's final)
+    # For a sweep's rows (run(rows=True)): what summarize_run reads of a sim run's files.
+    final_att: np.ndarray | None = None  # (M,) summary.json's mean_attitude_error_final (the family's)
+    final_pos: np.ndarray | None = None  # (M,) its mean_position_error_final (NaN: none)
     t_coarse: np.ndarray | None = None  # the report's 0.1 s grid up to the duration (zswarm.report.base.grid)
-    max_rel_coarse: np.ndarray | None = None  # (M, len(t_coarse)) max over edges of |R̄_k|_I as edges.csv writes it (%.6e), newest at or before each point
+    att_coarse: np.ndarray | None = None  # (M, len(t_coarse)) the family's team attitude measure on it, from its CSV's %.6e values
+    pos_coarse: np.ndarray | None = None  # (M, len(t_coarse)) the same of positions (None: the family has none)
     edge_messages: int = 0  # agent -> agent messages sent (each delivered: lockstep), per draw
     commands: int = 0  # commands sent to the world, per draw
 
@@ -249,7 +278,18 @@ def schedule(sc: Scenario) -> Scenario:
     agents' starts R_i(0), ω_i(0), J_i and initial estimates, the noise variances, the seed, its
     TOML)."""
     agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate()) for a in sc.agents)
-    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, gyro_var=0.0, rel_att_var=0.0, attitude_var=0.0, seed=0)
+    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, **{f"{f}_var": 0.0 for f in NOISES})
+
+
+def group(sc: Scenario, seed: int) -> tuple[Any, ...]:
+    """What runs must share to be stepped in one batch (a sweep's grouping): the schedule, which
+    sensors are noisy (the world draws no numbers for a variance of 0), and on a shared truth
+    with noise the seed and variances too (its measurements are drawn once for the batch)."""
+    variances = tuple(getattr(sc, f"{f}_var") for f in NOISES)
+    noisy = tuple(v > 0 for v in variances)
+    if sc.plant == MEASURES.get(sc.info.report) == "prescribed" and any(noisy):
+        return (schedule(sc), seed, variances)
+    return (schedule(sc), noisy)
 
 
 class _Noise:
@@ -304,6 +344,180 @@ class _Noise:
         return out[0], out[1], out[2]
 
 
+NOISES = ("gyro", "bearing", "rel_att", "velocity", "attitude")  # the noise variances the batched world draws with
+
+
+class _Ticks:
+    """A shared truth's measure of the estimates at the agents' ticks (lockstep: every agent
+    ticks at ``k · tick_every`` samples).  The sweep rows read it where the report reads its
+    CSV on the 0.1 s grid and over the last second, so only those ticks are kept."""
+
+    def __init__(self, sc: Scenario, M: int, duration: float, n_samples: int, tick_every: int, sample_dt: float, grid_s: float, rows: bool) -> None:
+        self.sc, self.M, self.duration, self.grid_s, self.rows = sc, M, duration, grid_s, rows
+        self.t_ticks = np.arange(0, n_samples, tick_every) * sample_dt  # k · sample_dt, as the loop computes them
+        self.n = 0  # ticks seen
+        self.basin: list[np.ndarray] = []  # the basin measure (M,) at every tick
+        self.kept: dict[int, Any] = {}  # tick index -> what the rows read there
+        self.keep: set[int] = set()
+
+    def tick(self, t: float, plant: Any, estimates: Mapping[int, Mapping[str, Any]]) -> None:
+        basin, kept = self.measure(plant, estimates, self.n in self.keep)
+        self.basin.append(basin)
+        if kept is not None:
+            self.kept[self.n] = kept
+        self.n += 1
+
+    def measure(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
+        raise NotImplementedError
+
+    def basin_series(self, res: Result) -> Result:
+        """The basin measure held on the family's grid (the newest tick at or before each point)."""
+        tk = self.t_ticks[: self.n]
+        if not len(tk):
+            res.t, res.max_rel = np.zeros(0), np.zeros((self.M, 0))
+            return res
+        res.t = np.arange(tk[0], tk[-1] + 1e-9, self.grid_s)
+        res.max_rel = np.array(self.basin)[np.searchsorted(tk, res.t, side="right") - 1].T
+        return res
+
+    def result(self, res: Result) -> Result:
+        return self.basin_series(res)
+
+
+def _mean_rows(x: np.ndarray) -> np.ndarray:
+    """np.mean of each row of (M, K) as of a 1-D array of its K values (the same sum: a
+    contiguous row), the way the report averages one run's values over its last second."""
+    return np.ascontiguousarray(x).mean(axis=1)
+
+
+class _FollowerErrors(_Ticks):
+    """The leader–follower family (zswarm.report.base, recording.errors): each follower's
+    |R̃_i|_I = sqrt(tr(I − R_i R̂_i^T)/4) and ||p̃_i|| = ||p_i − R_i R̂_i^T p̂_i|| (3.15) at its ticks;
+    the basin measure is the largest follower attitude error."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.followers = [(i, a) for a, i in enumerate(self.sc.ids) if self.sc.agent(i).role == "follower"]
+        # errors.csv's times (%.6f) and the newest row at or before each point of the 0.1 s grid (base.series)
+        t_csv = np.array([float(f"{t:.6f}") for t in self.t_ticks])
+        self.coarse_t = coarse_grid(self.duration)
+        self.coarse_at = np.searchsorted(t_csv, self.coarse_t + 1e-9, side="right") - 1
+        self.final_at = np.flatnonzero(self.t_ticks >= self.duration - FINAL_WINDOW_S)  # pipeline.final_mean's window
+        if self.rows:
+            self.keep = set(self.coarse_at[self.coarse_at >= 0].tolist()) | set(self.final_at.tolist())
+
+    def measure(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
+        R, p = plant.R, plant.p
+        att, pos = [], []
+        for i, a in self.followers:
+            R_hat, p_hat = estimates[i]["R_hat"], estimates[i]["p_hat"]
+            tr = np.einsum("ij,mij->m", R[a], R_hat)  # tr(R R̂^T)
+            att.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)))
+            if keep:
+                pos.append(np.linalg.norm(p[a] - np.einsum("ij,mkj,mk->mi", R[a], R_hat, p_hat), axis=1))
+        basin = np.max(att, axis=0) if att else np.zeros(self.M)
+        return basin, (np.array(att), np.array(pos)) if keep else None  # (F, M) each
+
+    def result(self, res: Result) -> Result:
+        res = self.basin_series(res)
+        if not self.rows:
+            return res
+        F = len(self.followers)
+        # Finals: per follower the mean over the last second of its ticks, then over followers (base.headline's nanmean).
+        fin = np.array([self.kept[n] for n in self.final_at if n < self.n])  # (K, 2, F, M)
+        per = [[_mean_rows(fin[:, c, f, :].T) for f in range(F)] for c in (0, 1)]  # [c][f] -> (M,)
+        res.final_att, res.final_pos = (_nanmean_of(per[c]) for c in (0, 1))
+        # The 0.1 s grid: each follower's newest row at or before the point, as errors.csv holds it; mean over followers.
+        ok = self.coarse_at >= 0
+        out = []
+        for c in (0, 1):
+            cols = np.full((F, self.M, len(self.coarse_t)), np.nan)
+            for g in np.flatnonzero(ok):
+                cols[:, :, g] = np.array(np.char.mod("%.6e", self.kept[int(self.coarse_at[g])][c]), dtype=float)
+            out.append(np.mean(cols, axis=0))
+        res.t_coarse, res.att_coarse, res.pos_coarse = self.coarse_t, out[0], out[1]
+        return res
+
+
+def _nanmean_of(values: Sequence[np.ndarray]) -> np.ndarray:
+    """zswarm.report.series.nanmean per draw (the mean of the finite values; NaN where none)."""
+    x = np.array(values).T  # (M, F)
+    fine = np.all(np.isfinite(x), axis=1)
+    out = _mean_rows(x)
+    for m in np.flatnonzero(~fine):
+        v = x[m][np.isfinite(x[m])]
+        out[m] = float(np.mean(v)) if len(v) else np.nan
+    return out
+
+
+class _TreeErrors(_Ticks):
+    """The tree family (zswarm.report.families.tree.tree_metrics): R̃_i = R_i R̂_i^T and per edge
+    |R̄_k|_I = |R̃_t^T R̃_h|_I at every tick (the basin measure: their max); for the rows, each
+    agent's |R̃_i R̃_c^T|_I up to the chordal mean R̃_c over the last second, and the edges'
+    mean on the 0.1 s grid as edges.csv holds it (%.3f times, %.6e values)."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.edges = list(self.sc.oriented)
+        self.col = {i: a for a, i in enumerate(self.sc.ids)}
+        tk = self.t_ticks
+        # tree_metrics' grid (step 0.01 from the first estimate), each point's newest tick ...
+        self.tm_t = np.arange(tk[0], tk[-1] + 1e-9, 0.01) if len(tk) else np.zeros(0)
+        self.tm_at = np.searchsorted(tk, self.tm_t, side="right") - 1
+        # ... and edges_on_grid's 0.1 s points on edges.csv's times
+        t_csv = np.array([float(f"{t:.3f}") for t in self.tm_t])
+        self.coarse_t = coarse_grid(self.duration)
+        self.coarse_at = self.tm_at[np.clip(np.searchsorted(t_csv, self.coarse_t, side="right") - 1, 0, len(t_csv) - 1)] if len(t_csv) else np.zeros(0, dtype=int)
+        self.final_at = self.tm_at[self.tm_t >= self.duration - FINAL_WINDOW_S]  # series.final's window on tm.t
+        if self.rows:
+            self.keep = set(self.coarse_at.tolist()) | set(self.final_at.tolist())
+
+    def measure(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
+        R = plant.R
+        Rt = {i: R[a] @ np.swapaxes(estimates[i]["R_hat"], -1, -2) for i, a in self.col.items()}
+        vals = []
+        for h, tl in self.edges:
+            tr = np.einsum("mji,mji->m", Rt[tl], Rt[h])  # tr(R̃_t^T R̃_h), without the product
+            vals.append(np.sqrt(np.clip((3.0 - tr) / 4.0, 0.0, 1.0)))
+        basin = np.max(vals, axis=0) if vals else np.zeros(self.M)
+        return basin, (np.array(vals), Rt) if keep else None
+
+    def result(self, res: Result) -> Result:
+        res = self.basin_series(res)
+        if not self.rows:
+            return res
+        sc = self.sc
+        # The agents' errors up to the chordal mean over the last second (tree.summary), their mean over followers.
+        finals = []
+        for n in self.final_at:
+            Rt = self.kept[int(n)][1]
+            Rc = _nearest_rotations(np.mean([Rt[i] for i in sc.ids], axis=0))  # (M, 3, 3)
+            finals.append([np.sqrt(np.clip((3.0 - np.einsum("mij,mij->m", Rt[i], Rc)) / 4.0, 0.0, 1.0)) for i in sc.ids])
+        fin = np.array(finals)  # (K, agents, M)
+        per = [_mean_rows(fin[:, q, :].T) for q, i in enumerate(sc.ids) if sc.agent(i).role == "follower"]
+        res.final_att = _nanmean_of(per)
+        res.final_pos = np.full(self.M, np.nan)  # tree's positions: the §4.4 pose observer's only
+        E = len(self.edges)
+        rounded = np.array([np.array(np.char.mod("%.6e", self.kept[int(n)][0]), dtype=float) for n in self.coarse_at])  # (T, E, M)
+        res.t_coarse = self.coarse_t
+        res.att_coarse = np.mean([rounded[:, e, :].T for e in range(E)], axis=0)  # edges_on_grid(..., np.mean)
+        return res
+
+
+def _nearest_rotations(A: np.ndarray) -> np.ndarray:
+    """The rotation nearest to each matrix of a stack (tree._nearest_rotation, batched)."""
+    U, _, Vt = np.linalg.svd(A)
+    d = np.sign(np.linalg.det(U @ Vt))
+    d[d == 0] = 1.0
+    D = np.zeros_like(A)
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    return U @ D @ Vt
+
+
+_SHARED_MEASURES: dict[str, type[_Ticks]] = {"tree": _TreeErrors, "leader_follower": _FollowerErrors}
+
+
 def run(
     draws: Sequence[Scenario],
     duration: float,
@@ -315,11 +529,11 @@ def run(
 ) -> Result:
     """Step the draws (scenarios that differ only in their agents' starts, or for a prescribed
     truth in their initial estimates, and on rigid bodies in their noise variances) together for
-    ``duration`` s of world time; max_k |R̄_k|_I on a grid of ``grid_s`` (the report family's,
-    zswarm.report.family.Family.basin_grid_s).  ``seeds``: each draw's seed (its noise, as sim's
-    World draws it with that seed); by default every draw has ``seed``.  ``rows``: also what a
-    sweep's row reads (Result.edge_final, max_rel_coarse; a truth per draw only).  Message and
-    command counts are counted either way."""
+    ``duration`` s of world time; the report family's measure on a grid of ``grid_s`` (the
+    family's, zswarm.report.family.Family.basin_grid_s).  ``seeds``: each draw's seed (its noise,
+    as sim's World draws it with that seed); by default every draw has ``seed``.  ``rows``: also
+    what a sweep's row reads (Result.final_att, att_coarse, ...).  Message and command counts
+    are counted either way."""
     sc = draws[0]
     why = problem(sc)
     if why is not None:
@@ -332,50 +546,52 @@ def run(
     common = schedule(sc)
     if any(schedule(d) != common for d in draws[1:]):
         raise Unsupported("draws that differ in more than their agents' starts, noise variances and seeds")
+    family = sc.info.report
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
     torques = _Torques(M * n)
+    std = {f: np.sqrt([getattr(d, f"{f}_var") for d in draws]) for f in NOISES}
+    if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
+        raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
+    one_noise = len(set(seeds)) == 1 and all(np.all(v == v[0]) for v in std.values())  # every draw the same noise
     plant: Any
+    sensing: Sensing | None = None
     if shared:
         key = _truth(sc)
         if any(_truth(d) != key for d in draws[1:]):
             raise Unsupported("draws whose prescribed truths differ (the batched engine simulates it once for all)")
+        if any(v[0] > 0 for v in std.values()) and not one_noise:
+            raise Unsupported("draws of several seeds or noise variances on the shared truth (prescribed motion: its measurements are the same for every draw)")
         plant = prescribed(sc)
+        sensing = Sensing(sc, seeds[0])  # the world's sensors, generators and draw order
     else:
         R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
         w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
         J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
         plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
     bias = np.array([a.gyro_bias for a in sc.agents])
-    std = {
-        "gyro": np.sqrt([d.gyro_var for d in draws]),
-        "rel_att": np.sqrt([d.rel_att_var for d in draws]),
-        "attitude": np.sqrt([d.attitude_var for d in draws]),
-    }
-    if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
-        raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
-    one_noise = len(set(seeds)) == 1 and all(np.all(v == v[0]) for v in std.values())  # every draw the same noise
-    if shared and any(v[0] > 0 for v in std.values()) and not one_noise:
-        raise Unsupported("draws of several seeds or noise variances on the shared truth (prescribed motion: its measurements are the same for every draw)")
 
     modules: dict[int, ModuleType] = {}
+    parts: dict[int, Any] = {}
     gains: dict[int, Any] = {}
     views: dict[int, BatchedView] = {}
     states: dict[int, Any] = {}
     inboxes: dict[int, dict[int, tuple[dict[str, Any], float]]] = {i: {} for i in ids}
     want = {i: sc.sensors_of(i) for i in ids}
     nbrs = {i: sc.graph_neighbors(i) for i in ids}
-    kept = ("attitude", "gyro") if shared else ("attitude",)  # the sensor fields whose history a view keeps
-    histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {f: deque(maxlen=HISTORY) for f in kept if f in want[i]} for i in ids}
-    rel_histories: dict[int, dict[int, deque[tuple[float, np.ndarray]]]] = {i: {j: deque(maxlen=HISTORY) for j in nbrs[i]} for i in ids if shared and "rel_att" in want[i]}
-    noise = {i: _Noise(seeds, i, std, want[i], len(nbrs[i]), one_noise) for i in ids}  # the world's generators
+    # Kept sensor history: on a shared truth, every packet (as an agent's inbox keeps them); on a
+    # truth per draw, the attitudes only.
+    packets: dict[int, deque[dict[str, Any]]] = {i: deque(maxlen=HISTORY) for i in ids}
+    histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {} if shared else {f: deque(maxlen=HISTORY) for f in ("attitude",) if f in want[i]} for i in ids}
+    noise = {} if shared else {i: _Noise(seeds, i, std, want[i], len(nbrs[i]), one_noise) for i in ids}  # the world's generators
     for i in ids:
         per = [setup(d, i, s) for d, s in zip(draws, seeds, strict=True)]
         modules[i], gains[i], tree_edges, _ = per[0]
+        spec_parts = modules[i].SPEC.parts
+        parts[i] = spec_parts[0] if spec_parts else None  # None: a leader that only publishes
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
-        views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], rel_histories.get(i) if shared else None)
+        views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], packets[i] if shared else None)
     hybrid = has_jumps(sc.info)
-    part = sc.info.parts[0]
 
     sample_dt = 1.0 / sc.sensor_rate
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
@@ -391,8 +607,8 @@ def run(
     coarse_set = set(coarse_at.tolist()) if rows else set()
     final_from = grid_all[-1] - FINAL_WINDOW_S if rows and len(grid_all) else math.inf
     final_v: list[np.ndarray] = []
+    measure = _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows) if shared else None
     edge_messages = commands = 0
-    ticks, tick_v = [], []  # the estimates' measure at every tick (shared truth)
     jumps = np.zeros(M, dtype=np.int64)
     agent_jumps = np.zeros(M, dtype=np.int64)
     started = False
@@ -403,11 +619,20 @@ def run(
     t_idx = np.array([col[t] for _, t in edges], dtype=int)
     for k in range(n_samples):
         t = k * sample_dt  # as World.next_time computes it
-        plant.advance_to(t)
-        if shared:
-            R = plant.R  # (n, 3, 3): every draw's
-            W = plant.omega_now()
+        tick = k % tick_every == 0
+        sensed: dict[int, dict[str, Any]] = {}
+        if sensing is not None:
+            # World.sample: the motion planned ahead, advanced, measured by the world's sensors.
+            if t > plant.planned_through():
+                plant.plan(np.arange(k, k + PLAN_SAMPLES) * sample_dt)
+            plant.advance_to(t)
+            R = plant.R
+            for i, m in sensing.measure(R, plant.p, plant.omega_now(), plant.velocity() if sc.moving else None).items():
+                m["t"] = t
+                packets[i].append(m)
+                sensed[i] = m
         else:
+            plant.advance_to(t)
             R = plant.R.reshape(M, n, 3, 3)
             if k % grid_every == 0 and edges:
                 # tr R̄_k = tr(R_t^T R_h) = Σ_ji (R_t)_ji (R_h)_ji, without forming R̄_k (a third of the cost;
@@ -422,50 +647,49 @@ def run(
                 if g in coarse_set:
                     coarse_v[g] = np.array(np.char.mod("%.6e", rel), dtype=float).max(axis=1)
             W = plant.omega_now().reshape(M, n, 3)
-        RT = np.swapaxes(R, -1, -2)
-        # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
-        # keeps them; the rest is measured at the agents' ticks only (with a truth per draw a
-        # relative attitude is M products, at 200 Hz for 100 Hz agents).
-        tick = k % tick_every == 0
-        sensed: dict[int, dict[str, Any]] = {}
-        for i in ids:
-            a = col[i]
-            need = want[i] if tick or shared else histories[i].keys()
-            # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
-            # then attitude) from its generator per agent and seed (_Noise).
-            n_gyro, n_rel, n_att = noise[i].next(nbrs[i])
-            sense: dict[str, Any] = {"t": t}
-            if "gyro" in need:
-                sense["gyro"] = _body(W, a, shared) + bias[a] if n_gyro is None else _body(W, a, shared) + bias[a] + n_gyro
-            if "rel_att" in need:
-                sense["rel_att"] = {j: _body(RT, a, shared) @ _body(R, col[j], shared) for j in nbrs[i]}
-                if n_rel is not None:
-                    sense["rel_att"] = {j: R_ij @ exp(n_rel[j]) for j, R_ij in sense["rel_att"].items()}
-            if "attitude" in need:
-                sense["attitude"] = _body(R, a, shared) if n_att is None else _body(R, a, shared) @ exp(n_att)
-            for f, hist in histories[i].items():
-                hist.append((t, sense[f] if shared else sense[f].copy()))
-            for j, rel in rel_histories.get(i, {}).items():
-                rel.append((t, sense["rel_att"][j]))
-            sensed[i] = sense
+            RT = np.swapaxes(R, -1, -2)
+            # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
+            # keeps them; the rest is measured at the agents' ticks only (a relative attitude is M
+            # products, at 200 Hz for 100 Hz agents).
+            for i in ids:
+                a = col[i]
+                need = want[i] if tick else histories[i].keys()
+                # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
+                # then attitude) from its generator per agent and seed (_Noise).
+                n_gyro, n_rel, n_att = noise[i].next(nbrs[i])
+                sense: dict[str, Any] = {"t": t}
+                if "gyro" in need:
+                    sense["gyro"] = W[:, a] + bias[a] if n_gyro is None else W[:, a] + bias[a] + n_gyro
+                if "rel_att" in need:
+                    sense["rel_att"] = {j: RT[:, a] @ R[:, col[j]] for j in nbrs[i]}
+                    if n_rel is not None:
+                        sense["rel_att"] = {j: R_ij @ exp(n_rel[j]) for j, R_ij in sense["rel_att"].items()}
+                if "attitude" in need:
+                    sense["attitude"] = R[:, a] if n_att is None else R[:, a] @ exp(n_att)
+                for f, hist in histories[i].items():
+                    hist.append((t, sense[f].copy()))
+                sensed[i] = sense
         if not tick:
             continue
-        estimates: dict[int, Any] = {}
+        estimates: dict[int, Mapping[str, Any]] = {}
         for i in ids:
             a = col[i]
-            v, mod, g = views[i], modules[i], gains[i]
+            v, mod, g, part = views[i], modules[i], gains[i], parts[i]
             outputs = None
             if not started:
                 v.begin(t, sensed[i], first=True)
-                if hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
+                if hybrid and part is not None:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
                     v.dt = 0.0
                     _step(part, states, i, v, g, 0.0, jumps, agent_jumps)
             else:
                 v.begin(t, sensed[i], first=False)
                 v.command_lead = 0.5 * v.period
                 v.dt = t - last
-                outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
+                if part is not None:
+                    outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
             pub = mod.publish(states[i], outputs, v)
+            if pub is None:
+                continue
             edge_messages += len(pub.edges)
             commands += pub.command is not None
             if pub.command is not None and "tau" in pub.command:
@@ -473,27 +697,16 @@ def run(
             t_stamp = t if pub.t is None else pub.t
             for j, fields in pub.edges.items():
                 inboxes[j][i] = (dict(fields), t_stamp)
-            estimates[i] = pub.estimate.get("R_hat")
-        if shared and edges:
-            # R̃_i = R_i R̂_i^T at the tick, R̄_k = R̃_t^T R̃_h (zswarm.report.families.tree.tree_metrics)
-            Rt = {i: R[col[i]] @ np.swapaxes(estimates[i], -1, -2) for i in ids}
-            vals = []
-            for h, tl in edges:
-                tr = np.einsum("mji,mji->m", Rt[tl], Rt[h])  # tr(R̃_t^T R̃_h), without the product
-                vals.append(np.sqrt(np.clip((3.0 - tr) / 4.0, 0.0, 1.0)))
-            ticks.append(t)
-            tick_v.append(np.max(vals, axis=0))
+            estimates[i] = pub.estimate
+        if measure is not None:
+            measure.tick(t, plant, estimates)
         if started:
             steps += 1
         started, last = True, t
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
-    if shared:
-        # The estimates held on the grid, as tree_metrics samples a recording's estimates.
-        tk = np.array(ticks)
-        t_grid = np.arange(tk[0], tk[-1] + 1e-9, grid_s) if len(tk) else np.zeros(0)
-        idx = np.searchsorted(tk, t_grid, side="right") - 1
-        return Result(t_grid, np.array(tick_v)[idx].T if len(tk) else np.zeros((M, 0)), jumps, agent_jumps, steps)
+    if measure is not None:
+        return measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands))
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all)
@@ -501,15 +714,11 @@ def run(
     if rows and grid_t:
         fin = np.array(final_v)  # (window, M, edges)
         t_fin = grid_all[grid_all >= final_from]
-        res.edge_final = np.array([[final_of_grid(t_fin, fin[:, m, e]) for e in range(fin.shape[2])] for m in range(M)])  # the report's final, edge by edge
+        edge_final = np.array([[final_of_grid(t_fin, fin[:, m, e]) for e in range(fin.shape[2])] for m in range(M)])  # the report's final, edge by edge
+        res.final_att = edge_final.mean(axis=1)
         res.t_coarse = coarse_t
-        res.max_rel_coarse = np.array([coarse_v[g] for g in coarse_at]).T
+        res.att_coarse = np.array([coarse_v[g] for g in coarse_at]).T
     return res
-
-
-def _body(X: np.ndarray, a: int, shared: bool) -> np.ndarray:
-    """Body ``a``'s entry of a truth array: (n, ...) when the truth is shared, (M, n, ...) when each draw has its own."""
-    return X[a] if shared else X[:, a]
 
 
 def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray) -> Any:

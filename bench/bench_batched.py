@@ -1,14 +1,19 @@
-"""CPU per draw of a basin check: zswarm sim against the batched lockstep engine (issue 31).
+"""CPU per draw of a basin check and per run of a sweep: zswarm sim against the batched
+lockstep engine (issue 31).
 
-For each scheme, in one run: one draw the way ``zswarm basin --engine sim`` runs it
-(``basin.run_draw``: sim in memory, the recording decoded, the family's max_k |R̄_k|_I),
-then the same draws on the batched engine (``basin.run_chunk``: the draws' scenarios loaded,
-stepped together, the same row computed) for M draws at once.  Printed: CPU seconds per
-draw and per agent-step, and the ratio sim / batched per draw.  Process CPU time
-(time.process_time), so another process on the machine does not count; each figure is
-the best of REPEATS.
+Basins (the §5.6 laws, the §4.5 observers), for each scheme in one run: one draw the way
+``zswarm basin --engine sim`` runs it (``basin.run_draw``: sim in memory, the recording
+decoded, the family's max_k |R̄_k|_I), then the same draws on the batched engine
+(``basin.run_chunk``: the draws' scenarios loaded, stepped together, the same row computed)
+for M draws at once.  Sweeps (the §3 observers, which have no basin): one run the way
+``zswarm sweep --engine sim`` runs it on a cluster's worker (``sweep.run_job``: sim in memory,
+the report's files, the row), then M runs of the same sweep point (their seeds differ; the
+noiseless scenario, so they share a batch) on the batched engine (``sweep.run_batch``).
+Printed: CPU seconds per draw and per agent-step, and the ratio sim / batched per draw.
+Process CPU time (time.process_time), so another process on the machine does not count;
+each figure is the best of REPEATS.
 
-    .venv/bin/python bench/bench_batched.py [--duration S] [--draws 1,10,100,1000] [--schemes a,b]
+    .venv/bin/python bench/bench_batched.py [--duration S] [--draws 1,10,100,1000] [--schemes a,b] [--sweep-schemes a,b]
 """
 
 from __future__ import annotations
@@ -17,11 +22,13 @@ import argparse
 import time
 from pathlib import Path
 
-from zswarm import basin
+from zswarm import basin, sweep
+from zswarm.report.base import THRESHOLDS
 from zswarm.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7", "thesis-4.5-continuous5", "thesis-4.5-hybrid5")
+SWEEP_SCHEMES = ("thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered", "thesis-3.3-moving5")
 REPEATS = 2
 
 
@@ -38,7 +45,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=5.0, help="world seconds per draw (default 5)")
     ap.add_argument("--draws", default="1,10,100,1000", help="batch sizes M (default 1,10,100,1000)")
-    ap.add_argument("--schemes", default=",".join(SCHEMES), help="topologies/ stems (default: the §5.6 laws and the §4.5 observers)")
+    ap.add_argument("--schemes", default=",".join(SCHEMES), help="topologies/ stems of basins (default: the §5.6 laws and the §4.5 observers)")
+    ap.add_argument("--sweep-schemes", default=",".join(SWEEP_SCHEMES), help="topologies/ stems of sweeps (default: the §3 observers; '' for none)")
     a = ap.parse_args()
     sizes = [int(x) for x in a.draws.split(",")]
     print(f"CPU per draw of {a.duration:g} s of world time (best of {REPEATS}); agent-steps per draw = agents x ticks")
@@ -51,6 +59,17 @@ def main() -> None:
         print(f"{stem:26} {'sim':14} {1:>5} {sim_s:9.3f} {1e6 * sim_s / steps:14.1f} {'':>12}")
         for m in sizes:
             per = cpu(basin.run_chunk, topo, 1, list(range(1, m + 1)), a.duration, 0.01) / m
+            print(f"{stem:26} {'batched':14} {m:>5} {per:9.4f} {1e6 * per / steps:14.2f} {sim_s / per:11.0f}x", flush=True)
+    for stem in filter(None, a.sweep_schemes.split(",")):
+        topo = ROOT / "topologies" / f"{stem}.toml"
+        sc = load(topo)
+        steps = len(sc.ids) * round(a.duration * sc.agent(1).clock.rate)
+        source = (topo.read_text(encoding="utf-8"), str(topo))
+        jobs = [sweep.Job(f"p000-r{k}", 0, k, k + 1, (), ()) for k in range(max(sizes))]
+        sim_s = cpu(sweep.run_job, *source, jobs[0], a.duration, THRESHOLDS)
+        print(f"{stem:26} {'sim (sweep)':14} {1:>5} {sim_s:9.3f} {1e6 * sim_s / steps:14.1f} {'':>12}")
+        for m in sizes:
+            per = cpu(sweep.run_batch, source, jobs[:m], a.duration, THRESHOLDS) / m
             print(f"{stem:26} {'batched':14} {m:>5} {per:9.4f} {1e6 * per / steps:14.2f} {sim_s / per:11.0f}x", flush=True)
 
 

@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from world import sensors
 from world.motion import PrescribedMotion, prescribed
@@ -28,6 +29,68 @@ def _cmd_agent(key: str) -> int | None:
 
 
 PLAN_SAMPLES = 200  # sensor samples whose motion is evaluated at once (1 s at 200 Hz)
+
+
+class Sensing:
+    """Every agent's sensor packet at a sample of the truth, with the scenario's noise: agent i's
+    from its own generator seeded by ``(seed, i)`` and drawn in one order (gyro, bearings,
+    relative attitudes, velocity, body velocity, attitude, relative positions), so a seed gives
+    the same measurements on every engine (the world's processes, sim, the batched engine)."""
+
+    def __init__(self, scenario: Scenario, seed: int) -> None:
+        # What each agent's algorithm declares it measures (zswarm.algorithm.SENSORS).
+        self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
+        want = frozenset().union(*self.sensors.values())
+        self.want_bearings = "bearings" in want
+        self.ids = list(scenario.ids)
+        self.index = {i: k for k, i in enumerate(self.ids)}
+        self.bias = np.array([a.gyro_bias for a in scenario.agents])
+        self.gyro_std = math.sqrt(scenario.gyro_var)
+        self.bearing_std = math.sqrt(scenario.bearing_var)
+        self.velocity_std = math.sqrt(scenario.velocity_var)
+        self.rel_att_std = math.sqrt(scenario.rel_att_var)
+        self.attitude_std = math.sqrt(scenario.attitude_var)
+        self.rel_pos_std = math.sqrt(scenario.rel_pos_var)
+        self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
+        self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
+        self.sensed = {i: scenario.sensed(i) for i in self.ids}
+        # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
+        pairs = [(i, j) for i in self.ids for j in self.nbrs[i]]
+        self._pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
+        self._pair_j = np.array([self.index[j] for _, j in pairs], dtype=int)
+        self._pairs_of = {i: [(q, j) for q, (a, j) in enumerate(pairs) if a == i] for i in self.ids}
+
+    def measure(self, R: NDArray[np.float64], p: NDArray[np.float64], W: NDArray[np.float64], V: NDArray[np.float64] | None) -> dict[int, dict[str, object]]:
+        """Each agent's packet fields from the truth's attitudes R (n, 3, 3), positions p, body
+        rates W and inertial velocities V (None: the agents do not move)."""
+        B = sensors.bearings(R, p, self._pair_i, self._pair_j) if self.want_bearings else None  # every agent's, at once
+        out: dict[int, dict[str, object]] = {}
+        for i in self.ids:
+            a = self.index[i]
+            rng = self.rngs[i]
+            want = self.sensors[i]
+            m: dict[str, object] = {}
+            if "gyro" in want:
+                m["gyro"] = sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)
+            if B is not None and "bearings" in want:
+                m["bearings"] = {j: sensors.noisy_bearing(B[q], self.bearing_std, rng) for q, j in self._pairs_of[i]}
+            if "rel_att" in want:
+                m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
+            if V is not None and "velocity" in want:
+                m["velocity"] = sensors.velocity(V[a], self.velocity_std, rng)
+            if "velocity_body" in want:
+                m["velocity_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
+            # Own attitude: R_i exp([n_R]^x) (§5.6; exact for the thesis' leaders, who
+            # know their pose).  Drawn last: earlier scenarios keep their measurements.
+            if "attitude" in want:
+                m["attitude"] = sensors.attitude(R[a], self.attitude_std, rng)
+            if "position" in want:
+                m["position"] = p[a]
+            if "rel_pos" in want:
+                # toward the robots i senses (Scenario.sensed): the sensing graph is directed
+                m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
+            out[i] = m
+        return out
 
 
 class World:
@@ -69,27 +132,8 @@ class World:
             bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
         else:
             self.motion = prescribed(scenario)
-        # What each agent's algorithm declares it measures (zswarm.algorithm.SENSORS).
-        self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
-        want = frozenset().union(*self.sensors.values())
-        self.want_bearings = "bearings" in want
-        self.ids = list(scenario.ids)
-        self.index = {i: k for k, i in enumerate(self.ids)}
-        self.bias = np.array([a.gyro_bias for a in scenario.agents])
-        self.gyro_std = math.sqrt(scenario.gyro_var)
-        self.bearing_std = math.sqrt(scenario.bearing_var)
-        self.velocity_std = math.sqrt(scenario.velocity_var)
-        self.rel_att_std = math.sqrt(scenario.rel_att_var)
-        self.attitude_std = math.sqrt(scenario.attitude_var)
-        self.rel_pos_std = math.sqrt(scenario.rel_pos_var)
-        self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
-        self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
-        self.sensed = {i: scenario.sensed(i) for i in self.ids}
-        # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
-        pairs = [(i, j) for i in self.ids for j in self.nbrs[i]]
-        self._pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
-        self._pair_j = np.array([self.index[j] for _, j in pairs], dtype=int)
-        self._pairs_of = {i: [(q, j) for q, (a, j) in enumerate(pairs) if a == i] for i in self.ids}
+        self.sensing = Sensing(scenario, seed)
+        self.ids = self.sensing.ids
         self.pub_sense = {i: bus.publisher(keys.sense(run, i)) for i in self.ids}
         self.pub_truth = bus.publisher(keys.truth(run))
         self.pub_stats = bus.publisher(keys.stats(run, "world", 0))
@@ -117,8 +161,6 @@ class World:
         self.motion.advance_to(t)
         R, p = self.motion.R, self.motion.p
         W = self.motion.omega_now()
-        if self.want_bearings:
-            B = sensors.bearings(R, p, self._pair_i, self._pair_j)  # every agent's, at once
         V = self.motion.velocity() if self.moving else None
         seq = self.seq
         if isinstance(self.motion, RigidBodyPlant):
@@ -127,32 +169,7 @@ class World:
             self.pub_truth.publish("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W, u=self.motion.u)
         else:
             self.pub_truth.publish("truth", 0, seq, t, inc=self.inc, ids=self.ids, R=R, p=p, w=W)
-        for i in self.ids:
-            a = self.index[i]
-            rng = self.rngs[i]
-            want = self.sensors[i]
-            # One draw order per agent (gyro, bearings, relative attitudes, velocity)
-            # so a seed gives the same measurements on every engine.
-            m: dict[str, object] = {}
-            if "gyro" in want:
-                m["gyro"] = sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)
-            if "bearings" in want:
-                m["bearings"] = {j: sensors.noisy_bearing(B[q], self.bearing_std, rng) for q, j in self._pairs_of[i]}
-            if "rel_att" in want:
-                m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
-            if V is not None and "velocity" in want:
-                m["velocity"] = sensors.velocity(V[a], self.velocity_std, rng)
-            if "velocity_body" in want:
-                m["velocity_body"] = sensors.velocity(R[a].T @ (V[a] if V is not None else np.zeros(3)), self.velocity_std, rng)
-            # Own attitude: R_i exp([n_R]^x) (§5.6; exact for the thesis' leaders, who
-            # know their pose).  Drawn last: earlier scenarios keep their measurements.
-            if "attitude" in want:
-                m["attitude"] = sensors.attitude(R[a], self.attitude_std, rng)
-            if "position" in want:
-                m["position"] = p[a]
-            if "rel_pos" in want:
-                # toward the robots i senses (Scenario.sensed): the sensing graph is directed
-                m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
+        for i, m in self.sensing.measure(R, p, W, V).items():
             self.pub_sense[i].publish("sense", 0, seq, t, inc=self.inc, **m)
         self.seq += 1
         self.samples += 1

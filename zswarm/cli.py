@@ -120,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ATT,POS",
         help="convergence thresholds on the mean attitude error |R̃|_I and position error in m (default 0.01,0.1)",
     )
-    sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run is killed and recorded as failed")
+    sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run's sim or run process is killed and recorded as failed (not the batched engine's runs)")
     sw.add_argument("--keep-recordings", action="store_true", help="keep each run's recording.mcap (deleted by default; summaries and CSVs stay)")
 
     b = sub.add_parser(

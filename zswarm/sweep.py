@@ -505,7 +505,7 @@ def run_sweep_cluster(
 
 # --------------------------------------------------------------------------- the batched engine
 
-BATCHED_FAMILIES = ("sync",)  # report families whose sweep rows the batched engine computes
+BATCHED_FAMILIES = ("sync", "tree", "leader_follower")  # report families whose sweep rows the batched engine computes
 
 
 def batched_problem(sc: Scenario) -> str | None:
@@ -513,20 +513,20 @@ def batched_problem(sc: Scenario) -> str | None:
     from zswarm import plugins
 
     if sc.info.report not in BATCHED_FAMILIES:
-        return f"the batched engine computes sweep rows for the Chapter 5 laws (report family 'sync'), not yet for the {sc.info.report!r} family"
+        return f"the batched engine computes sweep rows for the {', '.join(BATCHED_FAMILIES)} report families, not for {sc.info.report!r}"
     why: str | None = plugins.engine("batched").problem(sc)
     return why
 
 
 def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: int) -> tuple[list[list[Job]], list[tuple[Job, str]]]:
     """The jobs that the batched engine can step together, in batches (runs that share their
-    scenario but for seeds, noise variances and starts; a batch has one pattern of which
-    sensors are noisy), and the others with the reason.  A batch holds at most ``chunk`` runs
-    (default: each group shared out among ``n_jobs`` tasks, at most 1000)."""
+    scenario but for seeds, noise variances and starts: the engine's ``group``), and the others
+    with the reason.  A batch holds at most ``chunk`` runs (default: each group shared out among
+    ``n_jobs`` tasks, at most 1000)."""
     from zswarm import plugins
 
-    schedule = plugins.engine("batched").schedule
-    groups: list[tuple[Scenario, tuple[bool, ...], list[Job]]] = []
+    group = plugins.engine("batched").group
+    groups: list[tuple[tuple[Any, ...], list[Job]]] = []  # (key, runs): keys compared with == (a Scenario is not hashable)
     rest: list[tuple[Job, str]] = []
     loaded: dict[tuple[Override, ...], Scenario] = {}
     for j in jobs:
@@ -537,15 +537,15 @@ def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: 
         if why is not None:
             rest.append((j, why))
             continue
-        key, noisy = schedule(sc), (sc.gyro_var > 0, sc.rel_att_var > 0, sc.attitude_var > 0)
-        for g in groups:
-            if g[1] == noisy and g[0] == key:
-                g[2].append(j)
+        key = group(sc, j.seed)
+        for k, members in groups:
+            if k == key:
+                members.append(j)
                 break
         else:
-            groups.append((key, noisy, [j]))
+            groups.append((key, [j]))
     batches = []
-    for _, _, members in groups:
+    for _, members in groups:
         size = chunk or min(1000, max(1, math.ceil(len(members) / max(1, n_jobs))))
         batches += [members[i : i + size] for i in range(0, len(members), size)]
     return batches, rest
@@ -554,9 +554,9 @@ def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: 
 def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, thresholds: tuple[float, float]) -> list[dict[str, Any]]:
     """A batch of runs stepped together on the batched engine (in a worker's process): each
     run's sweep.csv columns, as :func:`summarize_run` reads them from a sim run's files (the
-    report's final |R̄_k|_I per edge, the max over edges on the 0.1 s grid as edges.csv holds it,
-    the messages and commands sent: lockstep delivers each at once, so none is lost, late or
-    expired)."""
+    family's finals of summary.json, its team measure on the 0.1 s grid as its CSV holds it,
+    agent/batched.py's Result; the messages and commands sent: lockstep delivers each at once,
+    so none is lost, late or expired)."""
     from zswarm import plugins
     from zswarm.report import convergence_time
 
@@ -571,29 +571,33 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
     sc = scs[0]
     res = plugins.engine("batched").run(scs, duration, 0, family.of(sc).basin_grid_s, seeds=[j.seed for j in batch], rows=True)
     wall = round((time.monotonic() - t0) / len(batch), 3)
-    hybrid = bool(getattr(sc.params, "Xi", ()))  # the sync family's jumps_total: the hybrid laws' ξ_k
+    hybrid = bool(getattr(sc.params, "Xi", ()))  # summary.json's jumps_total: the hybrid schemes' ξ_k
+    sync = sc.info.report == "sync"  # summary.json has "synchronization"
+    commanded = res.commands > 0  # the agents command the world: summary.json has their "->world" links
     rows = []
     for n, _job in enumerate(batch):
-        att = res.max_rel_coarse[n]
+        att = res.att_coarse[n]
+        pos = res.pos_coarse[n] if res.pos_coarse is not None else None
+        final_pos = float(res.final_pos[n]) if res.final_pos is not None and np.isfinite(res.final_pos[n]) else None
         sent, cmds = res.edge_messages, res.commands
         rows.append(
             {
-                "final_attitude_error": float(np.mean(res.edge_final[n])),
-                "final_position_error": None,
+                "final_attitude_error": float(res.final_att[n]) if np.isfinite(res.final_att[n]) else None,
+                "final_position_error": final_pos,
                 "conv_attitude_s": convergence_time(res.t_coarse, att, thresholds[0]),
-                "conv_position_s": None,
+                "conv_position_s": convergence_time(res.t_coarse, pos, thresholds[1]) if pos is not None and np.any(np.isfinite(pos)) else None,
                 "edge_sent": sent,
                 "edge_delivered": sent,
                 "edge_dropped": 0,
                 "edge_drop_ratio": 0.0 if sent else None,
                 "edge_latency_p50_ms": 0.0 if sent else None,
-                "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1),
+                "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1) if sync else None,
                 "sensor_dropped": 0,
-                "cmd_sent": cmds,
-                "cmd_dropped": 0,
+                "cmd_sent": cmds if commanded else None,
+                "cmd_dropped": 0 if commanded else None,
                 "cmd_drop_ratio": 0.0 if cmds else None,
                 "cmd_latency_p50_ms": 0.0 if cmds else None,
-                "cmd_expired": 0,
+                "cmd_expired": 0 if commanded else None,
                 "jumps": int(res.jumps[n]) if hybrid else None,
                 "stale_terms": 0,
                 "missed_deadlines": 0,

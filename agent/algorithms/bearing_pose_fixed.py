@@ -91,4 +91,5 @@ SPEC = AlgorithmSpec(
     # estimates constants, so an old value is as good as the neighbour's estimate was.
     stale=StalePolicy(0.2, "hold"),
     leader="leader_pose",
+    batched=True,  # its functions broadcast over a leading draw axis (agent/batched.py)
 )

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from zswarm.algorithm import Field, View
-from zswarm.so3 import Mat3, Vec3, cross
+from zswarm.so3 import Mat3, Vec3, cross, dot
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,7 +42,8 @@ class NeighborData:
 
 
 def bearing_correction(R_hat: Mat3, nbrs: tuple[NeighborData, ...]) -> Vec3:
-    """``Σ_j k_ij (R̂_j b_ij^j × R̂_i b_ij^i)`` of (3.3)/(3.9), inertial frame.
+    """``Σ_j k_ij (R̂_j b_ij^j × R̂_i b_ij^i)`` of (3.3)/(3.9), inertial frame.  Estimates may be
+    stacks of M draws (the batched engine): R̂ (M, 3, 3), the result then (M, 3).
 
     With ``b_ij^j = -b_ji^j``: each term is ``-(R̂_j b_ji^j) × (R̂_i b_ij^i)``.
     """
@@ -50,6 +51,11 @@ def bearing_correction(R_hat: Mat3, nbrs: tuple[NeighborData, ...]) -> Vec3:
     for n in nbrs:
         s = s + n.k * cross(-(n.R_hat_j @ n.b_nbr), R_hat @ n.b_own)
     return s
+
+
+def _per_vector(x: Any) -> Any:
+    """A value per vector as a factor of its vectors: a number as it is, a stack (...,) as (..., 1)."""
+    return x[..., None] if isinstance(x, np.ndarray) and x.ndim else x
 
 
 def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple[NeighborData, ...]) -> Vec3:
@@ -61,9 +67,9 @@ def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple
     acc = np.zeros(3)
     for n in nbrs:
         g = R_hat @ (n.b_own if n.b_pos is None else n.b_pos)
-        g = g / np.sqrt(g @ g)
+        g = g / _per_vector(np.sqrt(dot(g, g)))
         d = p_hat - n.p_hat_j
-        acc = acc + (d - g * (g @ d))
+        acc = acc + (d - g * _per_vector(dot(g, d)))
     return -cross(sigma, p_hat) - k_p * acc
 
 

@@ -54,4 +54,5 @@ SPEC = AlgorithmSpec(
     edge_out=EDGE_FIELDS,
     parts=(),
     stale=StalePolicy(0.2, "hold"),
+    batched=True,  # its functions broadcast over a leading draw axis (agent/batched.py)
 )

@@ -49,7 +49,7 @@ def test_world_on_a_kinematic_plant_measures_relative_positions():
     got = {}
     bus.subscribe(keys.sense("r", 3), lambda key, payload: got.setdefault("m", payload))
     w = World(sc, bus, "r", seed=1)
-    w.sensors = {i: s | {"rel_pos"} for i, s in w.sensors.items()}  # this observer declares no rel_pos; fit it
+    w.sensing.sensors = {i: s | {"rel_pos"} for i, s in w.sensing.sensors.items()}  # this observer declares no rel_pos; fit it
     assert isinstance(w.motion, KinematicPlant)
     w.sample()  # MemoryBus delivers synchronously
     m = wire.decode(got["m"], "sense")

@@ -104,8 +104,9 @@ def test_interrupted_sweep_resumes_where_it_stopped(tmp_path):
 
 def test_failed_runs_are_recorded_and_the_sweep_goes_on(tmp_path):
     out = tmp_path / "s"
-    # 0.05 s is too short for any run: each one is killed and recorded as failed.
-    p = sweep("--vary", "links.drop=0,0.1,0.2", "--duration", "1", "--timeout", "0.05", "--out", str(out))
+    # 0.05 s is too short for any run's process: each one is killed and recorded as failed (on
+    # sim: the batched engine would take the lossless run, and it runs no process per run).
+    p = sweep("--vary", "links.drop=0,0.1,0.2", "--duration", "1", "--timeout", "0.05", "--engine", "sim", "--out", str(out))
     assert p.returncode == 1, p.stderr
     rs = rows(out)
     assert len(rs) == 3
@@ -123,6 +124,9 @@ def _sweep_of(topology, *args, timeout=600):
         ("thesis-5.6-hybrid7-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # noise levels and repeats (seeds) in one batch
         ("thesis-5.6-velocity-free7-noisy.toml", "algorithm.gains.k_R=0.2,0.4"),  # a batch per gain
         ("thesis-5.6-continuous7.toml", "algorithm.gains.k_omega=0.1,0.2"),  # no jumps, no noise
+        ("thesis-3.3-moving5.toml", "agents[3].estimate.R.angle=0.1,2.5"),  # §3 (leader–follower family), starts and repeats in one batch
+        ("thesis-3.2-fixed8-noisy.toml", "algorithm.gains.k_p=1,2"),  # a shared noisy truth: a batch per seed and gain
+        ("thesis-4.5-hybrid5-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # the tree family: §4.5's finals up to a common frame
     ],
 )
 def test_batched_rows_are_sims(tmp_path, topology, vary):
