@@ -25,8 +25,9 @@ plant its report family is measured on here (MEASURES: the rigid-body plant for 
 laws, a truth per draw; for the §4.5 and §3 observers the prescribed motion, the same in every
 draw, so it is simulated and measured once, by the world's own Sensing, and its measurements
 are shared), and an algorithm whose SPEC says its functions broadcast (``batched=True``).
-The noise is drawn from the world's generators in the world's order: on a truth per draw each
-draw's from its own seed, on a shared truth once for all (draws of one seed and variances).
+The noise is drawn from the world's generators in the world's order, each draw's from its own
+seed and with its own variances (on a shared truth the noisy measurements then get a draw
+axis; draws of one seed and variances share one draw of it).
 :func:`problem` says which of these a scenario lacks; the commands then run it on ``sim`` per
 draw.
 """
@@ -46,6 +47,7 @@ import numpy as np
 from agent.runtime import setup
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
+from world.sensors import projective_bearing
 from world.plant import RigidBodyPlant
 from zswarm import timing
 from zswarm.agent_config import Estimate
@@ -282,28 +284,28 @@ def schedule(sc: Scenario) -> Scenario:
 
 
 def group(sc: Scenario, seed: int) -> tuple[Any, ...]:
-    """What runs must share to be stepped in one batch (a sweep's grouping): the schedule, which
-    sensors are noisy (the world draws no numbers for a variance of 0), and on a shared truth
-    with noise the seed and variances too (its measurements are drawn once for the batch)."""
-    variances = tuple(getattr(sc, f"{f}_var") for f in NOISES)
-    noisy = tuple(v > 0 for v in variances)
-    if sc.plant == MEASURES.get(sc.info.report) == "prescribed" and any(noisy):
-        return (schedule(sc), seed, variances)
-    return (schedule(sc), noisy)
+    """What runs must share to be stepped in one batch (a sweep's grouping): the schedule, and
+    which sensors are noisy (the world draws no numbers for a variance of 0).  ``seed``: the
+    run's, which may differ within a batch."""
+    return (schedule(sc), tuple(getattr(sc, f"{f}_var") > 0 for f in NOISES))
+
+
+# world/node.py Sensing.measure's draw order: per field, the numbers it draws per item (a
+# neighbour, a bearing pair), each field only where its variance is > 0.
+NOISE_ORDER = (("gyro", 3), ("bearing", 2), ("rel_att", 3), ("velocity", 3), ("attitude", 3))
 
 
 class _Noise:
     """The world's sensor noise of one agent for M draws, in the world's order at every sample
-    (world/sensors.py: gyro, then rel_att per neighbour, then attitude, each drawn only where its
-    variance is > 0) from the world's generator of that agent and seed: each draw gets the numbers
+    (NOISE_ORDER) from the world's generator of that agent and seed: each draw gets the numbers
     its own sim run gets.  Draws of one seed and variances share one generator and its numbers;
     otherwise each draw has its own, read ahead ``AHEAD`` samples at a time (a block of standard
     normals is the sequence the sample-by-sample calls draw, and ``0 + σ z`` is numpy's normal)."""
 
     AHEAD = 128
 
-    def __init__(self, seeds: Sequence[int], i: int, std: Mapping[str, np.ndarray], want: frozenset[str], n_nbrs: int, shared: bool) -> None:
-        self.on = {f: bool(std[f][0] > 0) and f in want for f in ("gyro", "rel_att", "attitude")}
+    def __init__(self, seeds: Sequence[int], i: int, std: Mapping[str, np.ndarray], items: Mapping[str, int], shared: bool) -> None:
+        self.on = [(f, size, items[f]) for f, size in NOISE_ORDER if items.get(f, 0) and std[f][0] > 0]
         self.shared = shared
         self.std: dict[str, Any]
         if self.shared:
@@ -312,36 +314,52 @@ class _Noise:
         else:
             self.rngs = [np.random.default_rng([s % (1 << 63), i]) for s in seeds]
             self.std = {f: v[:, None] for f, v in std.items()}
-            self.width = 3 * (int(self.on["gyro"]) + n_nbrs * int(self.on["rel_att"]) + int(self.on["attitude"]))
+            self.width = sum(size * count for _, size, count in self.on)
             self.buf = np.zeros((len(seeds), 0, self.width))
             self.k = 0
 
-    def next(self, nbrs: Sequence[int]) -> tuple[Any, dict[int, Any] | None, Any]:
-        """(gyro noise, rel_att noise per neighbour, attitude noise) of this sample, None where not drawn."""
-        on = self.on
+    def next(self) -> dict[str, list[Any]]:
+        """Each noisy field's noise at this sample, per item: (size,) shared, (M, size) per draw."""
         if self.shared:
             rng, std = self.rng, self.std
-            n_gyro = rng.normal(0.0, std["gyro"], 3) if on["gyro"] else None
-            n_rel = {j: rng.normal(0.0, std["rel_att"], 3) for j in nbrs} if on["rel_att"] else None
-            n_att = rng.normal(0.0, std["attitude"], 3) if on["attitude"] else None
-            return n_gyro, n_rel, n_att
-        if self.width == 0:
-            return None, None, None
+            return {f: [rng.normal(0.0, std[f], size) for _ in range(count)] for f, size, count in self.on}
+        if not self.on:
+            return {}
         if self.k == self.buf.shape[1]:
             self.buf = np.stack([r.standard_normal((self.AHEAD, self.width)) for r in self.rngs])
             self.k = 0
         z = self.buf[:, self.k]
         self.k += 1
+        out: dict[str, list[Any]] = {}
         c = 0
-        out: list[Any] = []
-        for f, count in (("gyro", 1), ("rel_att", len(nbrs)), ("attitude", 1)):
-            if not on[f]:
-                out.append(None)
-                continue
-            parts = [0.0 + self.std[f] * z[:, c + 3 * q : c + 3 * q + 3] for q in range(count)]
-            c += 3 * count
-            out.append(dict(zip(nbrs, parts, strict=True)) if f == "rel_att" else parts[0])
-        return out[0], out[1], out[2]
+        for f, size, count in self.on:
+            out[f] = [0.0 + self.std[f] * z[:, c + size * q : c + size * (q + 1)] for q in range(count)]
+            c += size * count
+        return out
+
+
+def _measure_draws(sensing: Sensing, i: int, noise: Mapping[str, list[Any]], R: np.ndarray, p: np.ndarray, W: np.ndarray, V: np.ndarray | None, B: np.ndarray | None) -> dict[str, Any]:
+    """Sensing.measure of agent i on a shared truth with each draw's own noise ``noise``
+    (_Noise.next): a noisy field gets a draw axis, the others stay shared.  The same operations
+    as world/sensors.py's, element by element."""
+    a, want, index = sensing.index[i], sensing.sensors[i], sensing.index
+    m: dict[str, Any] = {}
+    if "gyro" in want:
+        m["gyro"] = W[a] + sensing.bias[a] + noise["gyro"][0] if "gyro" in noise else W[a] + sensing.bias[a]
+    if B is not None and "bearings" in want:
+        nb = noise.get("bearing")
+        m["bearings"] = {j: B[q] if nb is None else projective_bearing(B[q], nb[n][:, 0], nb[n][:, 1]) for n, (q, j) in enumerate(sensing.pairs_of[i])}
+    if "rel_att" in want:
+        nr = noise.get("rel_att")
+        rel = {j: R[a].T @ R[index[j]] for j in sensing.nbrs[i]}
+        m["rel_att"] = rel if nr is None else {j: R_ij @ exp(nr[n]) for n, (j, R_ij) in enumerate(rel.items())}
+    if V is not None and "velocity" in want:
+        m["velocity"] = V[a] + noise["velocity"][0] if "velocity" in noise else np.array(V[a], dtype=float)
+    if "attitude" in want:
+        m["attitude"] = R[a] @ exp(noise["attitude"][0]) if "attitude" in noise else R[a]
+    if "position" in want:
+        m["position"] = p[a]
+    return m
 
 
 NOISES = ("gyro", "bearing", "rel_att", "velocity", "attitude")  # the noise variances the batched world draws with
@@ -560,10 +578,8 @@ def run(
         key = _truth(sc)
         if any(_truth(d) != key for d in draws[1:]):
             raise Unsupported("draws whose prescribed truths differ (the batched engine simulates it once for all)")
-        if any(v[0] > 0 for v in std.values()) and not one_noise:
-            raise Unsupported("draws of several seeds or noise variances on the shared truth (prescribed motion: its measurements are the same for every draw)")
         plant = prescribed(sc)
-        sensing = Sensing(sc, seeds[0])  # the world's sensors, generators and draw order
+        sensing = Sensing(sc, seeds[0])  # the world's sensors, its generators (one noise) and draw order
     else:
         R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
         w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
@@ -583,7 +599,16 @@ def run(
     # truth per draw, the attitudes only.
     packets: dict[int, deque[dict[str, Any]]] = {i: deque(maxlen=HISTORY) for i in ids}
     histories: dict[int, dict[str, deque[tuple[float, np.ndarray]]]] = {i: {} if shared else {f: deque(maxlen=HISTORY) for f in ("attitude",) if f in want[i]} for i in ids}
-    noise = {} if shared else {i: _Noise(seeds, i, std, want[i], len(nbrs[i]), one_noise) for i in ids}  # the world's generators
+    # The world's generators, when not Sensing's own (one noise for every draw on a shared truth).
+    per_draw_noise = not (shared and one_noise)
+    noise: dict[int, _Noise] = {}
+    if per_draw_noise:
+        for i in ids:
+            items = {"gyro": "gyro" in want[i], "rel_att": len(nbrs[i]) * ("rel_att" in want[i]), "attitude": "attitude" in want[i]}
+            if shared:
+                assert sensing is not None
+                items |= {"bearing": len(sensing.pairs_of[i]) * ("bearings" in want[i]), "velocity": sc.moving and "velocity" in want[i]}
+            noise[i] = _Noise(seeds, i, std, {f: int(c) for f, c in items.items()}, one_noise)
     for i in ids:
         per = [setup(d, i, s) for d, s in zip(draws, seeds, strict=True)]
         modules[i], gains[i], tree_edges, _ = per[0]
@@ -627,7 +652,14 @@ def run(
                 plant.plan(np.arange(k, k + PLAN_SAMPLES) * sample_dt)
             plant.advance_to(t)
             R = plant.R
-            for i, m in sensing.measure(R, plant.p, plant.omega_now(), plant.velocity() if sc.moving else None).items():
+            V = plant.velocity() if sc.moving else None
+            if per_draw_noise:  # each draw's own noise: the noisy fields get a draw axis
+                B = sensing.bearings(R, plant.p)
+                W = plant.omega_now()
+                measured = {i: _measure_draws(sensing, i, noise[i].next(), R, plant.p, W, V, B) for i in ids}
+            else:
+                measured = sensing.measure(R, plant.p, plant.omega_now(), V)
+            for i, m in measured.items():
                 m["t"] = t
                 packets[i].append(m)
                 sensed[i] = m
@@ -656,7 +688,9 @@ def run(
                 need = want[i] if tick else histories[i].keys()
                 # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
                 # then attitude) from its generator per agent and seed (_Noise).
-                n_gyro, n_rel, n_att = noise[i].next(nbrs[i])
+                nz = noise[i].next()
+                n_gyro, n_att = nz.get("gyro", [None])[0], nz.get("attitude", [None])[0]
+                n_rel = dict(zip(nbrs[i], nz["rel_att"], strict=True)) if "rel_att" in nz else None
                 sense: dict[str, Any] = {"t": t}
                 if "gyro" in need:
                     sense["gyro"] = W[:, a] + bias[a] if n_gyro is None else W[:, a] + bias[a] + n_gyro

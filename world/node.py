@@ -56,14 +56,18 @@ class Sensing:
         self.sensed = {i: scenario.sensed(i) for i in self.ids}
         # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
         pairs = [(i, j) for i in self.ids for j in self.nbrs[i]]
-        self._pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
-        self._pair_j = np.array([self.index[j] for _, j in pairs], dtype=int)
-        self._pairs_of = {i: [(q, j) for q, (a, j) in enumerate(pairs) if a == i] for i in self.ids}
+        self.pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
+        self.pair_j = np.array([self.index[j] for _, j in pairs], dtype=int)
+        self.pairs_of = {i: [(q, j) for q, (a, j) in enumerate(pairs) if a == i] for i in self.ids}
+
+    def bearings(self, R: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """Every pair's clean bearing at once, (pairs, 3) in ``pairs_of``'s numbering (None: no agent measures bearings)."""
+        return sensors.bearings(R, p, self.pair_i, self.pair_j) if self.want_bearings else None
 
     def measure(self, R: NDArray[np.float64], p: NDArray[np.float64], W: NDArray[np.float64], V: NDArray[np.float64] | None) -> dict[int, dict[str, object]]:
         """Each agent's packet fields from the truth's attitudes R (n, 3, 3), positions p, body
         rates W and inertial velocities V (None: the agents do not move)."""
-        B = sensors.bearings(R, p, self._pair_i, self._pair_j) if self.want_bearings else None  # every agent's, at once
+        B = self.bearings(R, p)
         out: dict[int, dict[str, object]] = {}
         for i in self.ids:
             a = self.index[i]
@@ -73,7 +77,7 @@ class Sensing:
             if "gyro" in want:
                 m["gyro"] = sensors.gyro(W[a], self.bias[a], self.gyro_std, rng)
             if B is not None and "bearings" in want:
-                m["bearings"] = {j: sensors.noisy_bearing(B[q], self.bearing_std, rng) for q, j in self._pairs_of[i]}
+                m["bearings"] = {j: sensors.noisy_bearing(B[q], self.bearing_std, rng) for q, j in self.pairs_of[i]}
             if "rel_att" in want:
                 m["rel_att"] = {j: sensors.relative_attitude(R[a], R[self.index[j]], self.rel_att_std, rng) for j in self.nbrs[i]}
             if V is not None and "velocity" in want:

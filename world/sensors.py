@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,12 +45,23 @@ def noisy_bearing(b: Vec3, std: float, rng: np.random.Generator) -> Vec3:
     if std == 0.0:
         return b
     n1, n2 = rng.normal(0.0, std, 2)
-    if abs(b[2]) < 1e-9:
-        return b
-    x = b[0] / b[2] + n1
-    y = b[1] / b[2] + n2
-    v = np.array((x, y, 1.0))
-    return math.copysign(1.0, b[2]) * v / math.sqrt(float(v @ v))
+    return projective_bearing(b, n1, n2)
+
+
+def projective_bearing(b: Vec3, n1: Any, n2: Any) -> Any:
+    """(3.18)–(3.19) with the noise ``n1, n2`` given: floats, or arrays (M,) of M draws' noise on
+    one bearing (the batched engine), then (M, 3).  ``|v|²`` summed as ``(x² + y²) + 1``, the same
+    operations either way (``v @ v`` may round otherwise)."""
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    if abs(b2) < 1e-9:
+        return b if np.ndim(n1) == 0 else np.broadcast_to(b, (len(n1), 3))
+    x = b0 / b2 + n1
+    y = b1 / b2 + n2
+    sign = math.copysign(1.0, b2)
+    if np.ndim(x) == 0:
+        return sign * np.array((x, y, 1.0)) / math.sqrt(x * x + y * y + 1.0)
+    v = np.stack((x, y, np.ones_like(x)), axis=-1)
+    return sign * v / np.sqrt(x * x + y * y + 1.0)[:, None]
 
 
 def gyro(omega: Vec3, bias: Vec3, std: float, rng: np.random.Generator) -> Vec3:

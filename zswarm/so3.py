@@ -67,6 +67,15 @@ def dot(a: Vec3, b: Vec3) -> Any:
     return x0 * y0 + x1 * y1 + x2 * y2
 
 
+def apply(R: Mat3, v: Vec3) -> Vec3:
+    """``R v``: a matrix times a vector, or each of stacks (..., 3, 3) and (..., 3) (either may
+    be a single one, broadcast): ``R @ v`` where that means it (one matrix, one vector, or a
+    stack of matrices and one vector), else the stacked product."""
+    if v.ndim == 1:
+        return R @ v  # type: ignore[no-any-return]
+    return (R @ v[..., None])[..., 0]  # type: ignore[no-any-return]
+
+
 def hat(x: Vec3) -> Mat3:
     """Skew-symmetric matrix ``[x]^x`` such that ``hat(x) @ y == x × y``."""
     return np.array(

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from zswarm.so3 import exp, log
+from zswarm.so3 import T, apply, dot, exp, log
 
 Sample = tuple[float, np.ndarray]
 
@@ -79,10 +79,12 @@ def _integrate(samples: Sequence[Sample], t0: float, t1: float, magnus: bool) ->
     ts_all = [s[0] for s in samples]
     first = max(0, min(bisect.bisect_right(ts_all, t0) - 1, n - 2))
     ts = ts_all[first:]
-    W = [tuple(s[1].tolist()) if type(s[1]) is np.ndarray else tuple(map(float, s[1])) for s in samples[first:]]
+    # Each rate as its three components: floats, or for a stack of M draws (the batched engine's
+    # per-draw noise) arrays (M,), on which the same operations give each draw its own numbers.
+    W = [_components(s[1]) for s in samples[first:]]
     gap = ts_all[-1] - ts_all[-2]
-    Wl, Wp = samples[-1][1], samples[-2][1]
-    slope = [(float(Wl[c]) - float(Wp[c])) / gap if gap > 0 else 0.0 for c in range(3)]
+    Wl, Wp = _components(samples[-1][1]), _components(samples[-2][1])
+    slope = [(Wl[c] - Wp[c]) / gap if gap > 0 else 0.0 * Wl[c] for c in range(3)]
     t_last = ts_all[-1]
     t_cap = t_last + max(gap, 0.0)
 
@@ -121,7 +123,24 @@ def _integrate(samples: Sequence[Sample], t0: float, t1: float, magnus: bool) ->
             acc[0] += a[0]
             acc[1] += a[1]
             acc[2] += a[2]
-    return np.array(acc) / (t1 - t0)
+    return _vector(acc) / (t1 - t0)
+
+
+def _components(v: object) -> tuple[object, object, object]:
+    """A rate's three components: floats for one vector, arrays (M,) for a stack (M, 3)."""
+    if type(v) is np.ndarray and v.ndim > 1:
+        return (v[..., 0], v[..., 1], v[..., 2])
+    if type(v) is np.ndarray:
+        x, y, z = v.tolist()
+        return (x, y, z)
+    return (float(v[0]), float(v[1]), float(v[2]))  # type: ignore[index]
+
+
+def _vector(acc: Sequence[object]) -> np.ndarray:
+    """The components back as a vector (3,) or a stack (M, 3)."""
+    if isinstance(acc[0], np.ndarray):
+        return np.stack(acc, axis=-1)  # type: ignore[arg-type]
+    return np.array(acc)
 
 
 def rotation_over(gyro: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
@@ -130,7 +149,7 @@ def rotation_over(gyro: Sequence[Sample], t0: float, t1: float) -> np.ndarray:
     if t1 == t0:
         return np.eye(3)
     if t1 < t0:
-        return rotation_over(gyro, t1, t0).T
+        return T(rotation_over(gyro, t1, t0))
     return exp((t1 - t0) * rotation_rate(gyro, t0, t1))
 
 
@@ -168,10 +187,10 @@ def relative_attitude_at(hist: Sequence[tuple[float, np.ndarray]], gyro: Sequenc
         return None
     if not gyro:
         # No gyro (a velocity-free agent): R_ij itself on the geodesic through the two samples.
-        return R0 @ exp(((t - t0) / (t1 - t0)) * log(R0.T @ R1))
-    E_j = R0.T @ rotation_over(gyro, t0, t1) @ R1
+        return R0 @ exp(((t - t0) / (t1 - t0)) * log(T(R0) @ R1))
+    E_j = T(R0) @ rotation_over(gyro, t0, t1) @ R1
     s_ = (t - t0) / (t1 - t0)
-    return rotation_over(gyro, t0, t).T @ R0 @ exp(s_ * log(E_j))
+    return T(rotation_over(gyro, t0, t)) @ R0 @ exp(s_ * log(E_j))
 
 
 def body_vector_at(hist: Sequence[tuple[float, np.ndarray, np.ndarray]], t: float, max_ahead: float = 0.05, unit: bool = True) -> np.ndarray | None:
@@ -197,7 +216,7 @@ def body_vector_at(hist: Sequence[tuple[float, np.ndarray, np.ndarray]], t: floa
         tk = hist[k][0]
         if tk == t:
             v = hist[k][1]
-            return v / np.sqrt(v @ v) if unit else np.array(v, dtype=float)
+            return _unit(v) if unit else np.array(v, dtype=float)
         if tk < t:
             break
     (t0, b0, _), (t1, b1, _) = hist[-2], hist[-1]
@@ -211,10 +230,17 @@ def body_vector_at(hist: Sequence[tuple[float, np.ndarray, np.ndarray]], t: floa
     if t1 <= t0:
         return None
     gyro = [(h[0], h[2]) for h in hist]
-    b0_in_1 = rotation_over(gyro, t0, t1).T @ b0
+    b0_in_1 = apply(T(rotation_over(gyro, t0, t1)), b0)
     s_ = (t - t0) / (t1 - t0)
-    v = rotation_over(gyro, t1, t).T @ ((1 - s_) * b0_in_1 + s_ * b1)
-    return v / np.sqrt(v @ v) if unit else v
+    v = apply(T(rotation_over(gyro, t1, t)), (1 - s_) * b0_in_1 + s_ * b1)
+    return _unit(v) if unit else v
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """``v / |v|`` of a vector (3,) or of each of a stack (M, 3)."""
+    if v.ndim > 1:
+        return v / np.sqrt(dot(v, v))[..., None]  # type: ignore[no-any-return]
+    return v / np.sqrt(v @ v)  # type: ignore[no-any-return]
 
 
 class HistoryReads:

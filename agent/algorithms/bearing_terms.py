@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from zswarm.algorithm import Field, View
-from zswarm.so3 import Mat3, Vec3, cross, dot
+from zswarm.so3 import Mat3, T, Vec3, apply, cross, dot
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,13 +43,14 @@ class NeighborData:
 
 def bearing_correction(R_hat: Mat3, nbrs: tuple[NeighborData, ...]) -> Vec3:
     """``Σ_j k_ij (R̂_j b_ij^j × R̂_i b_ij^i)`` of (3.3)/(3.9), inertial frame.  Estimates may be
-    stacks of M draws (the batched engine): R̂ (M, 3, 3), the result then (M, 3).
+    stacks of M draws (the batched engine): R̂ (M, 3, 3), the result then (M, 3); so may the
+    measurements (bearings (M, 3) with noise per draw).
 
     With ``b_ij^j = -b_ji^j``: each term is ``-(R̂_j b_ji^j) × (R̂_i b_ij^i)``.
     """
     s = np.zeros(3)
     for n in nbrs:
-        s = s + n.k * cross(-(n.R_hat_j @ n.b_nbr), R_hat @ n.b_own)
+        s = s + n.k * cross(-apply(n.R_hat_j, n.b_nbr), apply(R_hat, n.b_own))
     return s
 
 
@@ -66,7 +67,7 @@ def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple
     """
     acc = np.zeros(3)
     for n in nbrs:
-        g = R_hat @ (n.b_own if n.b_pos is None else n.b_pos)
+        g = apply(R_hat, n.b_own if n.b_pos is None else n.b_pos)
         g = g / _per_vector(np.sqrt(dot(g, g)))
         d = p_hat - n.p_hat_j
         acc = acc + (d - g * _per_vector(dot(g, d)))
@@ -107,7 +108,7 @@ def neighbor_data(view: View) -> tuple[NeighborData, ...]:
         if m is None:
             continue  # no (fresh enough) data from j: its term is left out of the sums
         f = m.fields
-        b_now = view.align @ b_own
+        b_now = apply(view.align, b_own)
         if not view.moving:
             nbrs.append(NeighborData(k, f["R_hat"], f["p_hat"], f["b"], b_now))
             continue
@@ -118,7 +119,7 @@ def neighbor_data(view: View) -> tuple[NeighborData, ...]:
         b_then = view.body_vector(j, m.t_world)
         b_att = b_now
         if b_then is not None:
-            b_att = view.rotation(m.t, view.t).T @ b_then
+            b_att = apply(T(view.rotation(m.t, view.t)), b_then)
         p_hat_j = f["p_hat"] + tau * f["vel"] if "vel" in f else f["p_hat"]
         nbrs.append(NeighborData(k, f["R_hat"], p_hat_j, f["b"], b_att, b_now))
     return tuple(nbrs)
@@ -139,7 +140,7 @@ def edge_messages(view: View, R_hat: Mat3, p_hat: Vec3) -> dict[int, dict[str, A
         if b is None:
             continue
         b_tick = view.body_vector(i, view.t_world) if view.moving else None
-        fields: dict[str, Any] = {"R_hat": R_hat, "p_hat": p_hat, "b": view.align @ b if b_tick is None else b_tick}
+        fields: dict[str, Any] = {"R_hat": R_hat, "p_hat": p_hat, "b": apply(view.align, b) if b_tick is None else b_tick}
         if vel is not None:
             fields["vel"] = vel
         out[i] = fields

@@ -56,7 +56,7 @@ class EdgeData:
 def relative_error(R_hat_i: Mat3, e: EdgeData) -> Mat3:
     """``R̄_k`` of the edge between i and j, in the edge's orientation (Remark 4.3)."""
     if e.head:
-        return e.R_hat_j @ e.R_ij.T @ T(R_hat_i)
+        return e.R_hat_j @ T(e.R_ij) @ T(R_hat_i)
     return R_hat_i @ e.R_ij @ T(e.R_hat_j)
 
 
@@ -166,7 +166,7 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
             # = R̃_j(t_j)^T R_i(t): exact but for R̃_j's own (slow, correction-driven) change
             # over τ_j, so nothing is left at convergence.  Extrapolating R̂_j and R_ij
             # separately with ω_j instead errs by ½ω̇τ² each, a floor of 1e-5–1e-4.
-            R_ij = view.rotation(m.t, view.t).T @ R_then
+            R_ij = T(view.rotation(m.t, view.t)) @ R_then
             R_hat_j = f["R_hat"]
         else:
             # Older than the sensor history: propagate both with the gyros (first order).
