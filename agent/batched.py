@@ -47,8 +47,8 @@ import numpy as np
 from agent.runtime import setup
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
-from world.sensors import projective_bearing
 from world.plant import RigidBodyPlant
+from world.sensors import projective_bearing
 from zswarm import timing
 from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
