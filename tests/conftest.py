@@ -47,7 +47,9 @@ def fixed8_text() -> str:
 # that keep no time and have no wall-clock limit, so a starved one is late, never wrong.  At
 # SCHED_IDLE the scheduler gives them only CPU that no other process asks for, and a waking
 # process of a run preempts them at once: the runs keep the machine they had.
-BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py"})
+# test_batched.py joined them on 2026-12-04 (57 s quietly: the batched engine against sim, draw by
+# draw, no subprocess and no timeout).
+BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py"})
 
 
 def pytest_collection_modifyitems(config, items):
