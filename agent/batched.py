@@ -39,7 +39,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from types import ModuleType
+from types import MappingProxyType, ModuleType
 from typing import Any, cast
 
 import numpy as np
@@ -277,10 +277,34 @@ _NO_TEXT = ScenarioText("")
 
 def schedule(sc: Scenario) -> Scenario:
     """What the draws of one batch must share: the scenario without what may differ per draw (its
-    agents' starts R_i(0), ω_i(0), J_i and initial estimates, the noise variances, the seed, its
-    TOML)."""
-    agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate()) for a in sc.agents)
-    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, **{f"{f}_var": 0.0 for f in NOISES})
+    agents' starts R_i(0), ω_i(0), J_i and initial estimates, the noise variances, the seed, the
+    gains its algorithm lets each draw have (SPEC.draw_gains), its TOML)."""
+    draw = sc.info.draw_gains  # gains each draw may have its own value of (SPEC.draw_gains)
+    agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate(), gains=_without(a.gains, draw)) for a in sc.agents)
+    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, gains=_without(sc.gains, draw), **{f"{f}_var": 0.0 for f in NOISES})
+
+
+def _without(gains: Mapping[str, float], names: frozenset[str]) -> Mapping[str, float]:
+    return MappingProxyType({k: v for k, v in gains.items() if k not in names}) if names else gains
+
+
+def _same(a: Any, b: Any) -> bool:
+    return bool(np.array_equal(a, b)) if isinstance(a, np.ndarray) or isinstance(b, np.ndarray) else bool(a == b)
+
+
+def draw_gains(module: ModuleType, values: Sequence[Any]) -> Any:
+    """One agent's Gains for M draws: the first draw's, where a gain differs between draws its M
+    values as a stack (M, 1) (it multiplies (M, 3) vectors only: SPEC.draw_gains)."""
+    g0 = values[0]
+    stacked: dict[str, Any] = {}
+    for f in dataclasses.fields(g0):
+        col = [getattr(v, f.name) for v in values]
+        if all(_same(col[0], x) for x in col[1:]):
+            continue
+        if f.name not in module.SPEC.draw_gains:
+            raise Unsupported(f"draws whose gain {f.name} differs ({module.__name__.rsplit('.', 1)[-1]} takes one value of it for all the draws of a batch)")
+        stacked[f.name] = np.array(col, dtype=float)[:, None]
+    return dataclasses.replace(g0, **stacked) if stacked else g0
 
 
 def group(sc: Scenario, seed: int) -> tuple[Any, ...]:
@@ -563,7 +587,7 @@ def run(
         raise ValueError(f"{len(seeds)} seeds for {M} draws")
     common = schedule(sc)
     if any(schedule(d) != common for d in draws[1:]):
-        raise Unsupported("draws that differ in more than their agents' starts, noise variances and seeds")
+        raise Unsupported("draws that differ in more than their agents' starts, noise variances, seeds and per-draw gains (SPEC.draw_gains)")
     family = sc.info.report
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
@@ -611,7 +635,8 @@ def run(
             noise[i] = _Noise(seeds, i, std, {f: int(c) for f, c in items.items()}, one_noise)
     for i in ids:
         per = [setup(d, i, s) for d, s in zip(draws, seeds, strict=True)]
-        modules[i], gains[i], tree_edges, _ = per[0]
+        modules[i], _, tree_edges, _ = per[0]
+        gains[i] = draw_gains(modules[i], [p[1] for p in per])
         spec_parts = modules[i].SPEC.parts
         parts[i] = spec_parts[0] if spec_parts else None  # None: a leader that only publishes
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])

@@ -216,6 +216,10 @@ class AlgorithmSpec:
     # Its inputs, step and publish broadcast over a leading draw axis (every measurement, message
     # and state value a stack of M draws), so the batched engine (agent/batched.py) may run it.
     batched: bool = False
+    # The gains the batched engine may give each draw a value of (a sweep over them steps as one
+    # batch): each one only ever multiplies a per-draw vector (M, 3) in the laws, so its stack of
+    # M values as (M, 1) broadcasts as the number does.  The others take one value per batch.
+    draw_gains: frozenset[str] = frozenset()
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
     # The report family that turns a run of this algorithm into figures (zswarm.report.family):
     # a name registered in the entry-point group REPORT_FAMILY_GROUP ("leader_follower", "tree",
@@ -475,6 +479,8 @@ def check(module: ModuleType) -> AlgorithmSpec:
         raise AlgorithmError(f"module {name!r}: SPEC.report: no report family {spec.report!r} (registered: {known}; or a module path like mylab.my_family)")
     if spec.stale.policy not in STALE_POLICIES:
         raise AlgorithmError(f"module {name!r}: SPEC.stale.policy must be one of {STALE_POLICIES}")
+    if not isinstance(spec.draw_gains, frozenset) or not spec.draw_gains <= set(spec.gains):
+        raise AlgorithmError(f"module {name!r}: SPEC.draw_gains must be a frozenset of declared gains (SPEC.gains: {', '.join(spec.gains) or 'none'})")
     known = set(spec.gains) | param_names(spec)
     for f in dataclasses.fields(module.Gains):
         if f.name not in known:

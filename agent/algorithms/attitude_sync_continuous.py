@@ -98,5 +98,6 @@ SPEC = AlgorithmSpec(
     params=hybrid.ContinuousParams,
     stale=StalePolicy(0.2, "hold"),
     batched=True,
+    draw_gains=frozenset({"k_R", "k_omega"}),  # τ = −k_ω ω + k_R σ only
     sensor_use={"gyro": "ω_i, the damping −k_ω ω_i", "rel_att": "R_ij, the coupling"},
 )

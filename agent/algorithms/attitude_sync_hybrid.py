@@ -177,4 +177,5 @@ SPEC = AlgorithmSpec(
     stale=StalePolicy(0.2, "hold"),
     sensor_use={"gyro": "ω_i, the damping −k_ω ω_i", "rel_att": "R_ij, the coupling and the jump logic"},
     batched=True,
+    draw_gains=frozenset({"k_R", "k_omega"}),  # τ = −k_ω ω + k_R σ only (k_ξ: the compiled ξ filter takes one)
 )

@@ -281,5 +281,6 @@ SPEC = AlgorithmSpec(
     },
     stale=StalePolicy(0.2, "hold"),
     batched=True,
+    draw_gains=frozenset({"k_R", "k_Qt"}),  # τ = k_R σ − k_Q̃ h only (k_Q, k_ζ, k_ξ: the compiled filters take one)
     sensor_use={"attitude": "R_i, for Q̃_i = Q_i^T R_i of (5.20)-(5.23)", "rel_att": "R_ij, the coupling and the jump logic"},
 )

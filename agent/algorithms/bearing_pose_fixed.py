@@ -92,4 +92,5 @@ SPEC = AlgorithmSpec(
     stale=StalePolicy(0.2, "hold"),
     leader="leader_pose",
     batched=True,  # its functions broadcast over a leading draw axis (agent/batched.py)
+    draw_gains=frozenset({"k_R", "k_p"}),  # k_R Σ…, k_p Σ… only
 )

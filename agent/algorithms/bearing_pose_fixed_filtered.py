@@ -76,5 +76,6 @@ SPEC = replace(
     bearing_pose_fixed.SPEC,
     description="thesis §3.2: filtered attitude observer (3.8)-(3.9) + position observer (3.14)",
     gains={"k_Omega": None, "k_p": None},
+    draw_gains=frozenset({"k_Omega", "k_p"}),  # −k_Ω Ω, k_p Σ… only
     parts=(Part("observer", inputs, step),),
 )

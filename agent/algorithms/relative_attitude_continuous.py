@@ -92,4 +92,5 @@ SPEC = AlgorithmSpec(
     # extrapolation whose error grows with the age (½ω̇τ²).
     stale=StalePolicy(0.2, "drop"),
     batched=True,
+    draw_gains=frozenset({"k_R"}),  # exp(−dt k_R σ) only
 )

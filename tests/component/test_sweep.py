@@ -122,10 +122,10 @@ def _sweep_of(topology, *args, timeout=600):
     ("topology", "vary"),
     [
         ("thesis-5.6-hybrid7-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # noise levels and repeats (seeds) in one batch
-        ("thesis-5.6-velocity-free7-noisy.toml", "algorithm.gains.k_R=0.2,0.4"),  # a batch per gain
+        ("thesis-5.6-velocity-free7-noisy.toml", "algorithm.gains.k_R=0.2,0.4"),  # a gain of SPEC.draw_gains: one batch
         ("thesis-5.6-continuous7.toml", "algorithm.gains.k_omega=0.1,0.2"),  # no jumps, no noise
         ("thesis-3.3-moving5.toml", "agents[3].estimate.R.angle=0.1,2.5"),  # §3 (leader–follower family), starts and repeats in one batch
-        ("thesis-3.2-fixed8-noisy.toml", "algorithm.gains.k_p=1,2"),  # a shared noisy truth, each run's own noise: a batch per gain
+        ("thesis-3.2-fixed8-noisy.toml", "algorithm.gains.k_p=1,2"),  # a shared noisy truth, each run's own noise and k_p: one batch
         ("thesis-4.5-hybrid5-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # the tree family: §4.5's finals up to a common frame
     ],
 )

@@ -126,8 +126,10 @@ def _sweep(out: Path, *extra: str) -> list[dict[str, str]]:
 
 
 def test_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path):
-    local = _sweep(tmp_path / "local", "--jobs", "2")
-    remote = _sweep(tmp_path / "cluster", "--cluster", cluster[0])
+    # sim runs as the cluster's tasks (the run without link delay would go to the batched engine:
+    # the next test)
+    local = _sweep(tmp_path / "local", "--jobs", "2", "--engine", "sim")
+    remote = _sweep(tmp_path / "cluster", "--cluster", cluster[0], "--engine", "sim")
     assert remote == local
     assert len(local) == 4 and all(r["status"] == "ok" for r in local)
     # each run's files came back into the sweep's folder
