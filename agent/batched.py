@@ -307,10 +307,9 @@ def draw_gains(module: ModuleType, values: Sequence[Any]) -> Any:
     return dataclasses.replace(g0, **stacked) if stacked else g0
 
 
-def group(sc: Scenario, seed: int) -> tuple[Any, ...]:
+def group(sc: Scenario) -> tuple[Any, ...]:
     """What runs must share to be stepped in one batch (a sweep's grouping): the schedule, and
-    which sensors are noisy (the world draws no numbers for a variance of 0).  ``seed``: the
-    run's, which may differ within a batch."""
+    which sensors are noisy (the world draws no numbers for a variance of 0)."""
     return (schedule(sc), tuple(getattr(sc, f"{f}_var") > 0 for f in NOISES))
 
 

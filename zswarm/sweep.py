@@ -537,7 +537,7 @@ def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: 
         if why is not None:
             rest.append((j, why))
             continue
-        key = group(sc, j.seed)
+        key = group(sc)
         for k, members in groups:
             if k == key:
                 members.append(j)
