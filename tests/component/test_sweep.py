@@ -118,37 +118,6 @@ def _sweep_of(topology, *args, timeout=600):
     return subprocess.run([sys.executable, "-m", "zswarm", "sweep", str(TOPO / topology), *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
 
 
-@pytest.mark.parametrize(
-    ("topology", "vary"),
-    [
-        ("thesis-5.6-hybrid7-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # noise levels and repeats (seeds) in one batch
-        ("thesis-5.6-velocity-free7-noisy.toml", "algorithm.gains.k_R=0.2,0.4"),  # a gain of SPEC.draw_gains: one batch
-        ("thesis-5.6-continuous7.toml", "algorithm.gains.k_omega=0.1,0.2"),  # no jumps, no noise
-        ("thesis-3.3-moving5.toml", "agents[3].estimate.R.angle=0.1,2.5"),  # §3 (leader–follower family), starts and repeats in one batch
-        ("thesis-3.2-fixed8-noisy.toml", "algorithm.gains.k_p=1,2"),  # a shared noisy truth, each run's own noise and k_p: one batch
-        ("thesis-4.5-hybrid5-noisy.toml", "noise.rel_att_var=0.005,0.02"),  # the tree family: §4.5's finals up to a common frame
-    ],
-)
-def test_batched_rows_are_sims(tmp_path, topology, vary):
-    """The same sweep on the batched engine and on sim, run by run: every column as written
-    (six significant digits: the two engines differ by round-off, ~1e-15 relative, see
-    tests/component/test_batched.py), but the wall time.  A threshold of 0.7 makes the
-    convergence times of the hybrid laws' 3 s runs numbers, not blanks."""
-    args = ["--vary", vary, "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "2"]
-    got = {}
-    for engine in ("batched", "sim"):
-        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
-        assert p.returncode == 0, p.stderr
-        got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
-    assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4
-    for rid, sim_row in got["sim"].items():
-        b = got["batched"][rid]
-        assert {k: v for k, v in b.items() if k != "wall_s"} == {k: v for k, v in sim_row.items() if k != "wall_s"}, rid
-    if "continuous" not in topology:  # the continuous law stays near its undesired start for these 3 s
-        assert any(r["conv_attitude_s"] for r in got["sim"].values())
-    assert not (tmp_path / "batched" / "runs").exists()  # no run folders: the rows come from the engine's arrays
-
-
 def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):
     """auto: the grid point without links is batched, the one with a link delay runs on sim and
     says why; --engine batched refuses that sweep before it starts (exit 2); a resumed sweep runs
