@@ -53,6 +53,7 @@ from zswarm import timing
 from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.report.base import grid as coarse_grid
+from zswarm.report.families.tree import nearest_rotations
 from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
 from zswarm.scenario import Scenario, ScenarioText
 from zswarm.so3 import exp
@@ -401,7 +402,7 @@ class _Ticks:
         self.kept: dict[int, Any] = {}  # tick index -> what the rows read there
         self.keep: set[int] = set()
 
-    def tick(self, t: float, plant: Any, estimates: Mapping[int, Mapping[str, Any]]) -> None:
+    def tick(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]]) -> None:
         basin, kept = self.measure(plant, estimates, self.n in self.keep)
         self.basin.append(basin)
         if kept is not None:
@@ -532,7 +533,7 @@ class _TreeErrors(_Ticks):
         finals = []
         for n in self.final_at:
             Rt = self.kept[int(n)][1]
-            Rc = _nearest_rotations(np.mean([Rt[i] for i in sc.ids], axis=0))  # (M, 3, 3)
+            Rc = nearest_rotations(np.mean([Rt[i] for i in sc.ids], axis=0))  # (M, 3, 3)
             finals.append([np.sqrt(np.clip((3.0 - np.einsum("mij,mij->m", Rt[i], Rc)) / 4.0, 0.0, 1.0)) for i in sc.ids])
         fin = np.array(finals)  # (K, agents, M)
         per = [_mean_rows(fin[:, q, :].T) for q, i in enumerate(sc.ids) if sc.agent(i).role == "follower"]
@@ -543,17 +544,6 @@ class _TreeErrors(_Ticks):
         res.t_coarse = self.coarse_t
         res.att_coarse = np.mean([rounded[:, e, :].T for e in range(E)], axis=0)  # edges_on_grid(..., np.mean)
         return res
-
-
-def _nearest_rotations(A: np.ndarray) -> np.ndarray:
-    """The rotation nearest to each matrix of a stack (tree._nearest_rotation, batched)."""
-    U, _, Vt = np.linalg.svd(A)
-    d = np.sign(np.linalg.det(U @ Vt))
-    d[d == 0] = 1.0
-    D = np.zeros_like(A)
-    D[:, 0, 0] = D[:, 1, 1] = 1.0
-    D[:, 2, 2] = d
-    return U @ D @ Vt
 
 
 _SHARED_MEASURES: dict[str, type[_Ticks]] = {"tree": _TreeErrors, "leader_follower": _FollowerErrors}
@@ -757,7 +747,7 @@ def run(
                 inboxes[j][i] = (dict(fields), t_stamp)
             estimates[i] = pub.estimate
         if measure is not None:
-            measure.tick(t, plant, estimates)
+            measure.tick(plant, estimates)
         if started:
             steps += 1
         started, last = True, t

@@ -122,7 +122,12 @@ def test_bearing_observers_are_sim_draw_by_draw(stem):
         errs = report.errors(rec)
         ids = [sc.agents[f].id for f in followers]
         last = errs[ids[0]][:, 0] >= DURATION - 1.0
-        # The finals: means of ~100 values each, round-off only (relative 1e-12 is 4500 ulps)
+        # The finals: means over F ≤ 6 followers of means over K = 101 ticks of positive values.
+        # The engine and the report sum them in other orders, a relative difference of at most
+        # (K + F)·u ≈ 1.2e-14 (u = 1.1e-16, the summation bound); the values themselves differ by
+        # the round-off the contracting observers carry (bounded above by TOL on the squares,
+        # relative ~1e-15).  1e-12 is 80 times the sum of both; a changed term or tick moves a
+        # final by far more (measured here: 1 ulp).
         assert res.final_att[n] == pytest.approx(np.mean([errs[i][last, 1].mean() for i in ids]), rel=1e-12)
         assert res.final_pos[n] == pytest.approx(np.mean([errs[i][last, 2].mean() for i in ids]), rel=1e-12)
     assert res.final_att[0] != res.final_att[1]  # the draws differ
@@ -168,6 +173,8 @@ def test_draws_of_their_own_gains_are_sim_draw_by_draw(stem):
             errs = report.errors(rec)
             ids = [a.id for a in sc.agents if a.role == "follower"]
             last = errs[ids[0]][:, 0] >= 1.0
+            # the same bound as in test_bearing_observers_are_sim_draw_by_draw: (K + F)·u of the sums
+            # plus the carried round-off, 80 times over
             assert res.final_pos[n] == pytest.approx(np.mean([errs[i][last, 2].mean() for i in ids]), rel=1e-12)
     assert not np.array_equal(res.max_rel[0], res.max_rel[1]) or res.final_pos[0] != res.final_pos[1]  # the gains made a difference
 

@@ -62,7 +62,7 @@ def tree_metrics(sc: Scenario, rec: Recording, step: float = 0.01) -> TreeMetric
         Rbar = np.einsum("tji,tjk->tik", Rg[tl], Rg[h])
         rel_att[k] = np.sqrt(np.clip((3.0 - np.trace(Rbar, axis1=1, axis2=2)) / 4.0, 0.0, 1.0))
         rel_pos[k] = np.linalg.norm(pg[h] - pg[tl], axis=1)
-    Rc = np.array([_nearest_rotation(m) for m in np.mean([Rg[i] for i in sc.ids], axis=0)])
+    Rc = nearest_rotations(np.mean([Rg[i] for i in sc.ids], axis=0))
     pc = np.mean([pg[i] for i in sc.ids], axis=0)
     att_common, pos_common = {}, {}
     for i in sc.ids:
@@ -72,10 +72,16 @@ def tree_metrics(sc: Scenario, rec: Recording, step: float = 0.01) -> TreeMetric
     return TreeMetrics(grid, rel_att, rel_pos, att_common, pos_common)
 
 
-def _nearest_rotation(M: np.ndarray) -> np.ndarray:
-    U, _, Vt = np.linalg.svd(M)
-    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Vt)) or 1.0)])
-    return U @ D @ Vt
+def nearest_rotations(A: np.ndarray) -> np.ndarray:
+    """The rotation nearest to each matrix of a stack (T, 3, 3): U diag(1, 1, ±1) V^T of its SVD
+    (the batched engine's sweep rows use it too, agent/batched.py)."""
+    U, _, Vt = np.linalg.svd(A)
+    d = np.sign(np.linalg.det(U @ Vt))
+    d[d == 0] = 1.0
+    D = np.zeros_like(A)
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    return U @ D @ Vt  # type: ignore[no-any-return]
 
 
 def summary(sc: Scenario, rec: Recording, tm: TreeMetrics | None, agents: dict[str, Any], t_end: float) -> dict[str, Any]:
