@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity bench-batched soak sim clean
+.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity bench-batched soak sim clean golden
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -56,3 +56,8 @@ bench-capacity: $(STAMP)
 
 clean:
 	rm -rf $(VENV) runs sweeps .pytest_cache
+
+## make golden: write tests/data/golden_sim.json anew on this machine (a command, not a test: it reports no
+## result; commit the file with the reason its numbers changed; tests/golden.py says what it holds)
+golden: $(STAMP)
+	$(PY) -m tests.write_golden

@@ -6,12 +6,13 @@
  * bit for bit):
  *
  *  - rigid_step: world/dynamics.py RigidBodies.step for isotropic inertias (the implicit
- *    midpoint rule on SO(3) x R^3, Rodrigues' formula of zswarm/so3.py exp_batch).  numpy's
- *    stacked 3x3 products (matmul) sum over the inner index 0, 1, 2 as a chain of fused
- *    multiply-adds on this machine's x86-64 (its AVX2/AVX-512 loops), so mm3 does too; its
- *    elementwise operations round each operation, and einsum("ij,ij->i") sums the three
- *    squares as (x² + z²) + y².  J_inv must be diagonal (world/dynamics.py checks): then
- *    J_inv tau is exact in any order.
+ *    midpoint rule on SO(3) x R^3, Rodrigues' formula of zswarm/so3.py exp_batch).  Every 3x3
+ *    product, here and below, is zswarm/so3.py mul's: (a_i0 b_0j + a_i1 b_1j) + a_i2 b_2j, each
+ *    operation rounded (no fused multiply-add), and a sum of three squares is (x² + z²) + y², as
+ *    so3's numpy code writes them out.  numpy's matmul is not used on either side of this promise:
+ *    it goes to the BLAS, whose kernel (chosen at run time by CPU and OPENBLAS_CORETYPE) fuses and
+ *    orders the sums its own way.  J_inv must be diagonal (world/dynamics.py checks): then J_inv tau
+ *    is exact in any order.
  *  - exp_batch: zswarm/so3.py exp_batch, Rodrigues' formula for a stack of rotation vectors.
  *  - flow_xi: agent/algorithms/attitude_sync_terms.py flow_xi, Heun's method on (5.21) in n
  *    sub-steps for each of M draws, with sin and cos of zswarm/trig.py (sincos4 below: 4 draws at once).
@@ -19,11 +20,12 @@
  *  - flow_aux: the velocity-free law's (Q_i, zeta_i) filter (attitude_sync_velocity_free.py), Heun's
  *    method on SO(3) x R in n sub-steps for each of M draws, four at a time.
  *  - predict, terms: attitude_sync_terms.predict and Terms.
- *  Python's float arithmetic and numpy's ufuncs round every operation; sin and cos are zswarm/trig.py's
- *  (sincos4), but for the few that numpy's code takes from the C library (atan2 and sin in log).
+ *  Python's float arithmetic and numpy's elementwise ufuncs round every operation, whatever the CPU; sin and
+ *  cos are zswarm/trig.py's (sincos4), but for the few that the numpy code takes from the C library through
+ *  Python's math module (atan2 and sin in log).  So the same bits hold by construction, on every CPU and BLAS.
  *
  * Built with -ffp-contract=off: the compiler must not fuse a*b + c on its own (that would
- * change the last bit against numpy); the fused products above are written out as fma().
+ * change the last bit against numpy, which rounds the product and the sum).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -31,18 +33,14 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* The loops come in two builds chosen at load time (GCC's target_clones): with the AVX2 and FMA
- * instructions where the CPU has them, and a default one (SSE2: a vector of four is two instructions,
- * fma() the C library's call).  Every operation rounds the same way in both (fma() once), so both give
- * the same bits; the first is ~3x faster (measured on the velocity-free filter, where the library call
- * was most of the time).  -DZSWARM_DEFAULT_ONLY builds the default one alone (tests/unit/test_kernels.py
+/* The loops come in two builds chosen at load time (GCC's target_clones): with the AVX2 instructions
+ * where the CPU has them, and a default one (SSE2: a vector of four is two instructions).  Every
+ * operation rounds the same way in both (no fused multiply-add in either), so both give the same bits.  -DZSWARM_DEFAULT_ONLY builds the default one alone (tests/unit/test_kernels.py
  * builds it to compare with the numpy code on a machine that would pick the other). */
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && __GNUC__ >= 11 && !defined(ZSWARM_DEFAULT_ONLY)
-#define FMA_CLONES __attribute__((target_clones("fma", "default")))
 #define V3_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #define AVX2_CLONES __attribute__((target_clones("avx2", "default")))
 #else
-#define FMA_CLONES
 #define V3_CLONES
 #define AVX2_CLONES
 #endif
@@ -105,27 +103,20 @@ static inline __attribute__((always_inline)) void sincos1(double x, double *s, d
     *c = cv[0];
 }
 
+/* c = a b (3x3, row-major): zswarm/so3.py mul's sums, (a_i0 b_0j + a_i1 b_1j) + a_i2 b_2j. */
 static inline void mm3(const double *a, const double *b, double *c)
 {
     for (int i = 0; i < 3; i++)
         for (int k = 0; k < 3; k++)
-            c[3 * i + k] = fma(a[3 * i + 2], b[6 + k], fma(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
+            c[3 * i + k] = (a[3 * i] * b[k] + a[3 * i + 1] * b[3 + k]) + a[3 * i + 2] * b[6 + k];
 }
 
 /* Four at a time: lane l of a v4d is draw (or body) l. */
-static inline __attribute__((always_inline)) v4d fma4(v4d a, v4d b, v4d c)
-{
-    v4d r;
-    for (int l = 0; l < 4; l++)
-        r[l] = fma(a[l], b[l], c[l]); /* one vfmadd in the x86-64-v3 clone, the C library's fma in the default one */
-    return r;
-}
-
 static inline __attribute__((always_inline)) void mm3_4(const v4d *a, const v4d *b, v4d *c)
 {
     for (int i = 0; i < 3; i++)
         for (int k = 0; k < 3; k++)
-            c[3 * i + k] = fma4(a[3 * i + 2], b[6 + k], fma4(a[3 * i + 1], b[3 + k], a[3 * i] * b[k]));
+            c[3 * i + k] = (a[3 * i] * b[k] + a[3 * i + 1] * b[3 + k]) + a[3 * i + 2] * b[6 + k];
 }
 
 /* Rodrigues' formula of four rotation vectors (lane l of W[r]: component r of vector l) into E, as
@@ -330,9 +321,9 @@ long predict(size_t M, const double *Rp, const double *Rn, double ratio, double 
                 N[q][l] = Rn[9 * m + q];
             }
         }
-        for (int i = 0; i < 3; i++) /* R_prev^T R_now, numpy's T(R_prev) @ R_now: the same chain over the inner index */
+        for (int i = 0; i < 3; i++) /* R_prev^T R_now, so3.mul(T(R_prev), R_now): the same sums over the inner index */
             for (int k = 0; k < 3; k++)
-                D[3 * i + k] = fma4(P[6 + i], N[6 + k], fma4(P[3 + i], N[3 + k], P[i] * N[k]));
+                D[3 * i + k] = (P[i] * N[k] + P[3 + i] * N[3 + k]) + P[6 + i] * N[6 + k];
         for (int l = 0; l < 4; l++) {
             double Dl[9], w[3];
             for (int q = 0; q < 9; q++)
@@ -357,7 +348,6 @@ long predict(size_t M, const double *Rp, const double *Rn, double ratio, double 
 /* attitude_sync_terms.Terms for M draws of R̄ (M,3,3): with X = A R̄, XK = X K, XK2 = XK K, the column
  * (psi(X), psi(XK), psi(XK2), tr X, tr XK, tr XK2, u.psi(X), u.psi(XK), u.psi(XK2)) of out (15,M): each
  * quantity a row of M, contiguous for the numpy and the flow_xi that read it. */
-FMA_CLONES
 void terms(size_t M, const double *A, const double *K, const double *u, const double *R, double *out)
 {
     for (size_t m = 0; m < M; m++) {
@@ -370,7 +360,7 @@ void terms(size_t M, const double *A, const double *K, const double *u, const do
             const double p0 = (Y[7] - Y[5]) * 0.5, p1 = (Y[2] - Y[6]) * 0.5, p2 = (Y[3] - Y[1]) * 0.5;
             out[(3 * j) * M + m] = p0, out[(3 * j + 1) * M + m] = p1, out[(3 * j + 2) * M + m] = p2;
             out[(9 + j) * M + m] = (Y[0] + Y[4]) + Y[8];
-            out[(12 + j) * M + m] = fma(p2, u[2], fma(p1, u[1], p0 * u[0]));
+            out[(12 + j) * M + m] = (p0 * u[0] + p1 * u[1]) + p2 * u[2]; /* so3.dot's order */
         }
     }
 }

@@ -67,13 +67,28 @@ def dot(a: Vec3, b: Vec3) -> Any:
     return x0 * y0 + x1 * y1 + x2 * y2
 
 
+def mul(A: Mat3, B: Mat3) -> Mat3:
+    """``A B`` of two 3x3 matrices, or of each pair of stacks (..., 3, 3) (either may be a single
+    matrix, broadcast): ``(a_i0 b_0j + a_i1 b_1j) + a_i2 b_2j``, each product and sum rounded on
+    its own (numpy's elementwise ufuncs), so the bits are the same on every CPU, for one matrix
+    or a stack, and the same as zswarm/_kernels.c's products.
+
+    ``A @ B`` goes to the BLAS, whose kernel is picked at run time (by the CPU and
+    ``OPENBLAS_CORETYPE``) and may fuse the multiply-adds or sum in another order, and differs
+    between one matrix and a stack: measured, Prescott's kernel against SkylakeX/Haswell/Zen's.
+    """
+    A = np.asarray(A, dtype=np.float64)
+    B = np.asarray(B, dtype=np.float64)
+    return (A[..., :, 0:1] * B[..., 0:1, :] + A[..., :, 1:2] * B[..., 1:2, :]) + A[..., :, 2:3] * B[..., 2:3, :]  # type: ignore[no-any-return]
+
+
 def apply(R: Mat3, v: Vec3) -> Vec3:
     """``R v``: a matrix times a vector, or each of stacks (..., 3, 3) and (..., 3) (either may
-    be a single one, broadcast): ``R @ v`` where that means it (one matrix, one vector, or a
-    stack of matrices and one vector), else the stacked product."""
-    if v.ndim == 1:
-        return R @ v  # type: ignore[no-any-return]
-    return (R @ v[..., None])[..., 0]  # type: ignore[no-any-return]
+    be a single one, broadcast), summed ``(r_i0 v_0 + r_i1 v_1) + r_i2 v_2`` as :func:`mul`
+    does: no BLAS, so one draw and a stack of draws give the same bits on every CPU."""
+    R = np.asarray(R, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    return (R[..., :, 0] * v[..., 0, None] + R[..., :, 1] * v[..., 1, None]) + R[..., :, 2] * v[..., 2, None]  # type: ignore[no-any-return]
 
 
 def hat(x: Vec3) -> Mat3:
@@ -157,7 +172,7 @@ def exp_batch(W: NDArray[np.float64]) -> NDArray[np.float64]:
     W = np.asarray(W, dtype=np.float64)
     if kernels.exp_batch is not None:  # the lines below, compiled (zswarm/_kernels.c): the same numbers
         return kernels.exp_batch(W)
-    t2 = np.einsum("ij,ij->i", W, W)
+    t2 = (W[:, 0] * W[:, 0] + W[:, 2] * W[:, 2]) + W[:, 1] * W[:, 1]  # the compiled loop's order
     small = t2 < 1e-8
     t = np.sqrt(np.where(small, 1.0, t2))
     sn, cs = sincos(t)  # zswarm/trig.py, as the compiled loop's
@@ -170,7 +185,7 @@ def exp_batch(W: NDArray[np.float64]) -> NDArray[np.float64]:
     K[:, 1, 2] = -W[:, 0]
     K[:, 2, 0] = -W[:, 1]
     K[:, 2, 1] = W[:, 0]
-    return _EYE + a[:, None, None] * K + b[:, None, None] * (K @ K)
+    return _EYE + a[:, None, None] * K + b[:, None, None] * mul(K, K)
 
 
 def log(R: Mat3) -> Vec3:
@@ -192,7 +207,7 @@ def _log_near_pi(R: Mat3) -> Vec3:
     s = psi(R)  # = sin(theta) * v
     # atan2, not acos: near theta = pi, acos(c) loses half the digits (an error
     # of 1e-8 rad from c = -1 + 1e-16), while |s| = sin(theta) is accurate there.
-    theta = math.atan2(math.sqrt(float(s @ s)), c)
+    theta = math.atan2(math.sqrt(dot(s, s)), c)
     if theta < 1e-6:
         return s * (1.0 + theta * theta / 6.0)
     if theta < math.pi - 1e-4:
@@ -203,7 +218,7 @@ def _log_near_pi(R: Mat3) -> Vec3:
     k = int(np.argmax(np.diag(B)))
     v = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
     v = v / np.linalg.norm(v)
-    if float(v @ s) < 0.0:  # pick the sign consistent with the small skew part
+    if dot(v, s) < 0.0:  # pick the sign consistent with the small skew part
         v = -v
     return theta * v
 
@@ -218,13 +233,14 @@ def log_batch(R: NDArray[np.float64]) -> NDArray[np.float64]:
     else:
         c = (trace(R) - 1.0) * 0.5
         s = psi(R)
-        r = np.sqrt(np.einsum("ij,ij->i", s, s))
+        r = np.sqrt((s[:, 0] * s[:, 0] + s[:, 2] * s[:, 2]) + s[:, 1] * s[:, 1])  # the compiled loop's order
         theta = np.fromiter(map(math.atan2, r.tolist(), c.tolist()), float, len(r))
         small = theta < 1e-6
         mid = ~small & (theta < math.pi - 1e-4)
         out = np.empty_like(s)
         out[small] = s[small] * (1.0 + theta[small, None] ** 2 / 6.0)
-        out[mid] = s[mid] * (theta[mid] / np.sin(theta[mid]))[:, None]
+        th = theta[mid]
+        out[mid] = s[mid] * (th / np.fromiter(map(math.sin, th.tolist()), float, len(th)))[:, None]  # the C library's sin, as compiled
         near_pi = ~small & ~mid
     for n in np.flatnonzero(near_pi):  # near π: rare, each on its own
         out[n] = _log_near_pi(R[n])
@@ -240,8 +256,8 @@ def Ra(theta: float, v: Vec3) -> Mat3:
         raise ValueError("Ra: rotation axis must be non-zero")
     K = hat(v / n)
     if isinstance(theta, np.ndarray):
-        return _EYE + np.sin(theta)[..., None, None] * K + (1.0 - np.cos(theta))[..., None, None] * (K @ K)
-    return _EYE + math.sin(theta) * K + (1.0 - math.cos(theta)) * (K @ K)
+        return _EYE + np.sin(theta)[..., None, None] * K + (1.0 - np.cos(theta))[..., None, None] * mul(K, K)
+    return _EYE + math.sin(theta) * K + (1.0 - math.cos(theta)) * mul(K, K)
 
 
 def attitude_norm(R: Mat3) -> float:
@@ -305,7 +321,7 @@ def _rotation_ok(m: list[float], tol: float) -> bool:
 
 def geodesic_interp(R0: Mat3, R1: Mat3, s: float) -> Mat3:
     """Point at fraction ``s`` of the geodesic from ``R0`` to ``R1`` (``R0 exp(s log(R0^T R1))``)."""
-    return R0 @ exp(s * log(R0.T @ R1))
+    return mul(R0, exp(s * log(mul(R0.T, R1))))
 
 
 def quaternion(R: Mat3) -> tuple[float, float, float, float]:

@@ -61,7 +61,7 @@ import numpy as np
 
 from zswarm import kernels
 from zswarm.algorithm import Field, View, number
-from zswarm.so3 import Mat3, T, Vec3, exp_batch, hat, log_batch, psi, trace
+from zswarm.so3 import Mat3, T, Vec3, apply, dot, exp_batch, hat, log_batch, mul, psi, trace
 from zswarm.trig import sincos
 
 
@@ -112,8 +112,8 @@ def _trig(x: Any) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
 
 
 def _times(R: Mat3, v: Vec3) -> Vec3:
-    """``R v`` for one matrix, or for stacks (M, 3, 3) and (M, 3)."""
-    return R @ v if R.ndim == 2 else (R @ v[..., None])[..., 0]
+    """``R v`` for one matrix, or for stacks (M, 3, 3) and (M, 3) (so3.apply: no BLAS, the same bits either way)."""
+    return apply(R, v)
 
 
 class Terms:
@@ -137,11 +137,11 @@ class Terms:
         if kernels.terms is not None:
             o = kernels.terms(A, K, u, R)  # the lines below, compiled (zswarm/_kernels.c)
         else:
-            M = A @ R
-            MK = M @ K
-            MK2 = MK @ K
+            M = mul(A, R)  # so3.mul, so3.dot: the compiled loop's sums, no BLAS on either side
+            MK = mul(M, K)
+            MK2 = mul(MK, K)
             p = (psi(M), psi(MK), psi(MK2))
-            o = np.concatenate([*(q.T for q in p), *(trace(X)[None] for X in (M, MK, MK2)), *((q @ u)[None] for q in p)])
+            o = np.concatenate([*(q.T for q in p), *(trace(X)[None] for X in (M, MK, MK2)), *(dot(q, u)[None] for q in p)])
         # o: (15, M), a row per quantity
         if one:
             r = o[:, 0]
@@ -171,10 +171,10 @@ class Terms:
         if isinstance(xi, np.ndarray):
             s, c = np.sin(xi)[:, None], 1.0 - np.cos(xi)[:, None]
             p = self.p0 + s * self.p1 + c * self.p2
-            return p + s * (p @ self.K.T) + c * (p @ self.K2.T)
+            return p + s * apply(self.K, p) + c * apply(self.K2, p)
         s, c = math.sin(xi), 1.0 - math.cos(xi)
         p = self.p0 + s * self.p1 + c * self.p2
-        return p + s * (self.K @ p) + c * (self.K2 @ p)
+        return p + s * apply(self.K, p) + c * apply(self.K2, p)
 
 
 _GEOM: dict[bytes, tuple[Mat3, Mat3, float]] = {}
@@ -186,7 +186,7 @@ def _geometry(A: Mat3, u: Vec3) -> tuple[Mat3, Mat3, float]:
     got = _GEOM.get(key)
     if got is None:
         K = hat(u)
-        got = _GEOM[key] = (K, K @ K, float(np.trace(A)))
+        got = _GEOM[key] = (K, mul(K, K), float(np.trace(A)))
     return got
 
 
@@ -211,7 +211,7 @@ def continuous_coupling(edges: tuple[Edge, ...], A: Mat3) -> Vec3:
     tail).  Broadcasts: with every R̄_k a stack (M, 3, 3) of M draws, σ_i is (M, 3)."""
     s = np.zeros(edges[0].R_bar.shape[:-1] if edges else 3)
     for e in edges:
-        s = s - psi(A @ (e.R_bar if e.head else T(e.R_bar)))
+        s = s - psi(mul(A, e.R_bar if e.head else T(e.R_bar)))
     return s
 
 
@@ -302,7 +302,7 @@ def predict(R_prev: Mat3 | None, R_now: Mat3, dt: float, lead: float) -> Mat3:
 
 
 def _predict(Rp: np.ndarray, Rn: np.ndarray, ratio: float) -> np.ndarray:
-    return Rn @ exp_batch(ratio * log_batch(T(Rp) @ Rn))
+    return mul(Rn, exp_batch(ratio * log_batch(mul(T(Rp), Rn))))
 
 
 def published_xi(view: View, xi: Mapping[int, float]) -> dict[int, dict[str, Any]]:

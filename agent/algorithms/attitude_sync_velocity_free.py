@@ -45,7 +45,7 @@ from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, _times, jump, measured_edges, published_xi, tail_xi
 from zswarm import hybrid, kernels
 from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Ra, T, Vec3, exp, hat, log, psi
+from zswarm.so3 import Mat3, Ra, T, Vec3, exp, hat, log, mul, psi
 from zswarm.trig import sincos
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
@@ -123,7 +123,7 @@ class _Rates:
     def __init__(self, g: Gains) -> None:
         self.A = np.ascontiguousarray(g.A, dtype=float)
         self.K = hat(np.asarray(g.u, dtype=float))
-        self.K2 = self.K @ self.K
+        self.K2 = mul(self.K, self.K)
         self.k_Q, self.k_zeta, self.gamma = float(g.k_Q), float(g.k_zeta), float(g.gamma)
         self.u2 = 2.0 * np.asarray(g.u, dtype=float)
 
@@ -133,7 +133,7 @@ class _Rates:
         zswarm/_kernels.c's flow_aux, in its order."""
         sn, cs = sincos(zeta)  # zswarm/trig.py, as the compiled loop's
         Z = _EYE + sn[:, None, None] * self.K + (1.0 - cs)[:, None, None] * self.K2
-        p = psi(self.A @ Qt @ Z)
+        p = psi(mul(mul(self.A, Qt), Z))  # so3.mul: the compiled loop's sums (no BLAS)
         return self.k_Q * _mv(Z, p), -self.k_zeta * (self.gamma * zeta + _dot(p, self.u2))
 
 
@@ -204,9 +204,9 @@ def flow_aux(Q: Mat3, zeta: Any, samples: tuple[tuple[float, Mat3], ...], dt: fl
         for r in rows:
             w = table[r]
             v1 = w - kh1
-            Qt1 = Qt @ exp(h * v1)
+            Qt1 = mul(Qt, exp(h * v1))
             kh2, z2 = rates(Qt1, z + h * z1)
-            Qt = Qt @ exp(hh * (v1 + w - kh2))
+            Qt = mul(Qt, exp(hh * (v1 + w - kh2)))
             z = z + hh * (z1 + z2)
             kh1, z1 = rates(Qt, z)
     if one:
