@@ -329,6 +329,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     sc = procutil.load_args(args)
     procutil.warn_notes(sc)
+    procutil.check_faults_in_run(sc, sc.duration if args.duration is None else args.duration, args.duration is not None)
     secure = None if args.secure is None else Path(args.secure) if args.secure else True
     return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure, rerun=args.rerun)
 

@@ -344,6 +344,18 @@ def load_args(args: Any) -> Any:
     return load_or_exit(args.topology, overrides)
 
 
+def check_faults_in_run(sc: Any, duration: float, given: bool) -> None:
+    """Exit 2 with one line when a fault of ``sc`` (``[[faults]]`` or ``--fault``) would begin, or
+    its agent restart, at or after the run's end: a mistake in the command, not a run to make
+    (``given``: the duration came from ``--duration``, not the scenario)."""
+    where = f"--duration {duration:g}" if given else f"scenario.duration = {duration:g} s"
+    for n, f in enumerate(sc.faults):
+        when = "restart_at" if f.restart_at is not None and f.at < duration <= f.restart_at else "at"
+        t = f.at if when == "at" else f.restart_at
+        if t >= duration:
+            fail_usage(f"faults[{n}] ({f.describe()}): {when} = {t:g} s is not within the run ({where}): it would never happen")
+
+
 def write_output(text: str, output: Path | None, what: str) -> None:
     """``text`` to standard output, or to ``output`` (its folder made) with "wrote FILE<what>" on stderr."""
     if output is None:

@@ -195,6 +195,7 @@ def command(args: argparse.Namespace) -> int:
     sc = procutil.load_args(args)
     procutil.warn_notes(sc)
     duration = sc.duration if args.duration is None else args.duration
+    procutil.check_faults_in_run(sc, duration, args.duration is not None)
     seed = sc.seed if args.seed is None else args.seed
     out = results_dir(args.out, sc.name)
     (out / "scenario.toml").write_text(sc.text, encoding="utf-8")

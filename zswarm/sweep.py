@@ -907,6 +907,7 @@ def command(args: argparse.Namespace) -> int:
             procutil.fail_usage(f"--vary {v.field}: field: also fixed by --set")
     sc = procutil.load_or_exit(args.topology, sets)
     duration = sc.duration if args.duration is None else args.duration
+    procutil.check_faults_in_run(sc, duration, args.duration is not None)
     seed = sc.seed if args.seed is None else args.seed
     try:
         jobs = sweep.plan(args.topology, sc, sets, varies, args.repeats, seed)

@@ -58,6 +58,35 @@ def test_the_cli_says_which_fault_is_wrong_and_exits_2(tmp_path):
     assert r.returncode == 2 and "--fault kill,agent=5,at=-1: faults[0].at: must be >= 0" in r.stderr, r.stderr
 
 
+@pytest.mark.parametrize(
+    ("cmd", "fault", "what"),
+    [
+        ("sim", "kill,agent=5,at=10", "at = 10 s"),  # the issue's case: it had exited 0 with the fault "applied"
+        ("sim", "kill,agent=5,at=0.2,restart_at=3", "restart_at = 3 s"),
+        ("sim", "cut,link=1->3,at=0.5,duration=1", "at = 0.5 s"),  # at the end is not within the run either
+        ("run", "stop,agent=3,at=4,duration=1", "at = 4 s"),
+        ("sweep", "faults=[{kind='router',at=7,duration=1}]", "at = 7 s"),  # sweep takes faults by --set
+    ],
+)
+def test_a_fault_past_the_runs_end_is_a_mistake_in_the_command(tmp_path, cmd, fault, what):
+    """A fault at or after the end of the run ``--duration`` makes (the file's own faults are
+    checked against scenario.duration by the loader): exit 2, one line naming it, nothing run."""
+    out = tmp_path / "out"
+    extra = ["--vary", "algorithm.gains.k_p=1,2"] if cmd == "sweep" else []
+    r = subprocess.run(
+        [sys.executable, "-m", "zswarm", cmd, str(T32), "--duration", "0.5", "--out", str(out), *extra, "--set" if cmd == "sweep" else "--fault", fault],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=120,
+    )
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert lines[0].startswith("error: faults[0]") and what in lines[0] and "--duration 0.5" in lines[0], lines
+    assert not out.exists()
+
+
 @pytest.fixture(scope="module")
 def killed(tmp_path_factory):
     """§3.2 in sim, agent 5 killed at 10 s and restarted at 15 s (the issue's case)."""
