@@ -55,6 +55,38 @@ def fixed8_text() -> str:
 BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py"})
 
 
+# In CI (CI=true) a skipped test is a failure: the tests that skip are those whose real part
+# (a Docker engine, network namespaces, Chromium) could not be had, and CI's machine must have
+# them; a green with one of them skipped would say that Docker or netns works when nothing
+# checked it.  On a developer's machine a skip stays a skip, with its reason.
+IN_CI = os.environ.get("CI") == "true"
+# A check that an overloaded real-time run could not make (the run did not keep up, so its
+# numbers are not the equations' alone) is recorded on the test's report under this name
+# (tests/integration/conftest.py, fixture `downgrade`) and counted at the end of the run.
+DOWNGRADED = "downgraded_by_overload"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    rep = outcome.get_result()
+    if IN_CI and rep.skipped and not hasattr(rep, "wasxfail"):
+        reason = rep.longrepr[2] if isinstance(rep.longrepr, tuple) else str(rep.longrepr)
+        rep.outcome = "failed"
+        rep.longrepr = f"skipped in CI (CI=true), where every real part this test needs must be there: {reason}"
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The count of checks that overloaded runs could not make (0 on a machine that keeps up)."""
+    reports = [r for cat in terminalreporter.stats.values() for r in cat if getattr(r, "when", None) == "call"]
+    if not any("tests/integration/" in r.nodeid for r in reports):
+        return
+    notes = [(r.nodeid, v) for r in reports for k, v in getattr(r, "user_properties", ()) if k == DOWNGRADED]
+    terminalreporter.write_line(f"checks downgraded by overload: {len(notes)}")
+    for nodeid, why in notes:
+        terminalreporter.write_line(f"  {nodeid}: {why}")
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in BACKGROUND and item.path.parent.name == "component":

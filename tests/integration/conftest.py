@@ -266,22 +266,43 @@ measured 1.0–1.7 on the six noise-free scenarios (quiet 2-core machine).
 Three allows that; the timing faults this guards against gave 10–1000
 (§3.2 before steps ended at measurements: ×10; a 35 ms stall on §3.3: ×14).
 
-When the run did not keep up (summary.json ``overload``), its errors are not
-the algorithm's alone and it must say so instead: then the flag is checked,
-not the factor."""
+When the run did not keep up (summary.json ``overload``), its errors are not the
+algorithm's alone: a test that exists to check the equations then fails, saying so
+(:func:`fail_if_overloaded`), instead of passing on a check it did not make.  Measured
+beside ``stress-ng --cpu 1`` (2026-12-03/05), the runs that call it keep up."""
+
+
+def fail_if_overloaded(s: dict, what: str) -> None:
+    """Fail the test when the run ``s`` (summary.json) did not keep up: ``what`` (the equations'
+    checks the test exists for) cannot be judged on it."""
+    ov = s["overload"]
+    if ov["overloaded"]:
+        pytest.fail(f"this machine did not keep up with the run ({'; '.join(ov['reasons'])}), so {what} could not be checked against the equations", pytrace=False)
 
 
 def assert_run_matches_sim(s: dict, ss: dict, keys: tuple[str, ...], launcher_log: Path) -> None:
     """``run`` summary ``s`` against ``sim`` summary ``ss`` on ``keys`` (see SIM_RUN_TOL)."""
     ov = s["overload"]
-    if ov["overloaded"]:
-        assert ov["reasons"] and "OVERLOADED" in launcher_log.read_text(), (ov, launcher_log.read_text()[-2000:])
-        return
+    assert not ov["overloaded"] or ("OVERLOADED" in launcher_log.read_text() and ov["reasons"]), ov  # said where the user reads it
+    fail_if_overloaded(s, f"the final errors {keys} against sim")
     for k in keys:
         a, b = s[k], ss[k]
         assert a is not None and b is not None and np.isfinite(a) and np.isfinite(b), (k, a, b)
         # 1e-12: both at rounding level (a leader-like zero), where a ratio means nothing.
         assert max(a, b) < 1e-12 or max(a, b) / max(min(a, b), 1e-300) <= SIM_RUN_TOL, (k, a, b, ov)
+
+
+@pytest.fixture
+def downgrade(request):
+    """``downgrade(what, s)``: record that the check ``what`` was not made because the run ``s``
+    did not keep up (a check of the machine's capacity, not of the equations: a publishing
+    rate, a command's age).  The records are counted at the end of the run (tests/conftest.py)."""
+    from tests.conftest import DOWNGRADED
+
+    def note(what: str, s: dict) -> None:
+        request.node.user_properties.append((DOWNGRADED, f"{what} ({'; '.join(s['overload']['reasons'])})"))
+
+    return note
 
 
 # A run's ``sim`` reference, computed while the run runs.  The real-time run leaves most of

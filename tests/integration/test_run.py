@@ -27,7 +27,7 @@ def run_and_load(procs, tmp_path, name, duration, extra=()):
 
 
 @pytest.mark.parametrize("name", ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered"])
-def test_run_converges_and_agrees_with_sim(procs, sim_reference, tmp_path, name):
+def test_run_converges_and_agrees_with_sim(procs, sim_reference, downgrade, tmp_path, name):
     # Time scale 1.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's cheaper ticks)
     # the agents keep up (≤ 0.1 % missed ticks).  The world, which skipped a sample whenever
     # it woke more than one 5 ms period late, dropped 0.4-3.9 % of them in four runs (3.9 %
@@ -42,6 +42,8 @@ def test_run_converges_and_agrees_with_sim(procs, sim_reference, tmp_path, name)
     assert s["engine"] == "run" and s["completed"]
     assert not (why := not_alive(out, s)), why
     assert not unconfirmed(out)  # every agent and the world had the recorder's word before closing
+    if s["overload"]["overloaded"]:
+        downgrade("the agents' step rates", s)
     for i, a in s["agents"].items():
         if not s["overload"]["overloaded"]:
             # A run that kept up (≤ 2 % missed ticks and skipped samples) publishes at the
@@ -75,7 +77,7 @@ def test_run_converges_and_agrees_with_sim(procs, sim_reference, tmp_path, name)
     topics = {t for t, _, _ in read(out / "recording.mcap")}
     assert {"truth", "est/3", "sense/3", "edge/1/3", "stats/agent/3", "ctl/start", "ctl/stop", "events/alive"} <= topics
 
-    # sim on the same scenario and seed: final errors within SIM_RUN_TOL, unless the run says it was overloaded.
+    # sim on the same scenario and seed: final errors within SIM_RUN_TOL (an overloaded run fails here, saying so).
     ss = ref.summary()
     assert_run_matches_sim(s, ss, ("mean_attitude_error_final", "mean_position_error_final"), tmp_path / "launcher.log")
 
@@ -123,20 +125,22 @@ def test_ctrl_c_stops_everything_and_writes_results(procs, tmp_path):
 
 def test_a_run_that_cannot_keep_up_says_so(procs, tmp_path):
     """Eight agents at 1 kHz and the world at 1 kHz on two cores: each agent tick costs
-    0.2–0.5 ms of Python, so the agents alone want 1.6–4 cores (measured: 20–90 % of
-    the ticks missed, 30 % of the world's samples skipped).  The run must finish and
-    flag itself in its table and in summary.json."""
+    0.2–0.5 ms of Python, so the agents alone want 1.6–4 cores (measured: 11–90 % of
+    the ticks missed; the world skipped 0–30 % of its samples, by machine).  The run must
+    finish and flag itself in its table and in summary.json, with the reasons it measured."""
     code, out = run_and_load(procs, tmp_path, "thesis-3.2-fixed8", 3.0, ("--set", "clock.rate=1000", "--set", "world.sensor_rate=1000"))
     log = (tmp_path / "launcher.log").read_text()
     assert code == 0, log
     s = json.loads((out / "summary.json").read_text())
     ov = s["overload"]
     assert ov["overloaded"] and ov["reasons"], ov
-    assert max(ov["agents_missed_pct"].values()) > ov["threshold_pct"] or ov["world_skipped_pct"] > ov["threshold_pct"]
-    # A world far behind still skips to its newest due sample instead of bursting through
-    # the backlog (world/__main__.py: CATCH_UP_S, 0.1 s).
-    assert ov["world_skipped_pct"] > 0, ov
-    assert "OVERLOADED: " in log and ov["reasons"][0] in log
+    # Which process fell behind is the machine's (here the agents missed 11-90 % of their ticks
+    # and the world 0-30 % of its samples, by CPU and load); what the code must do is say so,
+    # naming exactly the figures over the threshold.
+    over = [i for i, pct in ov["agents_missed_pct"].items() if pct > ov["threshold_pct"]]
+    assert any(r.startswith(f"{len(over)} of ") for r in ov["reasons"]) == bool(over), ov
+    assert any(r.startswith("the world skipped") for r in ov["reasons"]) == (ov["world_skipped_pct"] > ov["threshold_pct"]), ov
+    assert "OVERLOADED: " in log and all(r in log for r in ov["reasons"])
 
 
 @pytest.mark.parametrize("when", ["running", "starting"])

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import not_alive, stop_tail, wait_for, zswarm
+from tests.integration.conftest import fail_if_overloaded, not_alive, stop_tail, wait_for, zswarm
 from zswarm import keys, wire
 from zswarm.bus import ZenohBus, zenoh_config
 from zswarm.scenario import load
@@ -44,7 +44,7 @@ def _bad_commands(run: str) -> list[tuple[str, bytes]]:
     ]
 
 
-def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_reference, tmp_path):
+def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_reference, downgrade, tmp_path):
     sc = load(TOPO / f"{NAME}.toml")
     out = tmp_path / "run"
     ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", lean=True)  # computed while the run runs
@@ -55,8 +55,8 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     # 0.3-0.7 % of its samples in three runs: not overloaded, so the equations' checks below
     # ran (8 jumps, settled below 0.1 at 58.5 s and 0.01 at 98.9 s in the first).  Before
     # issue 28 the same needed 1.7-1.9 cores, and at time scale 0.5 with a core busy the
-    # agents stepped at 55-60 Hz; an overloaded run is still judged only by what it must
-    # report (below).
+    # agents stepped at 55-60 Hz; an overloaded run fails the test (its settle times and
+    # jumps would not be the equations').
     p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--time-scale", "1", "--quiet"), log=tmp_path / "launcher.log")
     meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
     run_id, ep = meta["run_id"], meta["router"]["endpoint"]
@@ -85,11 +85,13 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
     assert len(cmd) == 7
     for link, v in cmd.items():
-        _assert_commands_sent(s, link, v, sc.duration, 0.95)
+        _assert_commands_sent(s, link, v, sc.duration, 0.95, downgrade)
         assert v["latency_p50_ms"] < 20, v
     ov = s["overload"]
     if not ov["overloaded"]:  # a run that kept up: no command outlived its max_age at the world
         assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values()), s["commands"]
+    else:
+        downgrade("no command expired at the world", s)
 
     ss = ref.summary()
     sy, sy_sim = s["synchronization"], ss["synchronization"]
@@ -97,14 +99,13 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     for e in s["edges"].values():
         j = e["jump_log"][0]
         assert j["t"] < 0.1 and j["xi_before"] == pytest.approx(0.0, abs=1e-6) and j["xi_after"] == pytest.approx(0.9 * math.pi)
-    if ov["overloaded"]:
-        # A run that did not keep up stepped on older data than configured: a delay τ takes
-        # about k_R·λ(A)·τ ≈ 12τ off the damping k_ω = 0.1 (attitude_sync_terms, "Sampled
-        # data"), so at 55-60 Hz with 20-30 ms old measurements the loop does not settle and
-        # keeps jumping (measured: 22, 52 and 91 jumps in 150 s).  Neither the settle times
-        # nor the jump count are then the equations'; the report must say so.
-        assert "OVERLOADED" in (tmp_path / "launcher.log").read_text()
-        return
+    # A run that did not keep up stepped on older data than configured: a delay τ takes
+    # about k_R·λ(A)·τ ≈ 12τ off the damping k_ω = 0.1 (attitude_sync_terms, "Sampled
+    # data"), so at 55-60 Hz with 20-30 ms old measurements the loop does not settle and
+    # keeps jumping (measured: 22, 52 and 91 jumps in 150 s).  Neither the settle times
+    # nor the jump count are then the equations': such a run fails here, saying why.
+    assert not ov["overloaded"] or "OVERLOADED" in (tmp_path / "launcher.log").read_text()
+    fail_if_overloaded(s, "the jumps and settle times")
     assert 6 <= s["jumps_total"] <= 14, s["jumps_total"]  # READING-NOTES: 8 in 150 s
     for key, notes in (("settles_below_0.1_at", 58.5), ("settles_below_0.01_at", 102.0)):
         got, ref = sy[key], sy_sim[key]
@@ -114,27 +115,29 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     assert all(e["relative_attitude_error_final"] < 0.01 for e in s["edges"].values())
 
 
-def _assert_commands_sent(s: dict, link: str, v: dict, duration: float, share: float) -> None:
+def _assert_commands_sent(s: dict, link: str, v: dict, duration: float, share: float, downgrade) -> None:
     """Agent i -> world: a command per step that computed one (all but the steps before the first
     measurements), none lost in between, only the stop's tail undelivered; at the configured
-    100 Hz when the run kept up (a run that did not skips ticks: the report flags it)."""
+    100 Hz when the run kept up (a run that did not skips ticks: the report flags it, and the
+    rate check is counted as downgraded)."""
     a = s["agents"][link.split("->")[0]]
     assert 0.9 * a["steps"] <= v["sent"] <= a["steps"], (link, v, a["steps"])
     assert v["dropped"] == 0 and v["delivered"] >= v["sent"] - stop_tail(100.0), (link, v)
     if not s["overload"]["overloaded"]:
         assert v["sent"] > share * duration * 100, (link, v)
+    else:
+        downgrade(f"{link} sent at the configured rate", s)
 
 
-def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
+def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, downgrade, tmp_path):
     """The velocity-free law (no gyro) over real processes, first 15 s: every ξ_k and every ζ_i
     jumps 0 -> 0.9π at the start (§5.6: Q̃_i(0) = Ra(π, e3) too), the filter (Q_i, ζ_i) then
     tracks R_i (|Q̃_i|_I < 0.1 after 5 s; READING-NOTES: ≈ 0.05), and torques reach the world.
 
     At time scale 1: beside `stress-ng --cpu 1` (2026-12-03) the agents keep up; the world
     skipped 0.2-2.0 % of its samples over three runs while it skipped every sample it woke a
-    period late (now two: test_run.py), and an overloaded run is only flagged, not judged on
-    its jumps.  The test is about the law over real processes, not about capacity
-    (test_scale)."""
+    period late (now two: test_run.py).  An overloaded run fails: its jumps would not be the
+    law's."""
     name = "thesis-5.6-velocity-free7"
     out = tmp_path / "run"
     args = ("--out", str(out), "--duration", "15", "--time-scale", "1", "--quiet")
@@ -152,12 +155,10 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
         j = a["zeta_jump_log"][0]
         assert j["t"] < 0.1 and j["zeta_before"] == pytest.approx(0.0, abs=1e-9) and j["zeta_after"] == pytest.approx(0.9 * math.pi)
         assert a["Q_tilde_max_after_5s"] < 0.1, a
-    if s["overload"]["overloaded"]:  # stale data move the jumps: flagged, not judged
-        assert "OVERLOADED" in (tmp_path / "launcher.log").read_text()
-    else:
-        assert s["jumps_total"] <= 14 and s["zeta_jumps_total"] <= 14
+    fail_if_overloaded(s, "the jump counts")  # stale data move the jumps
+    assert s["jumps_total"] <= 14 and s["zeta_jumps_total"] <= 14
     cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
     assert len(cmd) == 7
     for link, v in cmd.items():
-        _assert_commands_sent(s, link, v, 15.0, 0.9)  # 15 s: the start-up is a larger share
+        _assert_commands_sent(s, link, v, 15.0, 0.9, downgrade)  # 15 s: the start-up is a larger share
     assert s["commands"]["malformed"] == 0
