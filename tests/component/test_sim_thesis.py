@@ -13,10 +13,17 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
+from tests.notes import agrees, interval
 from zswarm.report import load_recording, make_report
 from zswarm.report.families.tree import tree_metrics
 from zswarm.scenario import load
 from zswarm.sim import simulate
+
+
+STEP_45 = {10.0: 0.1, 20.0: 0.2}  # 2 x 4.6 % and 2 x 9.4 %, rounded up (module docstring)
+# §3.3.4's mean position error at 100 Hz against 10x the rates: 1.0 % above at 10 s, 2.6 % at 20 s,
+# 4.2 % at 30 s (0.0223 against 0.0214; READING-NOTES' dt -> 0: 0.022–0.023); twice that, rounded up.
+STEP_33 = {2.0: 0.02, 10.0: 0.02, 20.0: 0.06, 30.0: 0.09}
 
 
 def sim(tmp, name, duration=None):
@@ -50,7 +57,7 @@ def _follower_means(_f, summary, rec):
 
 def test_moving5_matches_reading_notes(moving5):
     summary, m = moving5
-    assert m[0.0][0] == pytest.approx(0.31, rel=0.05)
+    assert agrees(m[0.0][0], "0.31", 0.0), m[0.0]  # t = 0: the scenario's values
     # READING-NOTES' 5.5 at t = 0 is the direct ‖p − p̂‖; the thesis' ‖p̃‖, p̃ = p − R R̂^T p̂
     # (3.26), computed here from the scenario's initial values, is what errors.csv reports.
     sc = load(TOPO / "thesis-3.3-moving5.toml")
@@ -61,11 +68,13 @@ def test_moving5_matches_reading_notes(moving5):
     # The first row is the initial estimate against the truth at t = 0: the same formula,
     # so only round-off (1e-15) separates them.
     assert m[0.0][1] == pytest.approx(tilde, rel=1e-12)
-    assert m[2.0][0] < 1e-3  # notes: ≈1e-4 within 2 s
+    # notes: ≈1e-4 within 2 s, so below what prints as 1e-4 by then (ours 3.7e-6, the 10x run's
+    # 1.6e-6: the attitude's floor, no longer its transient)
+    assert m[2.0][0] < interval("1e-4", STEP_33[2.0])[1]
     assert m[5.0][0] < 1e-2  # the issue's threshold
-    assert m[10.0][1] == pytest.approx(0.4, rel=0.3)
-    assert m[20.0][1] == pytest.approx(0.09, rel=0.3)
-    assert m[30.0][1] < 0.1  # the issue's threshold; notes ≈ 0.02
+    assert agrees(m[10.0][1], "0.4", STEP_33[10.0]), m[10.0]
+    assert agrees(m[20.0][1], "0.09", STEP_33[20.0]), m[20.0]
+    assert m[30.0][1] < 0.1 and agrees(m[30.0][1], "0.02", STEP_33[30.0]), m[30.0]  # the issue's threshold; the notes' ≈ 0.02
     assert summary["mean_position_error_final"] < 0.05
 
 
@@ -88,8 +97,12 @@ def test_hybrid5_matches_reading_notes(hybrid5):
     sc, summary, rec, tm = hybrid5
     for k in tm.rel_att:
         assert at(tm.t, tm.rel_att[k], 0.0) == pytest.approx(1.0, abs=1e-6)
-        assert 0.7 * 0.04 <= at(tm.t, tm.rel_att[k], 10.0) <= 1.3 * 0.06  # notes: 0.04–0.06 at 10 s
-        assert 3e-4 <= at(tm.t, tm.rel_att[k], 20.0) <= 3e-3  # notes: ≈ 1e-3 at 20 s
+        # notes: 0.04–0.06 at 10 s (what prints as 0.04 to what prints as 0.06), widened by STEP_45[10]
+        assert interval("0.04", STEP_45[10.0])[0] <= at(tm.t, tm.rel_att[k], 10.0) < interval("0.06", STEP_45[10.0])[1], k
+        # notes: "≈ 1e-3 at 20 s" for every edge, where the equations (10x rates) put edges 1, 4 at
+        # 1.18e-3 and edges 2, 3 at 1.92e-3: one figure read on a log scale, [0.5e-3, 2e-3),
+        # widened by STEP_45[20].
+        assert 0.5e-3 * (1 - STEP_45[20.0]) <= at(tm.t, tm.rel_att[k], 20.0) < 2e-3 * (1 + STEP_45[20.0]), k
         assert np.max(tm.rel_att[k][tm.t >= 25.0]) < 1e-2  # the issue's threshold
     assert abs(summary["edges"]["1"]["xi_final"]) < 1e-2
 

@@ -106,7 +106,14 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     # nor the jump count are then the equations': such a run fails here, saying why.
     assert not ov["overloaded"] or "OVERLOADED" in (tmp_path / "launcher.log").read_text()
     fail_if_overloaded(s, "the jumps and settle times")
-    assert 6 <= s["jumps_total"] <= 14, s["jumps_total"]  # READING-NOTES: 8 in 150 s
+    # sim (and READING-NOTES, and sim at 10x the rates) has 8: six at the start, two at 7.6 and
+    # 9.8 s (test_sim_sync).  Over Zenoh each agent steps on data 0-15 ms old, which takes
+    # ≈ 12τ off the damping k_ω = 0.1 (≈ 0.06 at the mean τ ≈ 5 ms): ‖ω‖ swings longer, and an
+    # R̄_k that swings back through its δ band jumps again, at most once a swing.  The settle
+    # times below hold the swings to sim's within 25 %; the bound here allows each of the six
+    # edges one swing more than sim's (8 + 6), where chattering, the failure it exists for,
+    # shows as hundreds (the noisy §4.5 observer: 1000-1400 jumps per edge in 30 s).
+    assert 6 <= s["jumps_total"] <= ss["jumps_total"] + len(s["edges"]), (s["jumps_total"], ss["jumps_total"])
     for key, notes in (("settles_below_0.1_at", 58.5), ("settles_below_0.01_at", 102.0)):
         got, ref = sy[key], sy_sim[key]
         assert got is not None and ref is not None, (sy, sy_sim)

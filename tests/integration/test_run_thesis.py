@@ -90,7 +90,11 @@ def test_hybrid_run(procs, sim_reference, tmp_path, name):
     for k, e in s["edges"].items():
         first = e["jump_log"][0]
         assert first["t"] < 0.1 and first["xi_before"] == 0.0 and first["xi_after"] == pytest.approx(0.08 * math.pi), (k, e["jump_log"])
-        assert e["jumps"] == e["jumps_reported_by_head"] <= 3, (k, e["jump_log"])  # finitely many (1 on sim)
+        # sim: exactly 1 per edge, the start's (test_sim_thesis).  Over Zenoh a neighbour's data are
+        # up to 15 ms old, which can carry U(R̄_k, ξ_k) − min U back over δ = 0.003 while the
+        # transient is fast: two more re-entries per edge are allowed; chattering, the failure
+        # this guards against, shows as hundreds (the noisy case: 1000-1400 per edge in 30 s).
+        assert e["jumps"] == e["jumps_reported_by_head"] <= ss["edges"][k]["jumps"] + 2, (k, e["jump_log"])
     ra, ras = edge_series(out, "relative_attitude_error"), edge_series(sim_out, "relative_attitude_error")
     for k in ra:
         assert np.max(ra[k][ra[k][:, 0] >= 25.0, 1]) < 1e-2, k  # every |R̄_k|_I < 1e-2 by 25 s

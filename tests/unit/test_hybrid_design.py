@@ -43,15 +43,31 @@ def test_published_parameters_pass_the_check(xi, delta):
     assert min(d.gaps) > delta
 
 
-def test_case_three_meets_case_two_continuously():
-    """At λ2 = λ1λ3/(λ3−λ1) the third case's α and Δ* equal the second's."""
+@pytest.mark.parametrize("eps", [1e-2, 3e-3])
+def test_case_three_meets_case_two_continuously(eps):
+    """At λ2 = b = λ1λ3/(λ3−λ1) the third case's α² and Δ* equal the second's, and below b they
+    leave it at the rates the formulas give: with D = λ1λ2 + λ1λ3 + λ2λ3, case 3's
+    Δ* = 2λ1λ2λ3/D and α_i² = 1 − 2Π_{l≠i}λ_l/D have, at λ2 = b (where D = 2λ1λ3²/(λ3−λ1)),
+    dΔ*/dλ2 = (λ3−λ1)²/(2λ3²), dα1²/dλ2 = −(λ3−λ1)²/(2λ1λ3²), dα2²/dλ2 = (λ1+λ3)(λ3−λ1)²/(2λ1λ3³),
+    dα3²/dλ2 = −(λ3−λ1)²/(2λ3³).  So at λ2 = b(1 − ε) each gap is −(derivative)·εb to first
+    order; the second-order term is |f''/(2f')|·εb of it: for Δ*, f'' = −(λ1+λ3)(λ3−λ1)³/(2λ1λ3⁴),
+    0.71ε here (measured the same, 0.66-0.73ε, for the α_i²), so each gap is within ε of its
+    first-order value, relatively.  (α itself, a square root, leaves 0 like sqrt(ε): compared
+    on α².)"""
     l1, l3 = 5.0, 12.0
     b = l1 * l3 / (l3 - l1)
     d2 = hybrid.design(np.diag([l1, b, l3]), [1.0])
-    d3 = hybrid.design(np.diag([l1, b * 0.99, l3]), [1.0])
+    d3 = hybrid.design(np.diag([l1, b * (1 - eps), l3]), [1.0])
     assert (d2.case, d3.case) == (2, 3)
-    assert d3.Delta_star == pytest.approx(d2.Delta_star, rel=5e-3)
-    assert np.allclose(d3.alpha, d2.alpha, atol=0.06)
+    h = -eps * b  # the change of λ2
+    slopes = {
+        "Delta*": (d3.Delta_star - d2.Delta_star, (l3 - l1) ** 2 / (2 * l3**2)),
+        "alpha1^2": (d3.alpha[0] ** 2 - d2.alpha[0] ** 2, -((l3 - l1) ** 2) / (2 * l1 * l3**2)),
+        "alpha2^2": (d3.alpha[1] ** 2 - d2.alpha[1] ** 2, (l1 + l3) * (l3 - l1) ** 2 / (2 * l1 * l3**3)),
+        "alpha3^2": (d3.alpha[2] ** 2 - d2.alpha[2] ** 2, -((l3 - l1) ** 2) / (2 * l3**3)),
+    }
+    for name, (gap, slope) in slopes.items():
+        assert gap == pytest.approx(slope * h, rel=eps), (name, gap, slope * h)
 
 
 @pytest.mark.parametrize(

@@ -1,5 +1,9 @@
 """zswarm/kernels.py's compiled loops give the numbers of the numpy/Python code they replace,
-bit for bit (so a run is the same with or without them: golden sim passes either way).
+bit for bit (so a run is the same with or without them: golden sim passes either way), on any
+CPU and BLAS: neither side calls the BLAS (the numpy code's 3x3 products are so3.mul's
+elementwise sums, the compiled ones the same sums, no fused multiply-add), so the promise holds
+by construction; make test runs this file again with OpenBLAS's Prescott kernel and numpy's
+AVX-512 paths off (tests/layers.sh).
 
 The inputs cover both branches of Rodrigues' formula (|hω̄|² below and above 1e-8), torques
 of either sign, and the ξ filter from a single sub-step to many, for one draw (sim's path)
