@@ -79,6 +79,16 @@ def mul(A: Mat3, B: Mat3) -> Mat3:
     """
     A = np.asarray(A, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
+    if A.shape == (3, 3) and B.shape == (3, 3):  # one product: the same operations on Python floats, a third of the time
+        (a, b, c), (d, e, f), (g, h, i) = A.tolist()
+        (p, q, r), (s, t, u), (w, x, y) = B.tolist()
+        return np.array(
+            (
+                ((a * p + b * s) + c * w, (a * q + b * t) + c * x, (a * r + b * u) + c * y),
+                ((d * p + e * s) + f * w, (d * q + e * t) + f * x, (d * r + e * u) + f * y),
+                ((g * p + h * s) + i * w, (g * q + h * t) + i * x, (g * r + h * u) + i * y),
+            )
+        )
     return (A[..., :, 0:1] * B[..., 0:1, :] + A[..., :, 1:2] * B[..., 1:2, :]) + A[..., :, 2:3] * B[..., 2:3, :]  # type: ignore[no-any-return]
 
 
@@ -88,6 +98,10 @@ def apply(R: Mat3, v: Vec3) -> Vec3:
     does: no BLAS, so one draw and a stack of draws give the same bits on every CPU."""
     R = np.asarray(R, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
+    if R.shape == (3, 3) and v.shape == (3,):  # one product: the same operations on Python floats (R @ v took 1.4 µs, this 0.9)
+        (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+        x, y, z = v.tolist()
+        return np.array(((a * x + b * y) + c * z, (d * x + e * y) + f * z, (g * x + h * y) + i * z))
     return (R[..., :, 0] * v[..., 0, None] + R[..., :, 1] * v[..., 1, None]) + R[..., :, 2] * v[..., 2, None]  # type: ignore[no-any-return]
 
 

@@ -111,3 +111,25 @@ def test_quaternion_matches_scipy_and_rebuilds_R(theta, v):
     assert abs(np.linalg.norm(q) - 1.0) < 1e-12
     assert min(np.max(np.abs(q - ref)), np.max(np.abs(q + ref))) < 1e-12
     assert np.max(np.abs(Rotation.from_quat(q).as_matrix() - R)) < 1e-12
+
+
+def test_mul_and_apply_are_the_same_sums_for_one_matrix_and_a_stack():
+    """so3.mul and so3.apply: (a_i0 b_0j + a_i1 b_1j) + a_i2 b_2j, each operation rounded, so one
+    matrix (Python floats) and each matrix of a stack (numpy's elementwise ufuncs) give the same
+    bits, and both agree with the exact product to round-off."""
+    from zswarm.so3 import apply, exp_batch, mul
+
+    rng = np.random.default_rng(23)
+    A, B = exp_batch(rng.normal(size=(200, 3)) * 2.0), exp_batch(rng.normal(size=(200, 3)) * 2.0)
+    v = rng.normal(size=(200, 3)) * 10.0
+    AB, Av = mul(A, B), apply(A, v)
+    for m in range(len(A)):
+        assert np.array_equal(mul(A[m], B[m]), AB[m]) and np.array_equal(apply(A[m], v[m]), Av[m])
+        by_hand = [[(A[m, i, 0] * B[m, 0, j] + A[m, i, 1] * B[m, 1, j]) + A[m, i, 2] * B[m, 2, j] for j in range(3)] for i in range(3)]
+        assert np.array_equal(AB[m], np.array(by_hand))
+    # broadcasting one matrix over a stack, either side
+    assert np.array_equal(mul(A[0], B), np.array([mul(A[0], b) for b in B])) and np.array_equal(mul(A, B[0]), np.array([mul(a, B[0]) for a in A]))
+    assert np.array_equal(apply(A[0], v), np.array([apply(A[0], x) for x in v]))
+    # three products of entries <= 1 summed: within 3 ulps of 1 of the exact (long double) product
+    exact = np.einsum("nik,nkj->nij", A.astype(np.longdouble), B.astype(np.longdouble))
+    assert np.max(np.abs(AB - exact)) <= 3 * 2.0**-52
