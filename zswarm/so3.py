@@ -89,7 +89,7 @@ def mul(A: Mat3, B: Mat3) -> Mat3:
                 ((g * p + h * s) + i * w, (g * q + h * t) + i * x, (g * r + h * u) + i * y),
             )
         )
-    return (A[..., :, 0:1] * B[..., 0:1, :] + A[..., :, 1:2] * B[..., 1:2, :]) + A[..., :, 2:3] * B[..., 2:3, :]  # type: ignore[no-any-return]
+    return (A[..., :, 0:1] * B[..., 0:1, :] + A[..., :, 1:2] * B[..., 1:2, :]) + A[..., :, 2:3] * B[..., 2:3, :]
 
 
 def apply(R: Mat3, v: Vec3) -> Vec3:
@@ -102,7 +102,7 @@ def apply(R: Mat3, v: Vec3) -> Vec3:
         (a, b, c), (d, e, f), (g, h, i) = R.tolist()
         x, y, z = v.tolist()
         return np.array(((a * x + b * y) + c * z, (d * x + e * y) + f * z, (g * x + h * y) + i * z))
-    return (R[..., :, 0] * v[..., 0, None] + R[..., :, 1] * v[..., 1, None]) + R[..., :, 2] * v[..., 2, None]  # type: ignore[no-any-return]
+    return (R[..., :, 0] * v[..., 0, None] + R[..., :, 1] * v[..., 1, None]) + R[..., :, 2] * v[..., 2, None]
 
 
 def hat(x: Vec3) -> Mat3:

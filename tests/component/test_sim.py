@@ -20,7 +20,6 @@ from zswarm.report import make_report
 from zswarm.scenario import load
 from zswarm.sim import simulate
 
-
 STEP_32 = 0.04  # 2 x 1.6 %, rounded up (module docstring)
 
 

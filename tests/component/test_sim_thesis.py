@@ -19,7 +19,6 @@ from zswarm.report.families.tree import tree_metrics
 from zswarm.scenario import load
 from zswarm.sim import simulate
 
-
 STEP_45 = {10.0: 0.1, 20.0: 0.2}  # 2 x 4.6 % and 2 x 9.4 %, rounded up (module docstring)
 # §3.3.4's mean position error at 100 Hz against 10x the rates: 1.0 % above at 10 s, 2.6 % at 20 s,
 # 4.2 % at 30 s (0.0223 against 0.0214; READING-NOTES' dt -> 0: 0.022–0.023); twice that, rounded up.
