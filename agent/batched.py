@@ -56,7 +56,7 @@ from zswarm.report.base import grid as coarse_grid
 from zswarm.report.families.tree import nearest_rotations
 from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
 from zswarm.scenario import Scenario, ScenarioText
-from zswarm.so3 import exp
+from zswarm.so3 import exp, mul
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude", "bearings", "position", "velocity"})  # what the batched world measures
 PER_DRAW_SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # ... on a truth per draw (rigid bodies)
@@ -375,12 +375,12 @@ def _measure_draws(sensing: Sensing, i: int, noise: Mapping[str, list[Any]], R: 
         m["bearings"] = {j: B[q] if nb is None else projective_bearing(B[q], nb[n][:, 0], nb[n][:, 1]) for n, (q, j) in enumerate(sensing.pairs_of[i])}
     if "rel_att" in want:
         nr = noise.get("rel_att")
-        rel = {j: R[a].T @ R[index[j]] for j in sensing.nbrs[i]}
-        m["rel_att"] = rel if nr is None else {j: R_ij @ exp(nr[n]) for n, (j, R_ij) in enumerate(rel.items())}
+        rel = {j: mul(R[a].T, R[index[j]]) for j in sensing.nbrs[i]}
+        m["rel_att"] = rel if nr is None else {j: mul(R_ij, exp(nr[n])) for n, (j, R_ij) in enumerate(rel.items())}
     if V is not None and "velocity" in want:
         m["velocity"] = V[a] + noise["velocity"][0] if "velocity" in noise else np.array(V[a], dtype=float)
     if "attitude" in want:
-        m["attitude"] = R[a] @ exp(noise["attitude"][0]) if "attitude" in noise else R[a]
+        m["attitude"] = mul(R[a], exp(noise["attitude"][0])) if "attitude" in noise else R[a]
     if "position" in want:
         m["position"] = p[a]
     return m
@@ -709,11 +709,11 @@ def run(
                 if "gyro" in need:
                     sense["gyro"] = W[:, a] + bias[a] if n_gyro is None else W[:, a] + bias[a] + n_gyro
                 if "rel_att" in need:
-                    sense["rel_att"] = {j: RT[:, a] @ R[:, col[j]] for j in nbrs[i]}
+                    sense["rel_att"] = {j: mul(RT[:, a], R[:, col[j]]) for j in nbrs[i]}
                     if n_rel is not None:
-                        sense["rel_att"] = {j: R_ij @ exp(n_rel[j]) for j, R_ij in sense["rel_att"].items()}
+                        sense["rel_att"] = {j: mul(R_ij, exp(n_rel[j])) for j, R_ij in sense["rel_att"].items()}
                 if "attitude" in need:
-                    sense["attitude"] = R[:, a] if n_att is None else R[:, a] @ exp(n_att)
+                    sense["attitude"] = R[:, a] if n_att is None else mul(R[:, a], exp(n_att))
                 for f, hist in histories[i].items():
                     hist.append((t, sense[f].copy()))
                 sensed[i] = sense

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm.so3 import exp
+from zswarm.so3 import apply, exp, mul
 
 Vec3 = NDArray[np.float64]
 
@@ -71,13 +71,13 @@ def gyro(omega: Vec3, bias: Vec3, std: float, rng: np.random.Generator) -> Vec3:
 
 def relative_attitude(R_i: NDArray[np.float64], R_j: NDArray[np.float64], std: float, rng: np.random.Generator) -> NDArray[np.float64]:
     """``R_ij = R_i^T R_j`` (4.2), times ``exp([n_R]^x)`` with ``n_R ~ N(0, std²)`` per axis."""
-    R_ij = R_i.T @ R_j
-    return R_ij @ exp(rng.normal(0.0, std, 3)) if std > 0 else R_ij
+    R_ij = mul(R_i.T, R_j)
+    return mul(R_ij, exp(rng.normal(0.0, std, 3))) if std > 0 else R_ij
 
 
 def attitude(R: NDArray[np.float64], std: float, rng: np.random.Generator) -> NDArray[np.float64]:
     """Own attitude ``R_i exp([n_R]^x)``, ``n_R ~ N(0, std²)`` per axis (§5.6)."""
-    return R @ exp(rng.normal(0.0, std, 3)) if std > 0 else R
+    return mul(R, exp(rng.normal(0.0, std, 3))) if std > 0 else R
 
 
 def velocity(v: Vec3, std: float, rng: np.random.Generator) -> Vec3:
@@ -87,5 +87,5 @@ def velocity(v: Vec3, std: float, rng: np.random.Generator) -> Vec3:
 
 def relative_position(R_i: NDArray[np.float64], p_i: Vec3, p_j: Vec3, std: float, rng: np.random.Generator) -> Vec3:
     """``ⁱp_ij = R_i^T (p_j − p_i)`` (De Carli et al. (2)) plus ``n ~ N(0, std²)`` per axis."""
-    d = R_i.T @ (p_j - p_i)
+    d = apply(R_i.T, p_j - p_i)
     return d + rng.normal(0.0, std, 3) if std > 0 else d

@@ -16,11 +16,12 @@ agent's data are not).
 from __future__ import annotations
 
 import bisect
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
-from zswarm.so3 import T, apply, dot, exp, log
+from zswarm.so3 import T, apply, dot, exp, log, mul
 
 Sample = tuple[float, np.ndarray]
 
@@ -187,10 +188,10 @@ def relative_attitude_at(hist: Sequence[tuple[float, np.ndarray]], gyro: Sequenc
         return None
     if not gyro:
         # No gyro (a velocity-free agent): R_ij itself on the geodesic through the two samples.
-        return R0 @ exp(((t - t0) / (t1 - t0)) * log(T(R0) @ R1))
-    E_j = T(R0) @ rotation_over(gyro, t0, t1) @ R1
+        return mul(R0, exp(((t - t0) / (t1 - t0)) * log(mul(T(R0), R1))))
+    E_j = mul(mul(T(R0), rotation_over(gyro, t0, t1)), R1)
     s_ = (t - t0) / (t1 - t0)
-    return T(rotation_over(gyro, t0, t)) @ R0 @ exp(s_ * log(E_j))
+    return mul(mul(T(rotation_over(gyro, t0, t)), R0), exp(s_ * log(E_j)))
 
 
 def body_vector_at(hist: Sequence[tuple[float, np.ndarray, np.ndarray]], t: float, max_ahead: float = 0.05, unit: bool = True) -> np.ndarray | None:
@@ -240,7 +241,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
     """``v / |v|`` of a vector (3,) or of each of a stack (M, 3)."""
     if v.ndim > 1:
         return v / np.sqrt(dot(v, v))[..., None]  # type: ignore[no-any-return]
-    return v / np.sqrt(v @ v)  # type: ignore[no-any-return]
+    return v / math.sqrt(dot(v, v))  # type: ignore[no-any-return]  # the stack's sum, (x² + y²) + z²
 
 
 class HistoryReads:

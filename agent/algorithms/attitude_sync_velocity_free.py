@@ -36,16 +36,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
-from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, _times, jump, measured_edges, published_xi, tail_xi
+from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
 from zswarm import hybrid, kernels
 from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Ra, T, Vec3, exp, hat, log, mul, psi
+from zswarm.so3 import Mat3, Ra, T, Vec3, apply, exp, exp_batch, hat, log, mul, psi
 from zswarm.trig import sincos
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
@@ -109,8 +109,8 @@ def _dot(p: Any, u: Vec3) -> Any:
 def damping(Q_tilde: Mat3, zeta: float, g: Gains) -> tuple[Vec3, Vec3]:
     """``(h_i, ψ(A Q̃ Ra(ζ,u)))``: the gradient term of (5.20) and the ψ of (5.23)."""
     Z = Ra(zeta, g.u)
-    p = psi(g.A @ Q_tilde @ Z)
-    return Z @ p, p
+    p = psi(mul(mul(g.A, Q_tilde), Z))
+    return apply(Z, p), p
 
 
 class _Rates:
@@ -150,7 +150,7 @@ def _rates(g: Gains) -> _Rates:
 
 def attitude_path(samples: tuple[tuple[float, Mat3], ...]) -> list[tuple[float, float, Mat3, Vec3]]:
     """The geodesic segments between consecutive samples: ``(t0, t1, R0, log(R0^T R1))``."""
-    return [(t0, t1, R0, log(T(R0) @ R1)) for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False) if t1 > t0]
+    return [(t0, t1, R0, log(mul(T(R0), R1))) for (t0, R0), (t1, R1) in zip(samples, samples[1:], strict=False) if t1 > t0]
 
 
 def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float, path: list[tuple[float, float, Mat3, Vec3]] | None = None) -> Mat3:
@@ -159,7 +159,8 @@ def attitude_at(samples: tuple[tuple[float, Mat3], ...], s: float, path: list[tu
         return samples[0][1]
     for t0, t1, R0, w in path if path is not None else attitude_path(samples):
         if s <= t1:
-            return R0 @ exp(((s - t0) / (t1 - t0)) * w)
+            x = ((s - t0) / (t1 - t0)) * w  # one draw (3,) goes the way of a stack of one: exp_batch, as the stack's
+            return mul(R0, exp_batch(np.reshape(x, (-1, 3))).reshape(np.shape(x)[:-1] + (3, 3)))
     return samples[-1][1]
 
 
@@ -190,7 +191,7 @@ def flow_aux(Q: Mat3, zeta: Any, samples: tuple[tuple[float, Mat3], ...], dt: fl
     n = max(1, math.ceil(dt / SUBSTEP_S - 1e-9))
     h = dt / n
     path = attitude_path(samples)
-    Qt = T(Q) @ attitude_at(samples, -dt, path)
+    Qt = mul(T(Q), attitude_at(samples, -dt, path))
     one = Qt.ndim == 2
     z = np.array([zeta], dtype=float) if one else np.asarray(zeta, dtype=float)
     Qt = Qt[None] if one else Qt
@@ -210,8 +211,8 @@ def flow_aux(Q: Mat3, zeta: Any, samples: tuple[tuple[float, Mat3], ...], dt: fl
             z = z + hh * (z1 + z2)
             kh1, z1 = rates(Qt, z)
     if one:
-        return samples[-1][1] @ T(Qt[0]), float(z[0])
-    return samples[-1][1] @ T(Qt), z
+        return mul(samples[-1][1], T(Qt[0])), float(z[0])
+    return mul(samples[-1][1], T(Qt)), z
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
@@ -220,7 +221,7 @@ def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, 
     if dt > 0:
         Q, zeta = flow_aux(Q, zeta, inputs.R, dt, gains)
     R = inputs.R[-1][1]
-    Qt = T(Q) @ R
+    Qt = mul(T(Q), R)
     agent_jumps = []
     tq = Terms(gains.A, gains.u, Qt)
     new = jump(gains.A, gains.u, gains.gamma, gains.delta_Q, gains.Pi, Qt, zeta, tq)

@@ -28,7 +28,7 @@ from typing import Any
 
 from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Vec3, exp
+from zswarm.so3 import Mat3, Vec3, exp, mul
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,10 +56,10 @@ class Outputs:
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
     """Advance (3.3)+(3.14) by ``dt`` seconds (agent's own measured step)."""
-    R_pred = state.R_hat @ exp(dt * inputs.omega)
+    R_pred = mul(state.R_hat, exp(dt * inputs.omega))
     sigma = gains.k_R * bearing_correction(R_pred, inputs.neighbors)
     p_dot = position_rate(R_pred, state.p_hat, sigma, gains.k_p, inputs.neighbors)
-    R_next = exp(-dt * sigma) @ R_pred
+    R_next = mul(exp(-dt * sigma), R_pred)
     return State(R_next, state.p_hat + dt * p_dot), Outputs(sigma)
 
 

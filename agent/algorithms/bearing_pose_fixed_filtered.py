@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 from agent.algorithms import bearing_pose_fixed
 from agent.algorithms.bearing_terms import NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
 from zswarm.algorithm import Initial, Part, Publish, View
-from zswarm.so3 import Mat3, Vec3, exp
+from zswarm.so3 import Mat3, Vec3, exp, mul
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,10 +49,10 @@ class Outputs:
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
     """Advance (3.8)–(3.9)+(3.14) by ``dt`` seconds."""
     Omega = state.Omega
-    R_pred = state.R_hat @ exp(dt * inputs.omega)
+    R_pred = mul(state.R_hat, exp(dt * inputs.omega))
     innov = bearing_correction(R_pred, inputs.neighbors)
     p_dot = position_rate(R_pred, state.p_hat, Omega, gains.k_p, inputs.neighbors)
-    R_next = exp(-dt * Omega) @ R_pred
+    R_next = mul(exp(-dt * Omega), R_pred)
     Omega_next = Omega + dt * (-gains.k_Omega * Omega + innov)
     return State(R_next, state.p_hat + dt * p_dot, Omega_next), Outputs(innov)
 

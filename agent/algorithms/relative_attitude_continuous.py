@@ -25,7 +25,7 @@ import numpy as np
 from agent.algorithms.relative_attitude_terms import EDGE_FIELDS, EdgeData, continuous_correction, edge_data, edge_messages
 from zswarm import hybrid
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Vec3, exp
+from zswarm.so3 import Mat3, Vec3, exp, mul
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,12 +52,12 @@ class Outputs:
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
     """Advance (4.3)+(4.8) by ``dt`` seconds."""
-    R_pred = state.R_hat @ exp(dt * inputs.omega)
+    R_pred = mul(state.R_hat, exp(dt * inputs.omega))
     sigma = continuous_correction(R_pred, inputs.edges, gains.A)
     # Heun (see the module docstring): σ again at the Euler point, then the mean.
-    sigma2 = continuous_correction(exp(-dt * gains.k_R * sigma) @ R_pred, inputs.edges, gains.A)
+    sigma2 = continuous_correction(mul(exp(-dt * gains.k_R * sigma), R_pred), inputs.edges, gains.A)
     sigma_mean = 0.5 * (sigma + sigma2)
-    return State(exp(-dt * gains.k_R * sigma_mean) @ R_pred), Outputs(sigma_mean)
+    return State(mul(exp(-dt * gains.k_R * sigma_mean), R_pred)), Outputs(sigma_mean)
 
 
 def initial_state(init: Initial, gains: Gains) -> State:

@@ -43,7 +43,7 @@ from agent.algorithms.relative_attitude_continuous import Inputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, hybrid_correction, relative_error
 from zswarm import hybrid
 from zswarm.algorithm import POSE_ESTIMATE, Initial, Part, Publish, View
-from zswarm.so3 import Mat3, Vec3, exp
+from zswarm.so3 import Mat3, Vec3, exp, mul
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step", "SPEC"]
 
@@ -101,7 +101,7 @@ def flow_xi(R_bar: Mat3, xi: float, g: Gains) -> float:
 
 def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs, Mat3]:
     """One step of (4.25)–(4.26); also returns the predicted attitude R̂⁻ the step used."""
-    R_pred = state.R_hat @ exp(dt * inputs.omega)
+    R_pred = mul(state.R_hat, exp(dt * inputs.omega))
     R_bars = {e.k: relative_error(R_pred, e) for e in inputs.edges}  # R̄ does not depend on ξ
     xi = dict(state.xi)
     jumps = []
@@ -129,7 +129,7 @@ def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tupl
             U += hybrid.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k])
             rate1[e.k] = flow_xi(R_bar, xi[e.k], gains)
     # Heun: the flow's rates again at the Euler end point, then their mean.
-    R1 = exp(-dt * gains.k_R * sigma) @ R_pred
+    R1 = mul(exp(-dt * gains.k_R * sigma), R_pred)
     xi1 = {k: v + dt * rate1.get(k, 0.0) for k, v in xi.items()}
     R_bars1 = {e.k: relative_error(R1, e) for e in inputs.edges}
     sigma2 = hybrid_correction(R_bars1, inputs.edges, {e.k: (xi1[e.k] if e.head else e.xi) for e in inputs.edges}, gains.A, gains.u)
@@ -137,7 +137,7 @@ def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tupl
     for k, r1 in rate1.items():
         nxt[k] = xi[k] + 0.5 * dt * (r1 + flow_xi(R_bars1[k], xi1[k], gains))
     sigma_mean = 0.5 * (sigma + sigma2)
-    return State(exp(-dt * gains.k_R * sigma_mean) @ R_pred, nxt), Outputs(sigma_mean, tuple(jumps), U), R_pred
+    return State(mul(exp(-dt * gains.k_R * sigma_mean), R_pred), nxt), Outputs(sigma_mean, tuple(jumps), U), R_pred
 
 
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:

@@ -31,7 +31,7 @@ import numpy as np
 
 from zswarm import hybrid
 from zswarm.algorithm import Field, View, number
-from zswarm.so3 import Mat3, T, Vec3, exp, psi
+from zswarm.so3 import Mat3, T, Vec3, apply, dot, exp, mul, psi
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,8 +56,8 @@ class EdgeData:
 def relative_error(R_hat_i: Mat3, e: EdgeData) -> Mat3:
     """``R̄_k`` of the edge between i and j, in the edge's orientation (Remark 4.3)."""
     if e.head:
-        return e.R_hat_j @ T(e.R_ij) @ T(R_hat_i)
-    return R_hat_i @ e.R_ij @ T(e.R_hat_j)
+        return mul(mul(e.R_hat_j, T(e.R_ij)), T(R_hat_i))
+    return mul(mul(R_hat_i, e.R_ij), T(e.R_hat_j))
 
 
 def continuous_correction(R_hat: Mat3, edges: tuple[EdgeData, ...], A: Mat3) -> Vec3:
@@ -65,7 +65,7 @@ def continuous_correction(R_hat: Mat3, edges: tuple[EdgeData, ...], A: Mat3) -> 
     and the R̂_j stacks (M, 3, 3) of M draws (R_ij shared or stacked), σ_i is (M, 3)."""
     s = np.zeros(3)
     for e in edges:
-        s = s - psi(A @ e.R_hat_j @ T(e.R_ij) @ T(R_hat))
+        s = s - psi(mul(mul(mul(A, e.R_hat_j), T(e.R_ij)), T(R_hat)))
     return s
 
 
@@ -76,7 +76,7 @@ def hybrid_correction(R_bars: Mapping[int, Mat3], edges: tuple[EdgeData, ...], x
     for e in edges:
         R_bar = R_bars[e.k]
         g = hybrid.grad_R(A, u, R_bar, xi[e.k])
-        s = s - g if e.head else s + (R_bar @ g if R_bar.ndim == 2 else (R_bar @ g[..., None])[..., 0])
+        s = s - g if e.head else s + apply(R_bar, g)
     return s
 
 
@@ -90,12 +90,12 @@ def relative_position_rate(R_hat: Mat3, p_hat: Vec3, edges: tuple[EdgeData, ...]
     for e in edges:
         if e.b_own is None or e.b_nbr is None or e.p_hat_j is None:
             continue
-        gi = R_hat @ e.b_own
-        gi = gi / np.sqrt(gi @ gi)
-        gj = e.R_hat_j @ e.b_nbr
-        gj = gj / np.sqrt(gj @ gj)
-        Pj = e.p_hat_j - gj * (gj @ e.p_hat_j)
-        acc = acc + (p_hat - gi * (gi @ p_hat)) - R_hat @ e.R_ij @ e.R_hat_j.T @ Pj
+        gi = apply(R_hat, e.b_own)
+        gi = gi / np.sqrt(dot(gi, gi))
+        gj = apply(e.R_hat_j, e.b_nbr)
+        gj = gj / np.sqrt(dot(gj, gj))
+        Pj = e.p_hat_j - gj * dot(gj, e.p_hat_j)
+        acc = acc + (p_hat - gi * dot(gi, p_hat)) - apply(mul(mul(R_hat, e.R_ij), e.R_hat_j.T), Pj)
     return acc
 
 
@@ -157,7 +157,7 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
         b_own = bearings.get(j)
         if b_own is not None:
             b_t = view.body_vector(j, view.t_world) if view.moving else None
-            b_own = view.align @ b_own if b_t is None else b_t
+            b_own = apply(view.align, b_own) if b_t is None else b_t
         b_nbr = f.get("b")
         R_then = view.relative_attitude(j, m.t_world)
         if R_then is not None:
@@ -166,21 +166,21 @@ def edge_data(view: View, need_xi: bool) -> tuple[EdgeData, ...]:
             # = R̃_j(t_j)^T R_i(t): exact but for R̃_j's own (slow, correction-driven) change
             # over τ_j, so nothing is left at convergence.  Extrapolating R̂_j and R_ij
             # separately with ω_j instead errs by ½ω̇τ² each, a floor of 1e-5–1e-4.
-            R_ij = T(view.rotation(m.t, view.t)) @ R_then
+            R_ij = mul(T(view.rotation(m.t, view.t)), R_then)
             R_hat_j = f["R_hat"]
         else:
             # Older than the sensor history: propagate both with the gyros (first order).
-            R_ij = view.align @ R_m @ exp(tau_s * w_j)
-            R_hat_j = f["R_hat"] @ exp(tau_j * w_j)
+            R_ij = mul(mul(view.align, R_m), exp(tau_s * w_j))
+            R_hat_j = mul(f["R_hat"], exp(tau_j * w_j))
             if b_nbr is not None:
-                b_nbr = exp(-tau_j * w_j) @ b_nbr
+                b_nbr = apply(exp(-tau_j * w_j), b_nbr)
         if b_nbr is not None:
             b_then = view.body_vector(j, m.t_world) if (view.moving and b_own is not None) else None
             if b_then is not None and b_own is not None:
                 # j's bearing is from its tick t_j; the inertial bearing b_ji = −b_ij
                 # has turned since (0.5 rad/s in §4.5): our own bearing's change
                 # over [t_j, t], in j's frame, corrects it.
-                b_nbr = b_nbr - R_ij.T @ (b_own - view.rotation(m.t, view.t).T @ b_then)
+                b_nbr = b_nbr - apply(R_ij.T, b_own - apply(view.rotation(m.t, view.t).T, b_then))
         edges.append(
             EdgeData(
                 k,
@@ -202,14 +202,14 @@ def edge_messages(view: View, R_hat: Mat3, p_hat: Vec3, xi: Mapping[int, float])
     the receiver bring p̂_i to its tick)."""
     s = view.sense
     bearings = s.get("bearings", {})
-    vel = R_hat @ (view.align @ s["velocity_body"]) if "velocity_body" in s else None
+    vel = apply(R_hat, apply(view.align, s["velocity_body"])) if "velocity_body" in s else None
     out: dict[int, dict[str, Any]] = {}
     for i in view.out_neighbors:
         fields: dict[str, Any] = {"R_hat": R_hat, "p_hat": p_hat, "w": s["gyro"]}
         b = bearings.get(i)
         if b is not None:
             b_tick = view.body_vector(i, view.t_world) if view.moving else None
-            fields["b"] = view.align @ b if b_tick is None else b_tick
+            fields["b"] = apply(view.align, b) if b_tick is None else b_tick
         if vel is not None:
             fields["vel"] = vel
         k, head = view.tree_edges[i]

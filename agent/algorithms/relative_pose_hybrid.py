@@ -33,7 +33,7 @@ from agent.algorithms import relative_attitude_hybrid as att
 from agent.algorithms.relative_attitude_hybrid import Outputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, relative_position_rate
 from zswarm.algorithm import Initial, Part, Publish, View
-from zswarm.so3 import Mat3, Vec3, exp
+from zswarm.so3 import Mat3, Vec3, apply, exp
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "step", "SPEC"]
 
@@ -70,8 +70,8 @@ class Inputs:
 def step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs]:
     """Advance (4.25)–(4.26) and (4.30)–(4.31) by ``dt`` seconds."""
     a, out, R_pred = att.attitude_step(att.State(state.R_hat, state.xi), att.Inputs(inputs.omega, inputs.edges), dt, gains.attitude())
-    p_pred = state.p_hat + dt * (R_pred @ inputs.v_body)
-    p_next = exp(-dt * gains.k_R * out.sigma) @ (p_pred - dt * gains.k_p * relative_position_rate(R_pred, p_pred, inputs.edges))
+    p_pred = state.p_hat + dt * apply(R_pred, inputs.v_body)
+    p_next = apply(exp(-dt * gains.k_R * out.sigma), p_pred - dt * gains.k_p * relative_position_rate(R_pred, p_pred, inputs.edges))
     return State(a.R_hat, p_next, a.xi), out
 
 
@@ -86,7 +86,7 @@ def inputs(view: View, gains: Gains) -> Inputs:
     v̇·dt/2 ≈ 7 mm/s in §4.5, a ≈ 0.05–0.09 m bias on p̃."""
     omega = view.body_rate(view.t - view.dt, view.t)
     v = view.body_vector("velocity_body", view.t_world - view.dt / 2, unit=False)
-    v = view.align @ view.sense["velocity_body"] if v is None else exp(-(view.dt / 2) * omega) @ v
+    v = apply(view.align, view.sense["velocity_body"]) if v is None else apply(exp(-(view.dt / 2) * omega), v)
     return Inputs(omega, v, edge_data(view, need_xi=True))
 
 
