@@ -8,12 +8,12 @@
 #    other process asks for, and a waking process of a run preempts them at once, so the
 #    integration runs keep the machine they had.  Their output follows the integration layer's.
 #
-# 1b. The tests whose verdict depends on the rounding of the machine (the golden sim runs, the
+# 1b. (In the background part of step 2.)  The tests whose verdict depends on the rounding of the machine (the golden sim runs, the
 #    compiled loops against numpy, sin and cos, SO(3)) once more as on another machine: OpenBLAS
 #    forced to its Prescott kernel (no FMA: it rounds 3x3 products otherwise than the
 #    SkylakeX/Haswell/Zen kernels) and numpy's AVX-512 paths off (other arctan2 and exp).  Both
 #    are run-time switches, nothing to install; a verdict that holds on one machine only is
-#    caught here.  The batched engine's agreement with sim runs so too, in the background part.
+#    caught here.  The batched engine's agreement with sim runs so too.
 #
 # Each part lists its slowest tests (where the suite's time goes, on CI's machine too).  The exit
 # status is 0 only if every part passed.  Ctrl-C (or SIGTERM) stops both parts of step 2: the
@@ -27,18 +27,19 @@ PY=${1:-.venv/bin/python}
 
 # What numpy 1.x and 2.x call their AVX-512 dispatch targets; a name a numpy does not know is ignored.
 OTHER="OPENBLAS_CORETYPE=Prescott NPY_DISABLE_CPU_FEATURES=AVX512F,AVX512CD,AVX512_SKX,AVX512_CLX,AVX512_CNL,AVX512_ICL,AVX512_SPR,X86_V4"
-echo "--- the rounding-sensitive tests again as on another machine: $OTHER"
-env $OTHER "$PY" -m pytest -q -n 2 --dist loadfile -p no:cacheprovider tests/component/test_golden_sim.py tests/unit/test_kernels.py tests/unit/test_trig.py tests/unit/test_so3.py || exit $?
 
 idle=(nice -n 19)
 command -v chrt >/dev/null 2>&1 && idle=(chrt --idle 0)
 log=$(mktemp)
-# The background part: its tests, then the batched engine's agreement with sim (the noisy schemes
-# and the §4.5 continuous observer, a third of test_batched) as on another machine.
+# The background part: its tests, then step 1b (the rounding-sensitive files, and the batched engine's
+# agreement with sim on its noisy schemes and the §4.5 continuous observer, a third of test_batched)
+# as on another machine: CPU-bound, no real time, off the critical path (the first part: 22 s on two
+# cores beside stress-ng, when it ran after step 1).
 export PY OTHER
 setsid "${idle[@]}" bash -c '
     "$PY" -m pytest -q -m "background and not integration" -n 2 --dist loadfile --durations=15 || exit $?
-    echo "--- the batched engine against sim again as on another machine: $OTHER"
+    echo "--- the rounding-sensitive tests again as on another machine: $OTHER"
+    env $OTHER "$PY" -m pytest -q -n 2 --dist loadfile -p no:cacheprovider tests/component/test_golden_sim.py tests/unit/test_kernels.py tests/unit/test_trig.py tests/unit/test_so3.py || exit $?
     env $OTHER "$PY" -m pytest -q -n 2 -p no:cacheprovider tests/component/test_batched.py -k "noisy or continuous5"
 ' >"$log" 2>&1 &
 bg=$!
