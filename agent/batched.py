@@ -44,6 +44,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from agent import batched_links
 from agent.runtime import setup
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
@@ -105,8 +106,9 @@ def problem(sc: Scenario) -> str | None:
     ratio = sc.sensor_rate / c.rate
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         return f"agent ticks off the sensor grid ({c.rate:g} Hz against {sc.sensor_rate:g} Hz)"
-    if sc.links_active or any(s.active for s in sc.link_overrides.values()) or sc.command_links.active:
-        return "emulated links (delay, jitter, loss)"
+    why = batched_links.problem(sc)
+    if why is not None:
+        return why
     if sc.faults:
         return "faults"
     if sc.part_rate_scale != 1.0:
@@ -254,6 +256,7 @@ class Result:
     pos_coarse: np.ndarray | None = None  # (M, len(t_coarse)) the same of positions (None: the family has none)
     edge_messages: int = 0  # agent -> agent messages sent (each delivered: lockstep), per draw
     commands: int = 0  # commands sent to the world, per draw
+    command_links: batched_links.Commands | None = None  # emulated command links: their counters per draw (None: perfect, none lost, late or expired)
 
 
 class _Torques:
@@ -581,6 +584,7 @@ def run(
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
     torques = _Torques(M * n)
+    cmd_links = None if shared or not any(sc.link_spec(f"{i}->world").active for i in ids) else batched_links.Commands(sc, seeds, counters=rows)
     std = {f: np.sqrt([getattr(d, f"{f}_var") for d in draws]) for f in NOISES}
     if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
         raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
@@ -597,7 +601,7 @@ def run(
         R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
         w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
         J = np.array([[np.array(a.J).reshape(3, 3) for a in d.agents] for d in draws])
-        plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques)  # type: ignore[arg-type]
+        plant = RigidBodyPlant(R0.reshape(-1, 3, 3), np.zeros((M * n, 3)), w0.reshape(-1, 3), J.reshape(-1, 3, 3), sc.step, torques if cmd_links is None else cmd_links)  # type: ignore[arg-type]
     bias = np.array([a.gyro_bias for a in sc.agents])
 
     modules: dict[int, ModuleType] = {}
@@ -740,9 +744,12 @@ def run(
                 continue
             edge_messages += len(pub.edges)
             commands += pub.command is not None
-            if pub.command is not None and "tau" in pub.command:
-                torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
             t_stamp = t if pub.t is None else pub.t
+            if pub.command is not None and "tau" in pub.command:
+                if cmd_links is None:
+                    torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
+                else:
+                    cmd_links.send(a, t, t_stamp, pub.command["tau"])
             for j, fields in pub.edges.items():
                 inboxes[j][i] = (dict(fields), t_stamp)
             estimates[i] = pub.estimate
@@ -758,7 +765,7 @@ def run(
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all)
-    res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands)
+    res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links)
     if rows and grid_t:
         fin = np.array(final_v)  # (window, M, edges)
         t_fin = grid_all[grid_all >= final_from]

@@ -127,6 +127,16 @@ def _load(topology: Source, overrides: list[Override] | None = None) -> Scenario
     return load(topology, overrides or ())
 
 
+def run_seed(sc: Scenario, draw: int) -> int:
+    """The run seed of draw ``draw`` (its sensor noise and link losses): the scenario's own,
+    or with random links (loss, bursts, jitter) ``seed + draw``, so that each draw has its own
+    losses and delays (with one seed every draw would lose the very same messages), and
+    draw 0 stays ``zswarm sim`` of the scenario."""
+    from agent.batched_links import random_links
+
+    return sc.seed + draw if random_links(sc) else sc.seed
+
+
 def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold: float, near: float | None = None) -> dict[str, Any]:
     """One draw on ``sim``, in memory; its row of basin.csv."""
     from zswarm.sim import simulate
@@ -134,7 +144,7 @@ def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold:
     t0 = time.monotonic()
     base = _load(topology)
     sc = with_rotations(base, draw_overrides(base, seed, draw, near))
-    msgs = simulate(sc, Path("."), duration, sc.seed, lean=True, record=False)
+    msgs = simulate(sc, Path("."), duration, run_seed(base, draw), lean=True, record=False)
     rec = report.load_recording(msgs)
     fam = family.of(sc)
     assert fam.basin_series is not None  # draw_overrides refused a family without one
@@ -181,7 +191,7 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
             told[0] = time.monotonic()
             print(f"draws {draws[0]}-{draws[-1]}: t = {t:.0f} of {duration:g} s", file=sys.stderr, flush=True)
 
-    res = batched.run(scs, duration, base.seed, fam.basin_grid_s, progress=tell)
+    res = batched.run(scs, duration, base.seed, fam.basin_grid_s, progress=tell, seeds=[run_seed(base, d) for d in draws])
     wall = round((time.monotonic() - t0) / len(draws), 3)
     return [_row(d, near, res.t, res.max_rel[n], threshold, int(res.jumps[n]), int(res.agent_jumps[n]), wall) for n, d in enumerate(draws)]
 
@@ -221,13 +231,15 @@ def run_basin(
     batched: bool = False,
     chunk: int | None = None,
     cluster: str | None = None,
+    text: str | None = None,
 ) -> tuple[list[dict[str, str]], bool]:
     """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
     whether it was interrupted.  ``batched``: in chunks of ``chunk`` draws on the batched engine
     (default: the draws to do shared out among the jobs, at most MAX_CHUNK each), each chunk's
     rows written as it finishes (a resume reruns the unfinished chunks).  ``cluster``: on the
     Dask cluster whose scheduler is there (zswarm.cluster), as many at a time as it has worker
-    threads; the same rows as locally (the draws are seeded by their number)."""
+    threads; the same rows as locally (the draws are seeded by their number).  ``text``: the
+    scenario's TOML to run instead of the file's (the file with ``--set`` overrides applied)."""
     path = out / "basin.csv"
     done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
     todo = [d for d in range(draws) if d not in done]
@@ -244,7 +256,7 @@ def run_basin(
             f.flush()
         with zswarm_cluster.executor(jobs, cluster) as runner:
             pool, jobs = runner.pool, runner.slots
-            source: Source = topology if cluster is None else (Path(topology).read_text(encoding="utf-8"), topology)
+            source: Source = topology if cluster is None and text is None else (text or Path(topology).read_text(encoding="utf-8"), topology)
             progress(f"running on {runner.where}")
             pending: dict[Any, list[int]] = {}
             size = 1
@@ -571,7 +583,7 @@ def command(args: argparse.Namespace) -> int:
     from zswarm import basin
     from zswarm.launch import results_dir
 
-    sc = procutil.load_or_exit(args.topology)
+    sc = procutil.load_args(args)
     try:
         basin.starts_of(sc)
     except ValueError as exc:
@@ -579,11 +591,11 @@ def command(args: argparse.Namespace) -> int:
     duration = sc.duration if args.duration is None else args.duration
     out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("basins"))
     out.mkdir(parents=True, exist_ok=True)
-    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near}
+    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near, "set": list(args.overrides)}
     spec_path = out / "basin_def.json"
     if spec_path.exists():
         old = json.loads(spec_path.read_text())
-        diff = sorted(k for k in spec if k != "topology" and old.get(k) != spec[k])
+        diff = sorted(k for k in spec if k != "topology" and old.get(k, [] if k == "set" else None) != spec[k])
         if diff:
             procutil.fail_usage(f"--out {out}: holds a different basin check (differs in: {', '.join(diff)}); use another --out")
     else:
@@ -601,7 +613,7 @@ def command(args: argparse.Namespace) -> int:
     try:
         rows, interrupted = basin.run_basin(
             str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near,
-            batched=batched, chunk=args.chunk, cluster=args.cluster,
+            batched=batched, chunk=args.chunk, cluster=args.cluster, text=sc.text if args.overrides else None,
         )
     except zswarm_cluster.ClusterError as exc:
         print(f"zswarm basin: {exc}", file=sys.stderr)

@@ -145,13 +145,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="instead of uniform draws, turn the scenario's own start by EPS rad about a uniform axis "
         "(shows an almost-global law's slow escape from the undesired set)",
     )
+    b.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        dest="overrides",
+        help="override a scenario field for every draw (repeatable), e.g. links.commands.delay_ms=2; with random links (loss, bursts, jitter) "
+        "draw d runs with seed scenario.seed + d, its own losses and delays",
+    )
     b.add_argument("--out", type=Path, default=None, help="folder (default basins/<scenario>-<timestamp>/); the same folder resumes")
     b.add_argument(
         "--engine",
         choices=("auto", "batched", "sim"),
         default="auto",
         help="batched: the draws stepped together on arrays (the same algorithm modules; draw by draw the same numbers as sim); "
-        "sim: each draw on zswarm sim; auto (default): batched where the scenario allows it (one clock without jitter, drift or offset on the sensor grid, perfect links, no faults; sensor noise is drawn as sim draws it), else sim, saying why",
+        "sim: each draw on zswarm sim; auto (default): batched where the scenario allows it (one clock without jitter, drift or offset on the sensor grid, no emulated agent→agent or sensor links (command links are batched), no faults; sensor noise and link losses are drawn as sim draws them), else sim, saying why",
     )
     b.add_argument("--chunk", type=procutil.positive_int, default=None, help="draws stepped together per task of the batched engine (default: the draws shared out among the jobs, at most 1000)")
     b.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the draws on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port) instead of local processes")

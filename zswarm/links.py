@@ -16,10 +16,16 @@ released to the receiver's inbox:
   ``(p_bg·loss_good + p_gb·loss_bad)/(p_gb + p_bg)``, the mean burst
   (stay in bad) ``1/p_bg`` messages.
 
-Each link draws from its own generator seeded by ``(seed, crc32(link name))``,
-so a seed gives the same losses and delays on every engine and every run.
-With everything zero a model releases each message at its arrival time and
-draws no random numbers.
+Each link draws from its own generators, one per purpose (:data:`PURPOSES`: the
+Bernoulli loss, the Gilbert–Elliott move, the Gilbert–Elliott loss, the
+jitter), seeded by ``(seed, crc32(link name), purpose)``.  Message n of a link
+takes the n-th number of every stream its spec uses, whether or not the message
+is lost on the way: what became of one message never shifts the numbers of the
+next.  So the numbers of a link can be read ahead in blocks (:class:`LinkDraws`),
+the same ones for one message at a time in ``sim`` and for a whole batch of draws
+on the batched engine (agent/batched.py), and a seed gives the same losses and
+delays on every engine and every run.  With everything zero a model releases
+each message at its arrival time and draws no random numbers.
 """
 
 from __future__ import annotations
@@ -86,20 +92,69 @@ class LinkSpec:
         return out
 
 
-def link_seed(seed: int, name: str) -> list[int]:
-    """The generator seed of link ``name`` ("world->3", "1->3", ...)."""
-    return [seed % (1 << 63), zlib.crc32(name.encode())]
+# The random numbers a link may take per message, one stream each (a spec uses those of its parts).
+PURPOSES = ("drop", "ge_move", "ge_loss", "jitter")
+BLOCK = 256  # numbers read ahead per stream in sim (any block size gives the same numbers)
+
+
+def link_seed(seed: int, name: str, purpose: str) -> list[int]:
+    """The seed of link ``name``'s ("world->3", "1->3", "3->world") stream of ``purpose``."""
+    return [seed % (1 << 63), zlib.crc32(name.encode()), PURPOSES.index(purpose)]
+
+
+def purposes(spec: LinkSpec) -> tuple[str, ...]:
+    """The streams a spec draws from, a number each per message."""
+    out = []
+    if spec.drop > 0:
+        out.append("drop")
+    if spec.ge_p_gb > 0:
+        out += ["ge_move", "ge_loss"]
+    if spec.jitter_ms > 0:
+        out.append("jitter")
+    return tuple(out)
+
+
+def block(rng: np.random.Generator, purpose: str, jitter: str, n: int) -> np.ndarray:
+    """The next ``n`` numbers of a stream: uniforms in [0, 1), or the jitter's standard normal
+    or standard exponential variates (scaled by ``jitter_ms`` where they are used).  Numpy's
+    Generator fills a block one number after the other, so blocks of any size give the numbers
+    of one draw at a time (tests/unit/test_links.py)."""
+    if purpose != "jitter":
+        return rng.random(n)
+    return rng.standard_normal(n) if jitter == "normal" else rng.standard_exponential(n)
+
+
+class LinkDraws:
+    """One link's streams for one seed, read ahead ``size`` numbers at a time."""
+
+    __slots__ = ("buf", "pos", "rngs", "size", "spec")
+
+    def __init__(self, spec: LinkSpec, name: str, seed: int, size: int = BLOCK) -> None:
+        self.spec = spec
+        self.rngs = {p: np.random.default_rng(link_seed(seed, name, p)) for p in purposes(spec)}
+        self.buf: dict[str, list[float]] = {}
+        self.pos = size
+        self.size = size
+
+    def next(self) -> dict[str, float]:
+        """The numbers of the next message, by purpose."""
+        if self.pos == self.size:
+            self.buf = {p: block(r, p, self.spec.jitter, self.size).tolist() for p, r in self.rngs.items()}
+            self.pos = 0
+        k = self.pos
+        self.pos += 1
+        return {p: b[k] for p, b in self.buf.items()}
 
 
 class LinkModel:
     """Decides, message by message, loss and release time on one link."""
 
-    __slots__ = ("spec", "name", "rng", "bad", "last_release", "offered", "dropped", "delays", "cut")
+    __slots__ = ("spec", "name", "draws", "bad", "last_release", "offered", "dropped", "delays", "cut")
 
     def __init__(self, spec: LinkSpec, name: str, seed: int) -> None:
         self.spec = spec
         self.name = name
-        self.rng = np.random.default_rng(link_seed(seed, name))
+        self.draws = LinkDraws(spec, name, seed)
         self.bad = False  # Gilbert–Elliott state
         self.last_release = -math.inf
         self.offered = 0
@@ -108,19 +163,19 @@ class LinkModel:
         self.delays: list[float] = []  # applied delays, s (release − arrival)
 
     def admit(self, t_arrival: float) -> float | None:
-        """Release time (s, receiver's clock) of a message arriving at ``t_arrival``, or None if lost."""
+        """Release time (s, receiver's clock) of a message arriving at ``t_arrival``, or None if lost.
+
+        The batched engine decides the same way for a stack of draws (agent/batched.py
+        ``_Links.admit``): a change here is a change there."""
         self.offered += 1
         s = self.spec
         if not s.active:
             return t_arrival
-        lost = False
-        if s.drop > 0 and self.rng.random() < s.drop:
-            lost = True
+        x = self.draws.next()
+        lost = s.drop > 0 and x["drop"] < s.drop
         if s.ge_p_gb > 0:
-            flip = self.rng.random()
-            self.bad = (flip >= s.ge_p_bg) if self.bad else (flip < s.ge_p_gb)
-            if self.rng.random() < (s.ge_loss_bad if self.bad else s.ge_loss_good):
-                lost = True
+            self.bad = (x["ge_move"] >= s.ge_p_bg) if self.bad else (x["ge_move"] < s.ge_p_gb)
+            lost = lost or x["ge_loss"] < (s.ge_loss_bad if self.bad else s.ge_loss_good)
         if lost:
             self.dropped += 1
             return None
@@ -130,10 +185,7 @@ class LinkModel:
             return None
         d = s.delay_ms
         if s.jitter_ms > 0:
-            if s.jitter == "normal":
-                d = max(0.0, d + self.rng.normal(0.0, s.jitter_ms))
-            else:
-                d = d + self.rng.exponential(s.jitter_ms)
+            d = max(0.0, d + s.jitter_ms * x["jitter"]) if s.jitter == "normal" else d + s.jitter_ms * x["jitter"]
         release = t_arrival + d * 1e-3
         if not s.reorder:
             release = max(release, self.last_release)

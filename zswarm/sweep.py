@@ -580,6 +580,13 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
         pos = res.pos_coarse[n] if res.pos_coarse is not None else None
         final_pos = float(res.final_pos[n]) if res.final_pos is not None and np.isfinite(res.final_pos[n]) else None
         sent, cmds = res.edge_messages, res.commands
+        cmd_dropped, cmd_latency, cmd_expired = 0, 0.0 if cmds else None, 0
+        if res.command_links is not None:  # emulated command links: the world's counters of this draw
+            links = res.command_links.link_counters(n)
+            cmd_dropped = sum(v["dropped"] for v in links.values())
+            cmd_latency = _median([v["latency_p50_ms"] for v in links.values() if "latency_p50_ms" in v])
+            cmd_expired = int(res.command_links.expired[n].sum())
+        c_sent = cmds
         rows.append(
             {
                 "final_attitude_error": float(res.final_att[n]) if np.isfinite(res.final_att[n]) else None,
@@ -593,11 +600,11 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
                 "edge_latency_p50_ms": 0.0 if sent else None,
                 "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1) if sync else None,
                 "sensor_dropped": 0,
-                "cmd_sent": cmds if commanded else None,
-                "cmd_dropped": 0 if commanded else None,
-                "cmd_drop_ratio": 0.0 if cmds else None,
-                "cmd_latency_p50_ms": 0.0 if cmds else None,
-                "cmd_expired": 0 if commanded else None,
+                "cmd_sent": c_sent if commanded else None,
+                "cmd_dropped": cmd_dropped if commanded else None,
+                "cmd_drop_ratio": cmd_dropped / c_sent if c_sent else None,
+                "cmd_latency_p50_ms": cmd_latency,
+                "cmd_expired": cmd_expired if commanded else None,
                 "jumps": int(res.jumps[n]) if hybrid else None,
                 "stale_terms": 0,
                 "missed_deadlines": 0,
