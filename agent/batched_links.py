@@ -31,16 +31,10 @@ LATENCIES = 2000  # the last latencies a LinkCounter keeps (zswarm/links.py)
 def problem(sc: Scenario) -> str | None:
     """Which emulated links the batched engine does not run yet (None: it runs them all)."""
     if sc.links_active:
-        return "emulated agent→agent or sensor links (delay, jitter, loss): the batched engine runs the command links only"
+        return "emulated links between agents or from the sensors (delay, jitter, loss): the batched engine runs the agent→world command links only"
     if any(f.kind == "cut" for f in sc.faults):
         return "link cuts"
     return None
-
-
-def random_links(sc: Scenario) -> bool:
-    """Some link of ``sc`` draws random numbers (loss, bursts, jitter)."""
-    names = [f"{i}->world" for i in sc.ids] + [f"world->{i}" for i in sc.ids] + [f"{j}->{i}" for i in sc.ids for j in sc.agent(i).neighbors]
-    return any(purposes(sc.link_spec(n)) for n in names)
 
 
 class LinkStack:

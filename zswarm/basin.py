@@ -132,9 +132,7 @@ def run_seed(sc: Scenario, draw: int) -> int:
     or with random links (loss, bursts, jitter) ``seed + draw``, so that each draw has its own
     losses and delays (with one seed every draw would lose the very same messages), and
     draw 0 stays ``zswarm sim`` of the scenario."""
-    from agent.batched_links import random_links
-
-    return sc.seed + draw if random_links(sc) else sc.seed
+    return sc.seed + draw if sc.random_links else sc.seed
 
 
 def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold: float, near: float | None = None) -> dict[str, Any]:

@@ -57,7 +57,7 @@ from zswarm.algorithm import AlgorithmError, AlgorithmSpec, StalePolicy, resolve
 from zswarm.clock import ClockSpec, _clock
 from zswarm.faults import APPEND_FAULT, FAULT_KINDS, Fault, _faults, fault_actions, fault_override, parse_fault
 from zswarm.graph import GraphError, _sensing, _tree, check_leader_follower
-from zswarm.links import LinkSpec, LinksTable, _links
+from zswarm.links import LinkSpec, LinksTable, _links, purposes
 from zswarm.motion_checks import _check_finite_over_run, _snapshots
 from zswarm.overrides import Override, _apply, parse_field, parse_override, parse_value, render
 from zswarm.plants import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy, NoiseTable, WorldTable, _plant
@@ -209,6 +209,12 @@ class Scenario:
             spec = self.sensor_links if name.startswith("world->") else self.links
         cuts = tuple((f.at, f.end) for f in self.faults if f.kind == "cut" and f.link == name)
         return replace(spec, cuts=cuts) if cuts else spec
+
+    @property
+    def random_links(self) -> bool:
+        """Some link (sensors, edges, commands) draws random numbers: loss, bursts or jitter."""
+        names = [f"{i}->world" for i in self.ids] + [f"world->{i}" for i in self.ids] + [f"{j}->{a.id}" for a in self.agents for j in a.neighbors]
+        return any(purposes(self.link_spec(n)) for n in names)
 
     @property
     def links_active(self) -> bool:

@@ -194,3 +194,27 @@ def test_a_draw_is_the_scenario_its_overrides_load(stem):
     assert errors[0] == errors[1] and "agents[1].R: is not a rotation matrix" in errors[0]
     other = [parse_override("algorithm.gains.k_R=2")]  # not a start: loaded in full
     assert with_rotations(base, other) == load(path, other)
+
+
+def test_a_basin_under_command_delay_and_loss_is_sims_draw_by_draw(tmp_path):
+    """``--set`` reaches every draw; with random links draw d runs with seed + d (its own losses:
+    draws that lose the same commands would not be a Monte-Carlo over the network), and the
+    batched engine's rows are sim's, column by column (every number as written)."""
+    got = {}
+    for engine in ("batched", "sim"):
+        out = tmp_path / engine
+        cmd = [sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-5.6-hybrid7.toml"), "--draws", "3", "--duration", "30", "--threshold", "0.1", "--jobs", "2"]
+        cmd += ["--set", "links.commands.delay_ms=2", "--set", "links.commands.drop=0.1", "--engine", engine, "--out", str(out)]
+        p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
+        assert p.returncode == 0, p.stderr
+        with open(out / "basin.csv", newline="") as f:
+            got[engine] = {r["draw"]: {k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(f)}
+        assert json.loads((out / "basin_def.json").read_text())["set"] == ["links.commands.delay_ms=2", "links.commands.drop=0.1"]
+    assert got["batched"] == got["sim"] and len(got["sim"]) == 3
+    sc = load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override("links.commands.drop=0.1")])
+    assert [basin.run_seed(sc, d) for d in range(3)] == [sc.seed, sc.seed + 1, sc.seed + 2]
+    assert basin.run_seed(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override("links.commands.delay_ms=2")]), 2) == sc.seed  # no random links: one seed
+    # A resume with another --set is another basin check: refused, nothing run.
+    again = [*cmd[: cmd.index("--set")], "--set", "links.commands.delay_ms=5", "--out", str(tmp_path / "sim")]
+    p = subprocess.run(again, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert p.returncode == 2 and "differs in: set" in p.stderr, p.stderr

@@ -39,3 +39,42 @@ def test_batched_rows_are_sims(tmp_path, topology, vary):
     if "continuous" not in topology:  # the continuous law stays near its undesired start for these 3 s
         assert any(r["conv_attitude_s"] for r in got["sim"].values())
     assert not (tmp_path / "batched" / "runs").exists()  # no run folders: the rows come from the engine's arrays
+
+
+LOSSY = ["--set", "links.commands.drop=0.1", "--set", "links.commands.ge_p_gb=0.05", "--set", "links.commands.ge_p_bg=0.3"]
+
+
+@pytest.mark.parametrize(
+    ("topology", "vary", "sets"),
+    [
+        # delay, exponential jitter, Bernoulli and Gilbert–Elliott loss; FIFO and reordering
+        ("thesis-5.6-hybrid7.toml", "links.commands.reorder=false,true", ["--set", "links.commands.delay_ms=3", "--set", "links.commands.jitter_ms=4", "--set", 'links.commands.jitter="exponential"', *LOSSY]),
+        # normal jitter on noisy draws; a max_age shorter than the delay: commands expire, zeroed
+        ("thesis-5.6-velocity-free7-noisy.toml", "links.commands.jitter_ms=0,3", ["--set", "links.commands.delay_ms=5", "--set", "world.commands.max_age=0.007"]),
+        # one link's own model over the defaults; stale commands held
+        ("thesis-5.6-continuous7.toml", "links.commands.delay_ms=2,8", ["--set", 'links.per_link."3->world".drop=0.5', "--set", "world.commands.max_age=0.006", "--set", 'world.commands.policy="hold"']),
+    ],
+)
+def test_batched_rows_are_sims_with_command_links(tmp_path, topology, vary, sets):
+    """Emulated command links (agent/batched_links.py): each draw loses and delays the commands
+    its sim run does, so the rows are sim's column by column, the link counters included (sent,
+    lost, latency p50, expired).  Each case is checked to have lost, delayed or expired
+    something, or it would compare nothing."""
+    args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "2"]
+    got = {}
+    for engine in ("batched", "sim"):
+        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
+        assert p.returncode == 0, p.stderr
+        got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
+    assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4  # --engine batched ran them all (or exit 2)
+    for rid, sim_row in got["sim"].items():
+        b = got["batched"][rid]
+        assert {k: v for k, v in b.items() if k != "wall_s"} == {k: v for k, v in sim_row.items() if k != "wall_s"}, rid
+    sim_rows = list(got["sim"].values())
+    assert all(float(r["cmd_latency_p50_ms"]) >= 2 for r in sim_rows)
+    if "drop" in " ".join(sets):
+        assert all(int(r["cmd_dropped"]) > 0 for r in sim_rows)
+    if "max_age" in " ".join(sets):
+        assert all(int(r["cmd_expired"]) > 0 for r in sim_rows)
+    if "repeats" in args and "drop" in " ".join(sets):
+        assert len({r["cmd_dropped"] for r in sim_rows}) > 1  # each run (seed) its own losses

@@ -120,3 +120,31 @@ def test_a_message_takes_its_own_numbers_whatever_became_of_the_others():
     assert all(a[k] == b[k] for k in kept)
     d = LinkDraws(lossy, "1->3", 1)
     assert set(d.next()) == set(PURPOSES)
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [
+        LinkSpec(delay_ms=3.0),
+        LinkSpec(drop=0.2),
+        LinkSpec(delay_ms=2.0, jitter_ms=4.0),
+        LinkSpec(delay_ms=2.0, jitter_ms=4.0, jitter="exponential", reorder=True),
+        LinkSpec(delay_ms=1.0, jitter_ms=2.0, drop=0.1, ge_p_gb=0.05, ge_p_bg=0.3, ge_loss_good=0.01, ge_loss_bad=0.9),
+    ],
+)
+def test_the_batched_engines_link_is_each_draws_sim_link(spec):
+    """agent/batched_links.py LinkStack admits a message for M draws at once: each draw's
+    releases and losses are, bit for bit, those of LinkModel with that draw's seed (the same
+    streams, read AHEAD at a time, the same operations element by element)."""
+    from agent.batched_links import AHEAD, LinkStack
+
+    seeds = [3, 4, 11, 2**62 + 5]
+    stack = LinkStack(spec, "2->world", seeds)
+    models = [LinkModel(spec, "2->world", s) for s in seeds]
+    n = AHEAD + 300  # across a block boundary of both
+    for k in range(n):
+        t = k * 0.01
+        got = stack.admit(t)
+        want = [m.admit(t) for m in models]
+        assert [None if math.isnan(g) else float(g) for g in got] == want, k
+    assert stack.dropped.tolist() == [m.dropped for m in models] and stack.offered == n
