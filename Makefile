@@ -42,7 +42,7 @@ bench-sim: $(STAMP)
 	$(PY) bench/bench_sim.py
 
 ## make bench-batched: CPU per draw of a basin and per run of a sweep, zswarm sim against the batched engine (the §5.6 laws,
-## §4.5 observers and §3 observers, 3 s per draw, 10/100/1000 draws together; about a minute and a half on a quiet machine)
+## §4.5 observers and §3 observers, 3 s per draw, 10/100/1000 draws together; the §5.6 laws again with 2 ms of command delay and 10 % loss)
 bench-batched: $(STAMP)
 	$(PY) bench/bench_batched.py --duration 3 --draws 10,100,1000
 

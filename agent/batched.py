@@ -53,6 +53,7 @@ from world.sensors import projective_bearing
 from zswarm import timing
 from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
+from zswarm.links import LinkSpec
 from zswarm.report.base import grid as coarse_grid
 from zswarm.report.families.tree import nearest_rotations
 from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
@@ -160,19 +161,37 @@ class BatchedView(timing.HistoryReads):
         self._history = history
         self._packets = packets
         self._cache: dict[Any, Any] = {}
+        # Emulated agent→agent links: what each in-neighbour's link holds per draw, and the draws
+        # of the group being stepped (_step_groups); None: lockstep's perfect links (the inbox).
+        self.group: tuple[Mapping[int, batched_links.Read], np.ndarray] | None = None
+        self.read_js: set[int] = set()  # in-neighbours this step read (their stale reads are counted)
 
     def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
         self.t = self.t_world = self.sense_t = self.sense_t_world = t
         self.sense, self.first = sense, first
         self._cache.clear()
 
-    def neighbor(self, j: int) -> _Msg | None:
+    def neighbor(self, j: int) -> Any:
+        if self.group is not None:  # emulated links: the group's draws, each its own newest message
+            if self.first:
+                return None
+            reads, G = self.group
+            r = reads.get(j)
+            if r is None or not r.has[G][0]:  # a group shares what it holds (_step_groups)
+                return None
+            self.read_js.add(j)  # a stale read counts, dropped or held (TickView.neighbor)
+            if not r.present[G][0]:
+                return None
+            return batched_links.GroupMsg(j, r, G, self.t)
         m = None if self.first else self._inbox.get(j)
         if m is None or m[1] > self.t:
             return None
         return _Msg(m[0], m[1], m[1], self.t - m[1])  # fresh: a lockstep message is at most a period old
 
     def heard_all(self) -> bool:
+        if self.group is not None:
+            reads, G = self.group
+            return all(j in reads and bool(reads[j].has[G][0]) for j in self.neighbors)
         return all(j in self._inbox for j in self.neighbors)
 
     def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
@@ -257,6 +276,8 @@ class Result:
     edge_messages: int = 0  # agent -> agent messages sent (each delivered: lockstep), per draw
     commands: int = 0  # commands sent to the world, per draw
     command_links: batched_links.Commands | None = None  # emulated command links: their counters per draw (None: perfect, none lost, late or expired)
+    edge_links: batched_links.Edges | None = None  # emulated agent→agent links: their counters per draw (None: perfect)
+    t_end: float = 0.0  # the last sample's time: what a link released by then was delivered
 
 
 class _Torques:
@@ -277,15 +298,18 @@ def _truth(sc: Scenario) -> tuple[Any, ...]:
 
 
 _NO_TEXT = ScenarioText("")
+_NO_LINKS: Mapping[str, LinkSpec] = MappingProxyType({})
 
 
 def schedule(sc: Scenario) -> Scenario:
     """What the draws of one batch must share: the scenario without what may differ per draw (its
     agents' starts R_i(0), ω_i(0), J_i and initial estimates, the noise variances, the seed, the
-    gains its algorithm lets each draw have (SPEC.draw_gains), its TOML)."""
+    gains its algorithm lets each draw have (SPEC.draw_gains), its TOML, and the models of its
+    agent→agent and command links: batched_links takes each draw's own)."""
     draw = sc.info.draw_gains  # gains each draw may have its own value of (SPEC.draw_gains)
     agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate(), gains=_without(a.gains, draw)) for a in sc.agents)
-    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, gains=_without(sc.gains, draw), **{f"{f}_var": 0.0 for f in NOISES})
+    links = {"links": LinkSpec(), "command_links": LinkSpec(), "link_overrides": _NO_LINKS}  # sensor links are refused (problem)
+    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, gains=_without(sc.gains, draw), **links, **{f"{f}_var": 0.0 for f in NOISES})
 
 
 def _without(gains: Mapping[str, float], names: frozenset[str]) -> Mapping[str, float]:
@@ -584,7 +608,10 @@ def run(
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
     torques = _Torques(M * n)
-    cmd_links = None if shared or not any(sc.link_spec(f"{i}->world").active for i in ids) else batched_links.Commands(sc, seeds, counters=rows)
+    cmd_links = None if shared or not any(d.link_spec(f"{i}->world").active for d in draws for i in ids) else batched_links.Commands(draws, seeds, counters=rows)
+    edge_links = batched_links.Edges(draws, seeds, rows, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}) if any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors) else None
+    published = dict.fromkeys(ids, 0)  # messages each agent sent (its sequence number, as AgentNode.seq)
+    period = 1.0 / sc.agent(ids[0]).clock.rate  # AgentClock: tick k at k · period (the links' send and release times)
     std = {f: np.sqrt([getattr(d, f"{f}_var") for d in draws]) for f in NOISES}
     if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
         raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
@@ -738,10 +765,16 @@ def run(
                 v.command_lead = 0.5 * v.period
                 v.dt = t - last
                 if part is not None:
-                    outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
+                    if edge_links is None:
+                        outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
+                    else:
+                        reads = edge_links.read(i, (k // tick_every) * period)
+                        outputs = _step_groups(part, states, i, v, g, t - last, jumps, agent_jumps, reads, edge_links.stale_terms[i])
             pub = mod.publish(states[i], outputs, v)
             if pub is None:
                 continue
+            seq = published[i]
+            published[i] += 1
             edge_messages += len(pub.edges)
             commands += pub.command is not None
             t_stamp = t if pub.t is None else pub.t
@@ -751,7 +784,10 @@ def run(
                 else:
                     cmd_links.send(a, t, t_stamp, pub.command["tau"])
             for j, fields in pub.edges.items():
-                inboxes[j][i] = (dict(fields), t_stamp)
+                if edge_links is None:
+                    inboxes[j][i] = (dict(fields), t_stamp)
+                else:
+                    edge_links.send(i, j, seq, t_stamp, (k // tick_every) * period, dict(fields))
             estimates[i] = pub.estimate
         if measure is not None:
             measure.tick(plant, estimates)
@@ -761,11 +797,11 @@ def run(
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
     if measure is not None:
-        return measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands))
+        return measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all)
-    res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links)
+    res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt)
     if rows and grid_t:
         fin = np.array(final_v)  # (window, M, edges)
         t_fin = grid_all[grid_all >= final_from]
@@ -786,3 +822,71 @@ def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: A
     for _before, after in getattr(outputs, "agent_jumps", ()):
         agent_jumps += np.isfinite(np.asarray(after, dtype=float)).reshape(agent_jumps.shape) if np.ndim(after) else 1
     return outputs
+
+
+def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray, reads: Mapping[int, batched_links.Read], stale_terms: np.ndarray) -> Any:
+    """One step of agent i's draws over emulated links: the draws differ in which neighbours'
+    messages they hold (lost, late, stale) and in those messages' stamps, so they are stepped in
+    groups that share what the law reads: which in-neighbours are present (and heard from at
+    all), and, where a law reads a neighbour's stamp or age (batched_links.Split), that stamp.
+    Each group is stepped on the whole stack (every draw's own message, the others' filled in)
+    and its draws' results kept; one group when every draw holds the same, as on perfect links."""
+    M = len(jumps)
+    key = np.stack([np.stack([r.present, r.has]) for r in reads.values()]).reshape(-1, M).T if reads else None
+    if key is not None and not (key == key[0]).all():
+        _, inv = np.unique(key, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        queue = [inv == u for u in range(int(inv.max()) + 1)]
+    else:
+        queue = [np.ones(M, dtype=bool)]
+    s0 = states[i]
+    state, outputs, nones = s0, None, np.zeros(M, dtype=bool)
+    try:
+        while queue:
+            G = queue.pop()
+            view.group, view.read_js = (reads, G), set()
+            view._cache.clear()
+            try:
+                inputs = part.inputs(view, gains)
+                st, out = (s0, None) if inputs is None else part.step(s0, inputs, dt, gains)
+            except batched_links.Split as sp:
+                stamp = reads[sp.j].stamp
+                queue += [G & (stamp == u) for u in np.unique(stamp[G])]
+                continue
+            for j in view.read_js:
+                r = reads[j]
+                stale_terms += G & r.has & r.stale
+            state = _where(G, st, state, M)
+            if out is None:
+                nones |= G
+                continue
+            outputs = out if outputs is None else _where(G, out, outputs, M)
+            for _k, _before, after in getattr(out, "jumps", ()):
+                jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(M) if np.ndim(after) else True) & G
+            for _before, after in getattr(out, "agent_jumps", ()):
+                agent_jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(M) if np.ndim(after) else True) & G
+    finally:
+        view.group = None
+        view._cache.clear()
+    if outputs is not None and nones.any():
+        raise Unsupported(f"agent {i}: its law had inputs in some draws and none in others at one tick (the batched engine cannot publish both)")
+    states[i] = state
+    return outputs
+
+
+def _where(G: np.ndarray, a: Any, b: Any, M: int) -> Any:
+    """``a`` in the draws of ``G``, ``b`` in the others, through dataclasses, mappings and tuples;
+    an array without the draw axis is the same in every group (no draw's data went into it)."""
+    if a is b:
+        return a
+    if dataclasses.is_dataclass(a) and not isinstance(a, type):
+        return dataclasses.replace(a, **{f.name: _where(G, getattr(a, f.name), getattr(b, f.name), M) for f in dataclasses.fields(a) if f.init})
+    if isinstance(a, Mapping):
+        return {k: _where(G, v, b[k], M) if k in b else v for k, v in a.items()}
+    if isinstance(a, tuple | list):
+        if len(a) != len(b):
+            return b  # e.g. the jump events of one group's step: counted per group, not merged
+        return type(a)(_where(G, x, y, M) for x, y in zip(a, b, strict=True))
+    if isinstance(a, np.ndarray) and a.ndim >= 1 and a.shape[0] == M:
+        return np.where(G.reshape((M,) + (1,) * (a.ndim - 1)), a, b)
+    return a

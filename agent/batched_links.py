@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.links import LinkSpec, block, link_seed, purposes
+from zswarm.links import PURPOSES, LinkSpec, block, link_seed, purposes
 from zswarm.scenario import Scenario
 
 AHEAD = 512  # numbers read ahead per stream and draw
@@ -30,20 +30,32 @@ LATENCIES = 2000  # the last latencies a LinkCounter keeps (zswarm/links.py)
 
 def problem(sc: Scenario) -> str | None:
     """Which emulated links the batched engine does not run yet (None: it runs them all)."""
-    if sc.links_active:
-        return "emulated links between agents or from the sensors (delay, jitter, loss): the batched engine runs the agent→world command links only"
+    if sc.sensor_links.active or any(sc.link_spec(f"world->{i}").active for i in sc.ids):
+        return "emulated sensor links (delay, jitter, loss): the batched engine runs the agent→agent and agent→world links"
     if any(f.kind == "cut" for f in sc.faults):
         return "link cuts"
     return None
 
 
 class LinkStack:
-    """One link's model for M draws, each with its own seed: ``LinkModel`` draw by draw."""
+    """One link's model for M draws, each with its own seed and its own spec (a sweep's link
+    parameters vary between draws of one batch): ``LinkModel`` draw by draw.  A draw reads only
+    its own streams, so numbers it draws for a purpose its spec does not use change nothing."""
 
-    def __init__(self, spec: LinkSpec, name: str, seeds: Sequence[int]) -> None:
-        self.spec = spec
+    def __init__(self, specs: Sequence[LinkSpec], name: str, seeds: Sequence[int]) -> None:
+        self.specs = list(specs)
         self.M = len(seeds)
-        self.streams = {p: [np.random.default_rng(link_seed(s, name, p)) for s in seeds] for p in purposes(spec)}
+
+        def col(f: str) -> np.ndarray:
+            return np.array([getattr(s, f) for s in specs], dtype=float)
+
+        self.delay, self.jit, self.drop = col("delay_ms"), col("jitter_ms"), col("drop")
+        self.p_gb, self.p_bg, self.loss_good, self.loss_bad = col("ge_p_gb"), col("ge_p_bg"), col("ge_loss_good"), col("ge_loss_bad")
+        self.normal = np.array([s.jitter == "normal" for s in specs])
+        self.reorder = np.array([s.reorder for s in specs])
+        self.any_active = any(s.active for s in specs)
+        used = set().union(*(purposes(s) for s in specs))
+        self.streams = {p: [(np.random.default_rng(link_seed(seed, name, p)), sp.jitter) for seed, sp in zip(seeds, specs, strict=True)] for p in PURPOSES if p in used}
         self.buf: dict[str, np.ndarray] = {}
         self.pos = AHEAD
         self.bad = np.zeros(self.M, dtype=bool)
@@ -53,32 +65,34 @@ class LinkStack:
 
     def _next(self) -> dict[str, np.ndarray]:
         if self.pos == AHEAD:
-            self.buf = {p: np.stack([block(r, p, self.spec.jitter, AHEAD) for r in rngs]) for p, rngs in self.streams.items()}
+            self.buf = {p: np.stack([block(r, p, kind, AHEAD) for r, kind in rngs]) for p, rngs in self.streams.items()}
             self.pos = 0
         k = self.pos
         self.pos += 1
         return {p: b[:, k] for p, b in self.buf.items()}
 
     def admit(self, t_arrival: float) -> np.ndarray:
-        """Release times (M,) of a message arriving at ``t_arrival`` in every draw, NaN where lost."""
+        """Release times (M,) of a message arriving at ``t_arrival`` in every draw, NaN where lost
+        (LinkModel.admit's operations, element by element; a draw whose spec is all zero gets its
+        arrival time, as LinkModel returns it)."""
         self.offered += 1
-        s = self.spec
-        if not s.active:
+        if not self.any_active:
             return np.full(self.M, t_arrival)
         x = self._next()
-        lost = x["drop"] < s.drop if s.drop > 0 else np.zeros(self.M, dtype=bool)
-        if s.ge_p_gb > 0:
-            self.bad = np.where(self.bad, x["ge_move"] >= s.ge_p_bg, x["ge_move"] < s.ge_p_gb)
-            lost |= x["ge_loss"] < np.where(self.bad, s.ge_loss_bad, s.ge_loss_good)
+        lost = x["drop"] < self.drop if "drop" in x else np.zeros(self.M, dtype=bool)  # drop = 0: never
+        if "ge_move" in x:
+            on = self.p_gb > 0
+            self.bad = np.where(on, np.where(self.bad, x["ge_move"] >= self.p_bg, x["ge_move"] < self.p_gb), self.bad)
+            lost |= on & (x["ge_loss"] < np.where(self.bad, self.loss_bad, self.loss_good))
         self.dropped += lost
-        d: Any = s.delay_ms
-        if s.jitter_ms > 0:
-            d = np.maximum(0.0, d + s.jitter_ms * x["jitter"]) if s.jitter == "normal" else d + s.jitter_ms * x["jitter"]
-        release = t_arrival + np.multiply(d, 1e-3) * np.ones(self.M)
-        if not s.reorder:
-            release = np.where(lost, release, np.maximum(release, self.last_release))
+        d = self.delay
+        if "jitter" in x:
+            z = self.delay + self.jit * x["jitter"]
+            d = np.where(self.jit > 0, np.where(self.normal, np.maximum(0.0, z), z), self.delay)
+        release = t_arrival + d * 1e-3
+        release = np.where(self.reorder, release, np.maximum(release, self.last_release))
+        release = np.where(lost, np.nan, release)
         self.last_release = np.where(lost, self.last_release, np.maximum(self.last_release, release))
-        release[lost] = np.nan
         return release
 
 
@@ -86,11 +100,12 @@ class Commands:
     """The command links i->world of M draws and the world's hold of their commands: the
     torque source of the batched rigid-body plant (``inputs_at``, as CommandInbox's)."""
 
-    def __init__(self, sc: Scenario, seeds: Sequence[int], counters: bool) -> None:
+    def __init__(self, draws: Sequence[Scenario], seeds: Sequence[int], counters: bool) -> None:
+        sc = draws[0]
         self.ids = list(sc.ids)
         self.M, self.n = len(seeds), len(self.ids)
         M, n = self.M, self.n
-        self.links = [LinkStack(sc.link_spec(f"{i}->world"), f"{i}->world", seeds) for i in self.ids]
+        self.links = [LinkStack([d.link_spec(f"{i}->world") for d in draws], f"{i}->world", seeds) for i in self.ids]
         self.policy = sc.commands
         self.counters = counters
         self.pending: list[list[tuple[np.ndarray, int, float, np.ndarray]]] = [[] for _ in self.ids]  # per agent: (release (M,), seq, stamp, u (M, 3))
@@ -181,7 +196,182 @@ class Commands:
             lat = lat[~np.isnan(lat)][-LATENCIES:]
             if lat.size:
                 d["latency_p50_ms"] = 1e3 * float(np.percentile(lat, 50))
-            if self.links[a].spec.active:
+            if self.links[a].specs[m].active:
                 d["offered"], d["link_dropped"] = self.links[a].offered, int(self.links[a].dropped[m])
             out[f"{i}->world"] = d
+        return out
+
+
+class Split(Exception):  # a signal, not an error
+    """A step read a neighbour's stamp (``t``, ``t_world``, ``age``) that differs between the draws
+    of its group: the engine steps those draws again in groups of one stamp (``j``: whose)."""
+
+    def __init__(self, j: int) -> None:
+        super().__init__(j)
+        self.j = j
+
+
+class _Sent:
+    __slots__ = ("release", "seq", "stamp", "t_send")
+
+    def __init__(self, seq: int, stamp: float, t_send: float, release: np.ndarray) -> None:
+        self.seq, self.stamp, self.t_send, self.release = seq, stamp, t_send, release
+
+
+class _Ring:
+    """One link's messages that some draw may still read: their fields, per draw (M, ...), and
+    stamps, at slot ``index % cap`` (``index``: the link's message count), grown when the
+    messages between the oldest readable one and the newest outgrow it."""
+
+    def __init__(self, M: int) -> None:
+        self.M, self.cap, self.lo = M, 16, 0
+        self.fields: dict[str, np.ndarray] = {}
+        self.stamp = np.zeros(self.cap)
+        self.release = np.zeros((self.cap, M))
+
+    def put(self, a: int, stamp: float, release: np.ndarray, fields: dict[str, Any], ndim: dict[str, int]) -> None:
+        if a - self.lo >= self.cap:
+            cap = self.cap
+            while a - self.lo >= cap:
+                cap *= 2
+            live = np.arange(self.lo, a)
+            self.stamp = self._regrow(self.stamp, cap, live)
+            self.release = self._regrow(self.release, cap, live)
+            self.fields = {n: self._regrow(v, cap, live) for n, v in self.fields.items()}
+            self.cap = cap
+        k = a % self.cap
+        self.stamp[k] = stamp
+        self.release[k] = release
+        for name, v in fields.items():
+            v = np.asarray(v, dtype=float)
+            if v.ndim <= ndim.get(name, v.ndim):  # one value for every draw
+                v = np.broadcast_to(v, (self.M, *v.shape))
+            ring = self.fields.get(name)
+            if ring is None:
+                ring = self.fields[name] = np.zeros((self.cap, *v.shape))
+            ring[k] = v
+
+    def _regrow(self, old: np.ndarray, cap: int, live: np.ndarray) -> np.ndarray:
+        new = np.zeros((cap, *old.shape[1:]))
+        new[live % cap] = old[live % self.cap]
+        return new
+
+
+class Read:
+    """What in-neighbour j's link holds for receiver i at a tick, per draw: the newest message
+    delivered (``sel``, the link's message index; −1: none yet), its stamp, and whether it is stale."""
+
+    __slots__ = ("has", "present", "ring", "sel", "stale", "stamp")
+
+    def __init__(self, ring: _Ring, sel: np.ndarray, t: float, max_age: float, drop: bool) -> None:
+        self.has = sel >= 0
+        self.ring, self.sel = ring, sel
+        self.stamp = np.where(self.has, ring.stamp[sel % ring.cap], np.nan)
+        self.stale = self.has & ((t - np.where(self.has, self.stamp, t)) > max_age)
+        self.present = self.has & ~(self.stale & drop)
+
+
+class GroupMsg:
+    """An in-neighbour's message for the draws of a group (zswarm.algorithm.NeighborMsg): its fields
+    gathered per draw (M, ...) from each draw's own newest message (draws outside the group get the
+    group's first draw's: valid numbers, thrown away); its stamp where the group shares one,
+    else reading it raises :class:`Split`."""
+
+    __slots__ = ("_j", "_stamp", "_t", "fields")
+
+    def __init__(self, j: int, read: Read, group: np.ndarray, t: float) -> None:
+        first = int(np.flatnonzero(group)[0])
+        sel = np.where(group & read.has, read.sel, read.sel[first]) % read.ring.cap
+        rows = np.arange(len(sel))
+        self.fields = {name: ring[sel, rows] for name, ring in read.ring.fields.items()}
+        st = read.stamp[group]
+        self._j, self._t = j, t
+        self._stamp = float(st[0]) if np.all(st == st[0]) else None
+
+    def _uniform(self) -> float:
+        if self._stamp is None:
+            raise Split(self._j)
+        return self._stamp
+
+    @property
+    def t(self) -> float:
+        return self._uniform()
+
+    @property
+    def t_world(self) -> float:
+        return self._uniform()
+
+    @property
+    def age(self) -> float:
+        return self._t - self._uniform()
+
+
+class Edges:
+    """The agent→agent links of M draws (the receivers' Inbox with LinkModel and LinkCounter):
+    each message admitted for every draw when sent (:class:`LinkStack`), held as one entry with
+    a release time per draw, and at a receiver's tick the newest message delivered by then in
+    each draw (sim's ``at_or_before``: the highest sequence delivered, stamps never being ahead
+    of the tick).  ``ndim``: per receiver, the number of dimensions of each field it reads (more
+    is a draw axis).  ``counters``: keep every message, for the receivers' counters per draw."""
+
+    def __init__(self, draws: Sequence[Scenario], seeds: Sequence[int], counters: bool, ndim: dict[int, dict[str, int]]) -> None:
+        sc = draws[0]
+        self.M = M = len(seeds)
+        self.into = {i: tuple(sc.agent(i).neighbors) for i in sc.ids}
+        names = [(j, i) for i in sc.ids for j in sc.agent(i).neighbors]
+        self.links = {k: LinkStack([d.link_spec(f"{k[0]}->{k[1]}") for d in draws], f"{k[0]}->{k[1]}", seeds) for k in names}
+        self.msgs: dict[tuple[int, int], list[_Sent]] = {k: [] for k in names}
+        self.rings = {k: _Ring(M) for k in names}
+        self.ndim = ndim
+        self.sel = {k: np.full(M, -1, dtype=np.int64) for k in names}  # the newest delivered, per draw
+        self.todo = dict.fromkeys(names, 0)  # the first message not yet delivered or lost in every draw
+        self.sent = dict.fromkeys(names, 0)
+        self.max_age, self.drop = sc.stale.max_age, sc.stale.policy == "drop"
+        self.counters = counters
+        self.stale_terms = {i: np.zeros(M, dtype=np.int64) for i in sc.ids}
+
+    def send(self, j: int, i: int, seq: int, stamp: float, t_send: float, fields: dict[str, Any]) -> None:
+        k = (j, i)
+        if k not in self.links:
+            return  # i does not listen to j (sim's receiver drops it: not one of its links)
+        a = self.sent[k]
+        self.sent[k] += 1
+        release = self.links[k].admit(t_send)
+        self.rings[k].put(a, stamp, release, fields, self.ndim[i])
+        if self.counters:
+            self.msgs[k].append(_Sent(seq, stamp, t_send, release))
+
+    def read(self, i: int, t: float) -> dict[int, Read]:
+        """What each in-neighbour's link of ``i`` delivers by ``i``'s tick at ``t``, per draw."""
+        out = {}
+        for j in self.into[i]:
+            k = (j, i)
+            ring, sel, start, n = self.rings[k], self.sel[k], self.todo[k], self.sent[k]
+            if start < n:
+                idx = np.arange(start, n)
+                due = ring.release[idx % ring.cap] <= t  # (K, M); NaN (lost) compares False
+                newest = np.where(due, idx[:, None], -1).max(axis=0)
+                sel = np.maximum(sel, newest)
+                settled = (due | np.isnan(ring.release[idx % ring.cap])).all(axis=1)
+                self.todo[k] = start + (int(np.argmin(settled)) if not settled.all() else len(idx))  # the first some draw still waits for
+                self.sel[k] = sel
+            live = sel[sel >= 0]
+            ring.lo = min(self.todo[k], int(live.min())) if live.size else 0
+            out[j] = Read(ring, sel, t, self.max_age, self.drop)
+        return out
+
+    def link_counters(self, m: int, t_end: float) -> dict[str, dict[str, Any]]:
+        """Draw ``m``'s summary ``links`` entries of the agent→agent links, as the receivers count
+        them: the messages released by ``t_end`` replayed, in release order, through a LinkCounter."""
+        from zswarm.links import LinkCounter
+
+        out = {}
+        for (j, i), msgs in self.msgs.items():
+            c = LinkCounter()
+            got = sorted((float(x.release[m]), a, x) for a, x in enumerate(msgs) if x.release[m] <= t_end)
+            for rel, _, x in got:
+                c.see(x.seq, 0, rel - x.t_send)
+            d = c.as_dict() if got else {"delivered": 0, "dropped": 0, "reordered": 0}
+            d["sent"] = self.sent[(j, i)]
+            out[f"{j}->{i}"] = d
         return out

@@ -442,6 +442,11 @@ def load_dir(d: Path) -> tuple[dict[str, Any], list[dict[str, str]]]:
     return spec, read_rows(csv_path)
 
 
+def _name(entry: dict[str, Any]) -> str:
+    """A compared folder's name: its scenario and its ``--set`` overrides."""
+    return str(entry.get("name") or entry["scenario"])
+
+
 def compare(dirs: list[Path]) -> list[dict[str, Any]]:
     """One summary per basin folder (its scenario, start and settle-time quantiles), plus its
     drawn rows under ``"_rows"`` for the plot."""
@@ -449,6 +454,7 @@ def compare(dirs: list[Path]) -> list[dict[str, Any]]:
     for d in dirs:
         spec, rows = load_dir(d)
         s = {"scenario": spec["scenario"], "dir": str(d), **summarize(rows, spec["threshold"], spec["duration_s"], spec.get("near"))}
+        s["name"] = " ".join([spec["scenario"], *spec.get("set", [])])  # with its --set overrides: one scenario under several link models
         s["_rows"] = [r for r in rows if r["status"] == "ok" and r["kind"] != "scenario"]
         s["_draws"] = (spec["seed"], spec.get("near"), sc_kind(spec))
         out.append(s)
@@ -476,7 +482,7 @@ def paired(entries: list[dict[str, Any]]) -> list[str]:
     lines = []
     for i, a in enumerate(entries):
         for b in entries[i + 1 :]:
-            if a["_draws"] != b["_draws"] or "?" in a["_draws"][2] or a["scenario"] == b["scenario"]:
+            if a["_draws"] != b["_draws"] or "?" in a["_draws"][2] or _name(a) == _name(b):
                 continue
             sa = {r["draw"]: _f(r["settle_s"]) for r in a["_rows"]}
             sb = {r["draw"]: _f(r["settle_s"]) for r in b["_rows"]}
@@ -484,8 +490,8 @@ def paired(entries: list[dict[str, Any]]) -> list[str]:
             if len(d):
                 how = "" if a.get("near_rad") is None else f" {a['near_rad']:g} rad from their own"
                 lines.append(
-                    f"paired on {len(d)} identical starts{how}: {a['scenario']} − {b['scenario']} settle time: median {np.median(d):+.2f} s, "
-                    f"mean {d.mean():+.2f} s, from {d.min():+.2f} to {d.max():+.2f} s; {a['scenario']} earlier in {int((d < 0).sum())} of {len(d)}"
+                    f"paired on {len(d)} identical starts{how}: {_name(a)} − {_name(b)} settle time: median {np.median(d):+.2f} s, "
+                    f"mean {d.mean():+.2f} s, from {d.min():+.2f} to {d.max():+.2f} s; {_name(a)} earlier in {int((d < 0).sum())} of {len(d)}"
                 )
     return lines
 
@@ -511,7 +517,7 @@ def compare_table(entries: list[dict[str, Any]]) -> str:
         start = "uniform" if s["start"] == "uniform" else f"{s['near_rad']:g} rad from its own"
         own = s["scenario_start"] or {}
         lines.append(
-            f"| {s['scenario']} | {start} | {s['synchronized']} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
+            f"| {s['name']} | {start} | {s['synchronized']} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
             + (ci_text(ci, "–") if ci else "–")
             + f" | {q(s['settle_s'], 'min', 'median', 'p90', 'max')} | {q(s['settle_01_s'], 'median')} | {q(s.get('left_s'), 'median')} | {q(s['jumps'], 'median', 'max', fmt='g')} | {own_settle(own)} |"
         )
@@ -531,7 +537,7 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
     a1 = axes[0][0]
     for s in entries:
         v = np.sort([_f(r["settle_s"]) for r in s["_rows"] if r["synchronized"] == "True"])
-        label = f"{s['scenario']}, " + ("uniform" if s["start"] == "uniform" else f"ε = {s['near_rad']:g}") + f" ({s['synchronized']}/{s['drawn']})"
+        label = f"{s['name']}, " + ("uniform" if s["start"] == "uniform" else f"ε = {s['near_rad']:g}") + f" ({s['synchronized']}/{s['drawn']})"
         (ln,) = a1.step(np.r_[0.0, v], np.r_[0.0, np.arange(1, len(v) + 1)] / max(1, s["drawn"]), where="post", label=label)
         own = _f((s["scenario_start"] or {}).get("settle_s", ""))
         if math.isfinite(own):

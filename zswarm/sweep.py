@@ -587,6 +587,13 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
             cmd_latency = _median([v["latency_p50_ms"] for v in links.values() if "latency_p50_ms" in v])
             cmd_expired = int(res.command_links.expired[n].sum())
         c_sent = cmds
+        e_delivered, e_dropped, e_latency, stale = sent, 0, 0.0 if sent else None, 0
+        if res.edge_links is not None:  # emulated agent→agent links: the receivers' counters of this draw
+            elinks = res.edge_links.link_counters(n, res.t_end)
+            e_delivered = sum(v["delivered"] for v in elinks.values())
+            e_dropped = sum(v["dropped"] for v in elinks.values())
+            e_latency = _median([v["latency_p50_ms"] for v in elinks.values() if "latency_p50_ms" in v])
+            stale = int(sum(int(st[n]) for st in res.edge_links.stale_terms.values()))
         rows.append(
             {
                 "final_attitude_error": float(res.final_att[n]) if np.isfinite(res.final_att[n]) else None,
@@ -594,10 +601,10 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
                 "conv_attitude_s": convergence_time(res.t_coarse, att, thresholds[0]),
                 "conv_position_s": convergence_time(res.t_coarse, pos, thresholds[1]) if pos is not None and np.any(np.isfinite(pos)) else None,
                 "edge_sent": sent,
-                "edge_delivered": sent,
-                "edge_dropped": 0,
-                "edge_drop_ratio": 0.0 if sent else None,
-                "edge_latency_p50_ms": 0.0 if sent else None,
+                "edge_delivered": e_delivered,
+                "edge_dropped": e_dropped,
+                "edge_drop_ratio": e_dropped / sent if sent else None,
+                "edge_latency_p50_ms": e_latency,
                 "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1) if sync else None,
                 "sensor_dropped": 0,
                 "cmd_sent": c_sent if commanded else None,
@@ -606,7 +613,7 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
                 "cmd_latency_p50_ms": cmd_latency,
                 "cmd_expired": cmd_expired if commanded else None,
                 "jumps": int(res.jumps[n]) if hybrid else None,
-                "stale_terms": 0,
+                "stale_terms": stale,
                 "missed_deadlines": 0,
                 "wall_s": wall,
             }

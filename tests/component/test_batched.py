@@ -83,11 +83,13 @@ def test_the_engine_says_what_it_cannot_run():
     for stem, why in cases.items():
         assert why in (batched.problem(load(TOPO / f"{stem}.toml")) or ""), stem
     text = (TOPO / "thesis-5.6-hybrid7.toml").read_text()
-    for flag, why in (("links.delay_ms=5", "emulated links"), ("clock.jitter=0.001", "jitter"), ("clock.rate=300", "off the sensor grid")):
+    for flag, why in (("links.sensors.delay_ms=5", "emulated sensor links"), ("clock.jitter=0.001", "jitter"), ("clock.rate=300", "off the sensor grid")):
         got = batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override(flag)]))
         assert got is not None and why in got, (flag, got)
-    with pytest.raises(batched.Unsupported, match="emulated links"):
-        batched.run([load(TOPO / "thesis-5.6-hybrid7-noisy.toml", [parse_override("links.drop=0.1")])], 0.1, 1, 0.01)
+    with pytest.raises(batched.Unsupported, match="emulated sensor links"):
+        batched.run([load(TOPO / "thesis-5.6-hybrid7-noisy.toml", [parse_override("links.sensors.drop=0.1")])], 0.1, 1, 0.01)
+    for flag in ("links.delay_ms=5", "links.commands.drop=0.1", 'links.per_link."2->3".jitter_ms=3'):  # agent→agent and command links run batched
+        assert batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override(flag)])) is None, flag
     assert text  # the file the overrides were applied to
 
 

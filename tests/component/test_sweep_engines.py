@@ -78,3 +78,43 @@ def test_batched_rows_are_sims_with_command_links(tmp_path, topology, vary, sets
         assert all(int(r["cmd_expired"]) > 0 for r in sim_rows)
     if "repeats" in args and "drop" in " ".join(sets):
         assert len({r["cmd_dropped"] for r in sim_rows}) > 1  # each run (seed) its own losses
+
+
+@pytest.mark.parametrize(
+    ("topology", "vary", "sets"),
+    [
+        # the sweep of issue 46: delay, jitter, bursts and loss in one batch; stale neighbours held
+        ("thesis-3.2-fixed8.toml", "links.delay_ms=0,200", ["--set", "links.jitter_ms=10", "--set", "links.drop=0.25", "--set", "links.ge_p_gb=0.05", "--set", "links.ge_p_bg=0.3"]),
+        # stale neighbours dropped, one link slower than the rest, reordering
+        ("thesis-3.2-fixed8.toml", "links.delay_ms=100,200", ["--set", "links.jitter_ms=10", "--set", "links.reorder=true", "--set", 'algorithm.stale.policy="drop"', "--set", 'links.per_link."2->3".delay_ms=300']),
+        # moving agents read their neighbours' stamps and ages: draws split by stamp (batched_links.Split)
+        ("thesis-3.3-moving5.toml", "links.delay_ms=0,20", ["--set", "links.jitter_ms=8", "--set", "links.drop=0.2", "--set", 'links.jitter="exponential"']),
+        # §4.5: heard_all and the hybrid ξ messages over lossy links
+        ("thesis-4.5-hybrid5.toml", "links.delay_ms=5,30", ["--set", "links.jitter_ms=10", "--set", "links.drop=0.2"]),
+        # §5.6: lossy ξ/ω messages and lossy commands together, noisy draws
+        ("thesis-5.6-velocity-free7-noisy.toml", "links.delay_ms=0,100", ["--set", "links.jitter_ms=30", "--set", "links.ge_p_gb=0.1", "--set", "links.ge_p_bg=0.2", "--set", "links.commands.delay_ms=3", "--set", "links.commands.drop=0.1"]),
+    ],
+)
+def test_batched_rows_are_sims_with_agent_links(tmp_path, topology, vary, sets):
+    """Emulated agent→agent links (agent/batched_links.py Edges): each draw loses, delays and
+    reorders the messages its sim run does, reads the newest one delivered by its tick, held or
+    dropped when stale as sim's agent does, so the rows are sim's column by column: the link
+    counters (sent, delivered, lost, latency p50), the stale reads, the errors and jumps.  The
+    points of a sweep over link parameters share one batch (their draws have links of their own)."""
+    args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
+    got = {}
+    for engine in ("batched", "sim"):
+        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
+        assert p.returncode == 0, p.stderr
+        got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
+        if engine == "batched":
+            assert "4 batched in 1 batches" in p.stderr, p.stderr
+    assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4
+    for rid, sim_row in got["sim"].items():
+        b = got["batched"][rid]
+        assert {k: v for k, v in b.items() if k != "wall_s"} == {k: v for k, v in sim_row.items() if k != "wall_s"}, rid
+    sim_rows = list(got["sim"].values())
+    assert all(int(r["edge_dropped"]) > 0 or "drop" not in " ".join(sets) for r in sim_rows)
+    assert max(float(r["edge_latency_p50_ms"]) for r in sim_rows) >= 5  # the delays reached the counters
+    if "200" in vary or "policy" in " ".join(sets):
+        assert any(int(r["stale_terms"]) > 0 for r in sim_rows)  # stale reads counted

@@ -138,9 +138,22 @@ def test_the_batched_engines_link_is_each_draws_sim_link(spec):
     streams, read AHEAD at a time, the same operations element by element)."""
     from agent.batched_links import AHEAD, LinkStack
 
-    seeds = [3, 4, 11, 2**62 + 5]
-    stack = LinkStack(spec, "2->world", seeds)
-    models = [LinkModel(spec, "2->world", s) for s in seeds]
+    _same_as_models(LinkStack, AHEAD, [spec] * 4)
+
+
+def test_draws_of_one_batch_may_have_links_of_their_own():
+    """A sweep over link parameters steps its points in one batch: each draw its own spec (a
+    perfect link, a delay, each jitter, loss, bursts), each still its sim run's link."""
+    from agent.batched_links import AHEAD, LinkStack
+
+    _same_as_models(LinkStack, AHEAD, [LinkSpec(), LinkSpec(delay_ms=3.0), LinkSpec(delay_ms=2.0, jitter_ms=4.0, jitter="exponential", reorder=True), LinkSpec(delay_ms=1.0, jitter_ms=2.0, drop=0.1, ge_p_gb=0.05, ge_p_bg=0.3), LinkSpec(drop=0.5)])
+
+
+def _same_as_models(LinkStack, AHEAD, specs):  # the class and constant, imported late
+
+    seeds = [3, 4, 11, 2**62 + 5, 9][: len(specs)]
+    stack = LinkStack(specs, "2->world", seeds)
+    models = [LinkModel(sp, "2->world", s) for sp, s in zip(specs, seeds, strict=True)]
     n = AHEAD + 300  # across a block boundary of both
     for k in range(n):
         t = k * 0.01
