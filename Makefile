@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity bench-batched soak sim clean golden
+.PHONY: demo test test-fast fuzz bench bench-sim bench-capacity bench-batched bench-links soak sim clean golden
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -45,6 +45,11 @@ bench-sim: $(STAMP)
 ## §4.5 observers and §3 observers, 3 s per draw, 10/100/1000 draws together; the §5.6 laws again with 2 ms of command delay and 10 % loss)
 bench-batched: $(STAMP)
 	$(PY) bench/bench_batched.py --duration 3 --draws 10,100,1000
+
+## make bench-links: the README's §3.2 delay x drop sweep (120 runs of 40 s) with zswarm sweep on the batched engine, then
+## on sim, timed as a user runs it and the rows compared (bench/bench_links_sweep.py; about 9 minutes, most of it sim)
+bench-links: $(STAMP)
+	$(PY) bench/bench_links_sweep.py
 
 ## make soak: one hour of zswarm run with every process's RSS sampled each minute (bench/soak.py)
 soak: $(STAMP)

@@ -110,8 +110,8 @@ def problem(sc: Scenario) -> str | None:
     why = batched_links.problem(sc)
     if why is not None:
         return why
-    if sc.faults:
-        return "faults"
+    if any(f.kind != "cut" for f in sc.faults):
+        return "faults (other than link cuts)"
     if sc.part_rate_scale != 1.0:
         return "scaled part rates"
     if sc.stale.max_age < 1.0 / c.rate:

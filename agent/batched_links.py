@@ -32,8 +32,8 @@ def problem(sc: Scenario) -> str | None:
     """Which emulated links the batched engine does not run yet (None: it runs them all)."""
     if sc.sensor_links.active or any(sc.link_spec(f"world->{i}").active for i in sc.ids):
         return "emulated sensor links (delay, jitter, loss): the batched engine runs the agent→agent and agent→world links"
-    if any(f.kind == "cut" for f in sc.faults):
-        return "link cuts"
+    if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
+        return "cuts of sensor links"
     return None
 
 
@@ -54,6 +54,8 @@ class LinkStack:
         self.normal = np.array([s.jitter == "normal" for s in specs])
         self.reorder = np.array([s.reorder for s in specs])
         self.any_active = any(s.active for s in specs)
+        self.cuts = [s.cuts for s in specs] if any(s.cuts for s in specs) else None  # [[faults]] kind "cut": [start, end) per draw
+        self.cut = np.zeros(self.M, dtype=np.int64)
         used = set().union(*(purposes(s) for s in specs))
         self.streams = {p: [(np.random.default_rng(link_seed(seed, name, p)), sp.jitter) for seed, sp in zip(seeds, specs, strict=True)] for p in PURPOSES if p in used}
         self.buf: dict[str, np.ndarray] = {}
@@ -85,6 +87,10 @@ class LinkStack:
             self.bad = np.where(on, np.where(self.bad, x["ge_move"] >= self.p_bg, x["ge_move"] < self.p_gb), self.bad)
             lost |= on & (x["ge_loss"] < np.where(self.bad, self.loss_bad, self.loss_good))
         self.dropped += lost
+        if self.cuts is not None:  # after the model's draws, as LinkModel: outside a cut the link decides as without it
+            cut = ~lost & np.array([any(a <= t_arrival < b for a, b in c) for c in self.cuts])
+            self.cut += cut
+            lost = lost | cut
         d = self.delay
         if "jitter" in x:
             z = self.delay + self.jit * x["jitter"]

@@ -118,3 +118,22 @@ def test_batched_rows_are_sims_with_agent_links(tmp_path, topology, vary, sets):
     assert max(float(r["edge_latency_p50_ms"]) for r in sim_rows) >= 5  # the delays reached the counters
     if "200" in vary or "policy" in " ".join(sets):
         assert any(int(r["stale_terms"]) > 0 for r in sim_rows)  # stale reads counted
+
+
+def test_batched_rows_are_sims_with_link_cuts(tmp_path):
+    """[[faults]] kind "cut" on an agent→agent and a command link (everything lost over an
+    interval, after the model's own draws) runs batched: the same rows as sim, the cuts counted
+    as lost (0.4 s of agent 3's commands at 100 Hz: 40)."""
+    from tests.conftest import TOPO
+
+    topo = tmp_path / "hybrid-cut.toml"
+    cuts = '\n[[faults]]\nkind = "cut"\nlink = "3->world"\nat = 0.5\nduration = 0.4\n\n[[faults]]\nkind = "cut"\nlink = "2->3"\nat = 1.0\nduration = 0.5\n'
+    topo.write_text((TOPO / "thesis-5.6-hybrid7.toml").read_text() + cuts)
+    args = ["--vary", "links.delay_ms=0,10", "--set", "links.drop=0.1", "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
+    got = {}
+    for engine in ("batched", "sim"):
+        p = _sweep_of(str(topo), *args, "--engine", engine, "--out", str(tmp_path / engine))
+        assert p.returncode == 0, p.stderr
+        got[engine] = {r["run_id"]: {k: v for k, v in r.items() if k != "wall_s"} for r in rows(tmp_path / engine)}
+    assert got["batched"] == got["sim"] and len(got["sim"]) == 4
+    assert all(r["cmd_dropped"] == "40" for r in got["sim"].values())

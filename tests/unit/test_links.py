@@ -143,15 +143,15 @@ def test_the_batched_engines_link_is_each_draws_sim_link(spec):
 
 def test_draws_of_one_batch_may_have_links_of_their_own():
     """A sweep over link parameters steps its points in one batch: each draw its own spec (a
-    perfect link, a delay, each jitter, loss, bursts), each still its sim run's link."""
+    perfect link, a delay, each jitter, loss, bursts, cuts), each still its sim run's link."""
     from agent.batched_links import AHEAD, LinkStack
 
-    _same_as_models(LinkStack, AHEAD, [LinkSpec(), LinkSpec(delay_ms=3.0), LinkSpec(delay_ms=2.0, jitter_ms=4.0, jitter="exponential", reorder=True), LinkSpec(delay_ms=1.0, jitter_ms=2.0, drop=0.1, ge_p_gb=0.05, ge_p_bg=0.3), LinkSpec(drop=0.5)])
+    _same_as_models(LinkStack, AHEAD, [LinkSpec(), LinkSpec(delay_ms=3.0), LinkSpec(delay_ms=2.0, jitter_ms=4.0, jitter="exponential", reorder=True), LinkSpec(delay_ms=1.0, jitter_ms=2.0, drop=0.1, ge_p_gb=0.05, ge_p_bg=0.3, cuts=((1.0, 2.5),)), LinkSpec(drop=0.5), LinkSpec(cuts=((0.5, 1.0), (3.0, 3.2)))])
 
 
 def _same_as_models(LinkStack, AHEAD, specs):  # the class and constant, imported late
 
-    seeds = [3, 4, 11, 2**62 + 5, 9][: len(specs)]
+    seeds = [3, 4, 11, 2**62 + 5, 9, 10][: len(specs)]
     stack = LinkStack(specs, "2->world", seeds)
     models = [LinkModel(sp, "2->world", s) for sp, s in zip(specs, seeds, strict=True)]
     n = AHEAD + 300  # across a block boundary of both
@@ -161,3 +161,5 @@ def _same_as_models(LinkStack, AHEAD, specs):  # the class and constant, importe
         want = [m.admit(t) for m in models]
         assert [None if math.isnan(g) else float(g) for g in got] == want, k
     assert stack.dropped.tolist() == [m.dropped for m in models] and stack.offered == n
+    assert stack.cut.tolist() == [m.cut for m in models]
+    assert any(s.cuts for s in specs) <= (stack.cut.sum() > 0)
