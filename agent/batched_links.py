@@ -335,6 +335,7 @@ class Edges:
         self.max_age, self.drop = sc.stale.max_age, sc.stale.policy == "drop"
         self.counters = counters
         self.stale_terms = {i: np.zeros(M, dtype=np.int64) for i in sc.ids}
+        self._arrays: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None  # link_counters', built once
 
     def send(self, j: int, i: int, seq: int, stamp: float, t_send: float, fields: dict[str, Any]) -> None:
         k = (j, i)
@@ -368,16 +369,31 @@ class Edges:
 
     def link_counters(self, m: int, t_end: float) -> dict[str, dict[str, Any]]:
         """Draw ``m``'s summary ``links`` entries of the agent→agent links, as the receivers count
-        them: the messages released by ``t_end`` replayed, in release order, through a LinkCounter."""
+        them (LinkCounter) over the messages released by ``t_end``: on a FIFO link in sequence
+        order, so delivered, lost (the sequence's gaps) and the latencies of the last LATENCIES
+        come from arrays; with reordering they are replayed, in release order, through a LinkCounter."""
         from zswarm.links import LinkCounter
 
+        if self._arrays is None:
+            self._arrays = {k: (np.array([x.release for x in msgs]).reshape(len(msgs), self.M), np.array([x.seq for x in msgs]), np.array([x.t_send for x in msgs])) for k, msgs in self.msgs.items()}
         out = {}
         for (j, i), msgs in self.msgs.items():
-            c = LinkCounter()
-            got = sorted((float(x.release[m]), a, x) for a, x in enumerate(msgs) if x.release[m] <= t_end)
-            for rel, _, x in got:
-                c.see(x.seq, 0, rel - x.t_send)
-            d = c.as_dict() if got else {"delivered": 0, "dropped": 0, "reordered": 0}
+            R, seq, t_send = self._arrays[(j, i)]
+            d: dict[str, Any]
+            if self.links[(j, i)].specs[m].reorder:
+                c = LinkCounter()
+                got = sorted((float(x.release[m]), a, x) for a, x in enumerate(msgs) if x.release[m] <= t_end)
+                for rel, _, x in got:
+                    c.see(x.seq, 0, rel - x.t_send)
+                d = c.as_dict() if got else {"delivered": 0, "dropped": 0, "reordered": 0}
+            else:
+                idx = np.flatnonzero(R[:, m] <= t_end)  # NaN (lost) compares False
+                if not idx.size:
+                    d = {"delivered": 0, "dropped": 0, "reordered": 0}
+                else:
+                    d = {"delivered": int(idx.size), "dropped": int(seq[idx[-1]] - seq[idx[0]] + 1 - idx.size), "reordered": 0}
+                    q = np.percentile(R[idx[-LATENCIES:], m] - t_send[idx[-LATENCIES:]], [50, 99])
+                    d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
             d["sent"] = self.sent[(j, i)]
             out[f"{j}->{i}"] = d
         return out
