@@ -19,7 +19,9 @@ So a draw here and the same draw on ``sim`` differ by round-off only (the batche
 algebra sums in another order), which the dynamics then carries: tests/component/test_batched.py.
 
 Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
-its ticks on the sensor grid, perfect links, no faults, leaders (if any) that only publish,
+its ticks on the sensor grid, no emulated sensor links and no faults but link cuts (the
+agent→agent and command links are emulated draw by draw: agent/batched_links.py, _step_groups),
+leaders (if any) that only publish,
 sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), the
 plant its report family is measured on here (MEASURES: the rigid-body plant for the §5.6
 laws, a truth per draw; for the §4.5 and §3 observers the prescribed motion, the same in every
@@ -308,8 +310,8 @@ def schedule(sc: Scenario) -> Scenario:
     agent→agent and command links: batched_links takes each draw's own)."""
     draw = sc.info.draw_gains  # gains each draw may have its own value of (SPEC.draw_gains)
     agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate(), gains=_without(a.gains, draw)) for a in sc.agents)
-    links = {"links": LinkSpec(), "command_links": LinkSpec(), "link_overrides": _NO_LINKS}  # sensor links are refused (problem)
-    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, gains=_without(sc.gains, draw), **links, **{f"{f}_var": 0.0 for f in NOISES})
+    sc = dataclasses.replace(sc, links=LinkSpec(), command_links=LinkSpec(), link_overrides=_NO_LINKS)  # sensor links are refused (problem)
+    return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, gains=_without(sc.gains, draw), **{f"{f}_var": 0.0 for f in NOISES})
 
 
 def _without(gains: Mapping[str, float], names: frozenset[str]) -> Mapping[str, float]:
