@@ -137,10 +137,12 @@ def test_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path):
 
 
 def test_batched_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path):
-    """The batched engine's batches as the cluster's tasks: the rows of the local pool."""
+    """The batched engine's batches as the cluster's tasks: the rows of the local pool, emulated
+    agent→agent and command links included (each run its own losses, wherever it is stepped)."""
 
     def batched_rows(out: Path, *extra: str) -> list[dict[str, str]]:
-        args = ("--vary", "noise.rel_att_var=0.005,0.02", "--repeats", "2", "--duration", "2", "--engine", "batched", "--chunk", "2", "--out", str(out))
+        links = ("--set", "links.delay_ms=20", "--set", "links.drop=0.2", "--set", "links.commands.drop=0.1")
+        args = ("--vary", "noise.rel_att_var=0.005,0.02", *links, "--repeats", "2", "--duration", "2", "--engine", "batched", "--chunk", "2", "--out", str(out))
         _zswarm("sweep", str(TOPO / "thesis-5.6-hybrid7-noisy.toml"), *args, *extra)
         with open(out / "sweep.csv", newline="") as f:
             return sorted(({k: v for k, v in row.items() if k != "wall_s"} for row in csv.DictReader(f)), key=lambda row: row["run_id"])
@@ -148,3 +150,4 @@ def test_batched_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path)
     local = batched_rows(tmp_path / "local", "--jobs", "2")
     remote = batched_rows(tmp_path / "cluster", "--cluster", cluster[0])
     assert remote == local and len(local) == 4 and all(r["status"] == "ok" for r in local)
+    assert all(int(r["edge_dropped"]) > 0 and int(r["cmd_dropped"]) > 0 for r in local)
