@@ -44,6 +44,20 @@ def test_batched_rows_are_sims(tmp_path, topology, vary):
 LOSSY = ["--set", "links.commands.drop=0.1", "--set", "links.commands.ge_p_gb=0.05", "--set", "links.commands.ge_p_bg=0.3"]
 
 
+def _same_rows(tmp_path, topology, args, batches=None):
+    """The sweep ``args`` on both engines: the same rows, every column as written but the wall
+    time (``batches``: the batched run's stderr says it ran in that many); sim's rows."""
+    got = {}
+    for engine in ("batched", "sim"):
+        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
+        assert p.returncode == 0, p.stderr
+        got[engine] = {r["run_id"]: {k: v for k, v in r.items() if k != "wall_s"} for r in rows(tmp_path / engine)}
+        if engine == "batched" and batches is not None:
+            assert f"batched in {batches} batches" in p.stderr, p.stderr
+    assert got["batched"] == got["sim"] and len(got["sim"]) == 4  # --engine batched ran them all (or exit 2)
+    return list(got["sim"].values())
+
+
 @pytest.mark.parametrize(
     ("topology", "vary", "sets"),
     [
@@ -61,16 +75,7 @@ def test_batched_rows_are_sims_with_command_links(tmp_path, topology, vary, sets
     lost, latency p50, expired).  Each case is checked to have lost, delayed or expired
     something, or it would compare nothing."""
     args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "2"]
-    got = {}
-    for engine in ("batched", "sim"):
-        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
-        assert p.returncode == 0, p.stderr
-        got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
-    assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4  # --engine batched ran them all (or exit 2)
-    for rid, sim_row in got["sim"].items():
-        b = got["batched"][rid]
-        assert {k: v for k, v in b.items() if k != "wall_s"} == {k: v for k, v in sim_row.items() if k != "wall_s"}, rid
-    sim_rows = list(got["sim"].values())
+    sim_rows = _same_rows(tmp_path, topology, args)
     assert all(float(r["cmd_latency_p50_ms"]) >= 2 for r in sim_rows)
     if "drop" in " ".join(sets):
         assert all(int(r["cmd_dropped"]) > 0 for r in sim_rows)
@@ -102,18 +107,7 @@ def test_batched_rows_are_sims_with_agent_links(tmp_path, topology, vary, sets):
     counters (sent, delivered, lost, latency p50), the stale reads, the errors and jumps.  The
     points of a sweep over link parameters share one batch (their draws have links of their own)."""
     args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
-    got = {}
-    for engine in ("batched", "sim"):
-        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
-        assert p.returncode == 0, p.stderr
-        got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
-        if engine == "batched":
-            assert "4 batched in 1 batches" in p.stderr, p.stderr
-    assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4
-    for rid, sim_row in got["sim"].items():
-        b = got["batched"][rid]
-        assert {k: v for k, v in b.items() if k != "wall_s"} == {k: v for k, v in sim_row.items() if k != "wall_s"}, rid
-    sim_rows = list(got["sim"].values())
+    sim_rows = _same_rows(tmp_path, topology, args, batches=1)
     assert all(int(r["edge_dropped"]) > 0 or "drop" not in " ".join(sets) for r in sim_rows)
     assert max(float(r["edge_latency_p50_ms"]) for r in sim_rows) >= 5  # the delays reached the counters
     if "200" in vary or "policy" in " ".join(sets):
@@ -130,10 +124,4 @@ def test_batched_rows_are_sims_with_link_cuts(tmp_path):
     cuts = '\n[[faults]]\nkind = "cut"\nlink = "3->world"\nat = 0.5\nduration = 0.4\n\n[[faults]]\nkind = "cut"\nlink = "2->3"\nat = 1.0\nduration = 0.5\n'
     topo.write_text((TOPO / "thesis-5.6-hybrid7.toml").read_text() + cuts)
     args = ["--vary", "links.delay_ms=0,10", "--set", "links.drop=0.1", "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
-    got = {}
-    for engine in ("batched", "sim"):
-        p = _sweep_of(str(topo), *args, "--engine", engine, "--out", str(tmp_path / engine))
-        assert p.returncode == 0, p.stderr
-        got[engine] = {r["run_id"]: {k: v for k, v in r.items() if k != "wall_s"} for r in rows(tmp_path / engine)}
-    assert got["batched"] == got["sim"] and len(got["sim"]) == 4
-    assert all(r["cmd_dropped"] == "40" for r in got["sim"].values())
+    assert all(r["cmd_dropped"] == "40" for r in _same_rows(tmp_path, str(topo), args))

@@ -199,14 +199,15 @@ def stall_meter():
         m.stop()
 
 
-def wait_for(pred, timeout: float, what: str, step: float = 0.05):
+def wait_for(pred, timeout: float, what: str, step: float = 0.05, fail=None):
+    """Poll ``pred`` until true; past ``timeout`` fail naming ``what`` (and ``fail()``: what was seen)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         v = pred()
         if v:
             return v
         time.sleep(step)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}" + (f"; last seen: {fail()}" if fail is not None else ""))
 
 
 def not_alive(out: Path, s: dict) -> str:
