@@ -784,7 +784,7 @@ def run(
                 if cmd_links is None:
                     torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
                 else:
-                    cmd_links.send(a, t, t_stamp, pub.command["tau"])
+                    cmd_links.send(a, (k // tick_every) * period, t_stamp, pub.command["tau"])  # arrives at the tick (AgentClock), as the world stamps it
             for j, fields in pub.edges.items():
                 if edge_links is None:
                     inboxes[j][i] = (dict(fields), t_stamp)
