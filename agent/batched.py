@@ -613,7 +613,7 @@ def run(
     cmd_links = None if shared or not any(d.link_spec(f"{i}->world").active for d in draws for i in ids) else batched_links.Commands(draws, seeds, counters=rows)
     edge_links = batched_links.Edges(draws, seeds, rows, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}) if any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors) else None
     published = dict.fromkeys(ids, 0)  # messages each agent sent (its sequence number, as AgentNode.seq)
-    period = 1.0 / sc.agent(ids[0]).clock.rate  # AgentClock: tick k at k · period (the links' send and release times)
+    period = 1.0 / sc.agent(ids[0]).clock.rate  # AgentClock: tick k at k · period
     std = {f: np.sqrt([getattr(d, f"{f}_var") for d in draws]) for f in NOISES}
     if any(np.any((v > 0) != (v[0] > 0)) for v in std.values()):
         raise Unsupported("draws of which some have a sensor's noise and others not (the world draws no numbers for a variance of 0)")
@@ -753,6 +753,7 @@ def run(
         if not tick:
             continue
         estimates: dict[int, Mapping[str, Any]] = {}
+        t_tick = (k // tick_every) * period  # the agents' clock at this tick (AgentClock): the links' send and release times
         for i in ids:
             a = col[i]
             v, mod, g, part = views[i], modules[i], gains[i], parts[i]
@@ -770,7 +771,7 @@ def run(
                     if edge_links is None:
                         outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
                     else:
-                        reads = edge_links.read(i, (k // tick_every) * period)
+                        reads = edge_links.read(i, t_tick)
                         outputs = _step_groups(part, states, i, v, g, t - last, jumps, agent_jumps, reads, edge_links.stale_terms[i])
             pub = mod.publish(states[i], outputs, v)
             if pub is None:
@@ -784,12 +785,12 @@ def run(
                 if cmd_links is None:
                     torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
                 else:
-                    cmd_links.send(a, (k // tick_every) * period, t_stamp, pub.command["tau"])  # arrives at the tick (AgentClock), as the world stamps it
+                    cmd_links.send(a, t_tick, t_stamp, pub.command["tau"])  # arrives at the tick, as the world stamps it
             for j, fields in pub.edges.items():
                 if edge_links is None:
                     inboxes[j][i] = (dict(fields), t_stamp)
                 else:
-                    edge_links.send(i, j, seq, t_stamp, (k // tick_every) * period, dict(fields))
+                    edge_links.send(i, j, seq, t_stamp, t_tick, dict(fields))
             estimates[i] = pub.estimate
         if measure is not None:
             measure.tick(plant, estimates)
@@ -819,11 +820,17 @@ def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: A
     if inputs is None:
         return None
     states[i], outputs = part.step(states[i], inputs, dt, gains)
-    for _k, _before, after in getattr(outputs, "jumps", ()):
-        jumps += np.isfinite(np.asarray(after, dtype=float)).reshape(jumps.shape) if np.ndim(after) else 1
-    for _before, after in getattr(outputs, "agent_jumps", ()):
-        agent_jumps += np.isfinite(np.asarray(after, dtype=float)).reshape(agent_jumps.shape) if np.ndim(after) else 1
+    _count_jumps(outputs, jumps, agent_jumps, np.ones(len(jumps), dtype=bool))
     return outputs
+
+
+def _count_jumps(outputs: Any, jumps: np.ndarray, agent_jumps: np.ndarray, G: np.ndarray) -> None:
+    """Count a step's jumps (``outputs.jumps``: ξ_k, ``outputs.agent_jumps``: the agents' own) in
+    the draws of ``G``: a jump's value after is finite in the draws that jumped (NaN elsewhere)."""
+    for _k, _before, after in getattr(outputs, "jumps", ()):
+        jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(jumps.shape) if np.ndim(after) else True) & G
+    for _before, after in getattr(outputs, "agent_jumps", ()):
+        agent_jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(agent_jumps.shape) if np.ndim(after) else True) & G
 
 
 def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray, reads: Mapping[int, batched_links.Read], stale_terms: np.ndarray) -> Any:
@@ -863,10 +870,7 @@ def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, g
                 nones |= G
                 continue
             outputs = out if outputs is None else _where(G, out, outputs, M)
-            for _k, _before, after in getattr(out, "jumps", ()):
-                jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(M) if np.ndim(after) else True) & G
-            for _before, after in getattr(out, "agent_jumps", ()):
-                agent_jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(M) if np.ndim(after) else True) & G
+            _count_jumps(out, jumps, agent_jumps, G)
     finally:
         view.group = None
         view._cache.clear()
