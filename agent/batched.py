@@ -19,8 +19,9 @@ So a draw here and the same draw on ``sim`` differ by round-off only (the batche
 algebra sums in another order), which the dynamics then carries: tests/component/test_batched.py.
 
 Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
-its ticks on the sensor grid, no emulated sensor links and no faults but link cuts (the
-agent→agent and command links are emulated draw by draw: agent/batched_links.py, _step_groups),
+its ticks on the sensor grid, no faults but link cuts (the
+agent→agent and command links are emulated draw by draw: agent/batched_links.py, _step_groups;
+a sensor delay, the same on every sensor link, is stepped as the runtime steps it: _SensorLinks),
 leaders (if any) that only publish,
 sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), the
 plant its report family is measured on here (MEASURES: the rigid-body plant for the §5.6
@@ -47,7 +48,7 @@ from typing import Any, cast
 import numpy as np
 
 from agent import batched_links
-from agent.runtime import setup
+from agent.runtime import RECENT_EDGE_MESSAGES, setup, step_ends
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
 from world.plant import RigidBodyPlant
@@ -55,7 +56,7 @@ from world.sensors import projective_bearing
 from zswarm import timing
 from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
-from zswarm.links import LinkSpec
+from zswarm.links import LinkModel, LinkSpec
 from zswarm.report.base import grid as coarse_grid
 from zswarm.report.families.tree import nearest_rotations
 from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
@@ -141,7 +142,7 @@ class BatchedView(timing.HistoryReads):
     relative_attitude and body_vector give the runtime's numbers; on a truth per draw only the
     history of the fields in ``history`` is kept, and the rest say they are not available."""
 
-    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, tuple[dict[str, Any], float]], history: Mapping[str, deque[tuple[float, np.ndarray]]], packets: deque[dict[str, Any]] | None = None) -> None:
+    def __init__(self, sc: Scenario, i: int, tree_edges: Mapping[int, tuple[int, bool]], inbox: dict[int, deque[tuple[dict[str, Any], float]]], history: Mapping[str, deque[tuple[float, np.ndarray]]], packets: deque[dict[str, Any]] | None = None) -> None:
         a = sc.agent(i)
         self.id = i
         self.role = a.role
@@ -152,6 +153,7 @@ class BatchedView(timing.HistoryReads):
         self.tree_edges = tree_edges
         self.moving = sc.moving
         self.period = 1.0 / a.clock.rate
+        self.max_age = sc.stale.max_age
         self.t = self.t_world = self.dt = 0.0
         self.command_lead = 0.5 * self.period
         self.first = False
@@ -185,10 +187,16 @@ class BatchedView(timing.HistoryReads):
             if not r.present[G][0]:
                 return None
             return batched_links.GroupMsg(j, r, G, self.t)
-        m = None if self.first else self._inbox.get(j)
-        if m is None or m[1] > self.t:
+        recent = None if self.first else self._inbox.get(j)
+        if not recent:
             return None
-        return _Msg(m[0], m[1], m[1], self.t - m[1])  # fresh: a lockstep message is at most a period old
+        # The newest stamped at or before this step, else the oldest (Inbox.at_or_before): a step
+        # behind its tick (a sensor delay) reads what was sent by then.
+        m = next((x for x in reversed(recent) if x[1] <= self.t_world), recent[0])
+        age = self.t - m[1]
+        if age > self.max_age:
+            raise Unsupported(f"agent {self.id} read agent {j}'s message {age:g} s old on perfect links (stale after {self.max_age:g} s)")
+        return _Msg(m[0], m[1], m[1], age)
 
     def heard_all(self) -> bool:
         if self.group is not None:
@@ -282,6 +290,65 @@ class Result:
     t_end: float = 0.0  # the last sample's time: what a link released by then was delivered
 
 
+class _SensorLinks:
+    """The world→agent sensor links of a batch with a sensor delay: one fixed delay on every
+    link (batched_links.problem), so every agent of every draw receives the same packets at the
+    same ticks, and the steps the runtime takes on them (AgentNode.tick: an idle tick when no
+    packet is newer than the last step, catch-up steps after a late one) are one plan for all.
+    Replays a LinkModel (the release times) and the Inbox's delivery at the ticks (held packets
+    whose release is at or before the tick, in release order), once."""
+
+    def __init__(self, spec: LinkSpec, period: float) -> None:
+        self.model = LinkModel(spec, "world->", 0)  # no random numbers: the seed is never read
+        self.period = period
+        self.held: deque[tuple[float, int, float]] = deque()  # (release, sample, t): FIFO, releases ascending
+        self.packets: deque[tuple[float, int]] = deque(maxlen=HISTORY)  # delivered (t, sample), as Inbox.packets
+        self.started = False
+        self.t_step = 0.0
+
+    def offer(self, k: int, t: float) -> None:
+        """Sample ``k``, sent at ``t``: held until its release (it arrives at ``t``: sim's bus)."""
+        release = self.model.admit(t)
+        assert release is not None  # no loss (batched_links.problem)
+        self.held.append((release, k, t))
+
+    def deliver(self, t_tick: float) -> list[tuple[float, int]]:
+        """The packets released by the tick ``t_tick`` (Inbox.release_due), oldest first."""
+        out = []
+        while self.held and self.held[0][0] <= t_tick:
+            _, k, t = self.held.popleft()
+            out.append((t, k))
+        self.packets.extend(out)
+        return out
+
+    def plan(self, t_tick: float) -> tuple[str, list[tuple[float, int]]]:
+        """This tick's steps (AgentNode.tick): ("none", []) before the first packet, ("idle", [])
+        when none is newer than the last step, ("first", [(t, k)]) the first step at the newest
+        packet, else ("steps", [(t_end, sample), ...]) (step_ends)."""
+        if not self.packets:
+            return "none", []
+        t_m, k_m = self.packets[-1]
+        t_end = min(t_m, t_tick)
+        if not self.started:
+            self.started, self.t_step = True, t_end
+            return "first", [(t_end, k_m)]
+        if t_end <= self.t_step:
+            return "idle", []
+        recent: list[tuple[float, int]] = []  # Inbox.recent_packets(t_step)
+        for p in reversed(self.packets):
+            recent.append(p)
+            if p[0] <= self.t_step:
+                break
+        recent.reverse()
+        ends = step_ends(recent, self.t_step, t_end, self.period, recent[0][1])
+        at = {k: t for t, k in recent}
+        for t_e, k in ends:
+            if at[k] != t_e:  # no loss and ≥ 1 sample a period: never (an end is a packet's time)
+                raise Unsupported(f"a step at {t_e:g} s between sensor packets (the batched engine keeps no history to read there)")
+        self.t_step = ends[-1][0]
+        return "steps", ends
+
+
 class _Torques:
     """The plant's command source: the torques the agents' last ticks sent, held (ZOH)."""
 
@@ -310,7 +377,9 @@ def schedule(sc: Scenario) -> Scenario:
     agent→agent and command links: batched_links takes each draw's own)."""
     draw = sc.info.draw_gains  # gains each draw may have its own value of (SPEC.draw_gains)
     agents = tuple(dataclasses.replace(a, R=(), omega=cast(Any, ()), J=None, estimate=Estimate(), gains=_without(a.gains, draw)) for a in sc.agents)
-    sc = dataclasses.replace(sc, links=LinkSpec(), command_links=LinkSpec(), link_overrides=_NO_LINKS)  # sensor links are refused (problem)
+    # The sensor links stay: every draw of a batch steps at the same packets (_SensorLinks).
+    sensor = MappingProxyType({k: v for k, v in sc.link_overrides.items() if k.startswith("world->")}) if sc.link_overrides else _NO_LINKS
+    sc = dataclasses.replace(sc, links=LinkSpec(), command_links=LinkSpec(), link_overrides=sensor)
     return dataclasses.replace(sc, agents=agents, source=_NO_TEXT, seed=0, gains=_without(sc.gains, draw), **{f"{f}_var": 0.0 for f in NOISES})
 
 
@@ -638,7 +707,7 @@ def run(
     gains: dict[int, Any] = {}
     views: dict[int, BatchedView] = {}
     states: dict[int, Any] = {}
-    inboxes: dict[int, dict[int, tuple[dict[str, Any], float]]] = {i: {} for i in ids}
+    inboxes: dict[int, dict[int, deque[tuple[dict[str, Any], float]]]] = {i: {} for i in ids}
     want = {i: sc.sensors_of(i) for i in ids}
     nbrs = {i: sc.graph_neighbors(i) for i in ids}
     # Kept sensor history: on a shared truth, every packet (as an agent's inbox keeps them); on a
@@ -664,6 +733,11 @@ def run(
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
         views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], packets[i] if shared else None)
     hybrid = has_jumps(sc.info)
+    # A sensor delay (the same on every sensor link: batched_links.problem): the packets' releases
+    # and the steps the agents take on them, one plan for every agent and draw.
+    sensor_spec = sc.link_spec(f"world->{ids[0]}")
+    sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active else None
+    store: dict[int, dict[int, dict[str, Any]]] = {i: {} for i in ids}  # sample -> packet, while some tick may read it
 
     sample_dt = 1.0 / sc.sensor_rate
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
@@ -729,10 +803,11 @@ def run(
             RT = np.swapaxes(R, -1, -2)
             # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
             # keeps them; the rest is measured at the agents' ticks only (a relative attitude is M
-            # products, at 200 Hz for 100 Hz agents).
+            # products, at 200 Hz for 100 Hz agents).  With a sensor delay every sample is measured
+            # in full and kept (store) until the ticks that deliver and read it.
             for i in ids:
                 a = col[i]
-                need = want[i] if tick else histories[i].keys()
+                need = want[i] if tick or sensor_links is not None else histories[i].keys()
                 # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
                 # then attitude) from its generator per agent and seed (_Noise).
                 nz = noise[i].next()
@@ -747,32 +822,66 @@ def run(
                         sense["rel_att"] = {j: mul(R_ij, exp(n_rel[j])) for j, R_ij in sense["rel_att"].items()}
                 if "attitude" in need:
                     sense["attitude"] = R[:, a] if n_att is None else mul(R[:, a], exp(n_att))
-                for f, hist in histories[i].items():
-                    hist.append((t, sense[f].copy()))
+                if sensor_links is None:
+                    for f, hist in histories[i].items():
+                        hist.append((t, sense[f].copy()))
+                else:
+                    if "attitude" in sense:
+                        sense["attitude"] = sense["attitude"].copy()
+                    store[i][k] = sense
                 sensed[i] = sense
+            if sensor_links is not None:
+                sensor_links.offer(k, t)
         if not tick:
             continue
         estimates: dict[int, Mapping[str, Any]] = {}
         t_tick = (k // tick_every) * period  # the agents' clock at this tick (AgentClock): the links' send and release times
+        if sensor_links is None:
+            mode, ends = ("steps" if started else "first"), [(t, k)]
+        else:
+            for t_p, k_p in sensor_links.deliver(t_tick):  # what the agents' inboxes hold from now on
+                for i in ids:
+                    for f, hist in histories[i].items():
+                        hist.append((t_p, store[i][k_p][f]))
+            if sensor_links.packets:  # the oldest packet a step may still read: the older ones go
+                lo = sensor_links.packets[0][1]
+                for i in ids:
+                    while next(iter(store[i])) < lo:
+                        del store[i][next(iter(store[i]))]
+            mode, ends = sensor_links.plan(t_tick)
+            if mode in ("none", "idle"):  # nothing measured yet, or nothing newer: no step, nothing sent (AgentNode.tick)
+                continue
         for i in ids:
             a = col[i]
             v, mod, g, part = views[i], modules[i], gains[i], parts[i]
             outputs = None
-            if not started:
-                v.begin(t, sensed[i], first=True)
+            if mode == "first":
+                t_e, k_e = ends[0]
+                v.begin(t_e, sensed[i] if sensor_links is None else store[i][k_e], first=True)
+                if sensor_links is not None:
+                    v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period  # AgentNode._begin
                 if hybrid and part is not None:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
                     v.dt = 0.0
                     _step(part, states, i, v, g, 0.0, jumps, agent_jumps)
+                if sensor_links is not None and part is not None and 0.0 < t_e <= 0.5:
+                    v.dt = t_e  # the initial estimate (at t = 0) brought to the first packet: prediction only (no neighbours)
+                    _step(part, states, i, v, g, t_e, jumps, agent_jumps)
             else:
-                v.begin(t, sensed[i], first=False)
-                v.command_lead = 0.5 * v.period
-                v.dt = t - last
-                if part is not None:
-                    if edge_links is None:
-                        outputs = _step(part, states, i, v, g, t - last, jumps, agent_jumps)
-                    else:
-                        reads = edge_links.read(i, t_tick)
-                        outputs = _step_groups(part, states, i, v, g, t - last, jumps, agent_jumps, reads, edge_links.stale_terms[i])
+                prev = last
+                for n_e, (t_e, k_e) in enumerate(ends, 1):
+                    v.begin(t_e, sensed[i] if sensor_links is None else store[i][k_e], first=False)
+                    if sensor_links is None:
+                        v.command_lead = 0.5 * v.period
+                    else:  # only the last step's command is sent (AgentNode._advance): a catch-up step's has no lead
+                        v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period if n_e == len(ends) else 0.0
+                    v.dt = t_e - prev
+                    if part is not None:
+                        if edge_links is None:
+                            outputs = _step(part, states, i, v, g, t_e - prev, jumps, agent_jumps) or outputs
+                        else:
+                            reads = edge_links.read(i, t_tick)
+                            outputs = _step_groups(part, states, i, v, g, t_e - prev, jumps, agent_jumps, reads, edge_links.stale_terms[i])
+                    prev = t_e
             pub = mod.publish(states[i], outputs, v)
             if pub is None:
                 continue
@@ -780,7 +889,7 @@ def run(
             published[i] += 1
             edge_messages += len(pub.edges)
             commands += pub.command is not None
-            t_stamp = t if pub.t is None else pub.t
+            t_stamp = v.t_world if pub.t is None else pub.t
             if pub.command is not None and "tau" in pub.command:
                 if cmd_links is None:
                     torques.u.reshape(M, n, 3)[:, a] = pub.command["tau"]
@@ -788,7 +897,10 @@ def run(
                     cmd_links.send(a, t_tick, t_stamp, pub.command["tau"])  # arrives at the tick, as the world stamps it
             for j, fields in pub.edges.items():
                 if edge_links is None:
-                    inboxes[j][i] = (dict(fields), t_stamp)
+                    box = inboxes[j].get(i)
+                    if box is None:
+                        box = inboxes[j][i] = deque(maxlen=RECENT_EDGE_MESSAGES)
+                    box.append((dict(fields), t_stamp))
                 else:
                     edge_links.send(i, j, seq, t_stamp, t_tick, dict(fields))
             estimates[i] = pub.estimate
@@ -796,7 +908,7 @@ def run(
             measure.tick(plant, estimates)
         if started:
             steps += 1
-        started, last = True, t
+        started, last = True, ends[-1][0]
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
     if measure is not None:

@@ -29,11 +29,24 @@ LATENCIES = 2000  # the last latencies a LinkCounter keeps (zswarm/links.py)
 
 
 def problem(sc: Scenario) -> str | None:
-    """Which emulated links the batched engine does not run yet (None: it runs them all)."""
-    if sc.sensor_links.active or any(sc.link_spec(f"world->{i}").active for i in sc.ids):
-        return "emulated sensor links (delay, jitter, loss): the batched engine runs the agent→agent and agent→world links"
+    """Which emulated links the batched engine does not run yet (None: it runs them all).
+
+    The agent→agent and command links: every model, each draw its own randomness.  The sensor
+    links (world→agent): one fixed delay on all of them, so that every agent of every draw
+    receives the same packets at the same ticks and takes the same steps (agent/batched.py
+    ``_SensorLinks``); with jitter, loss or a cut each draw would step at its own packets."""
+    sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
     if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
         return "cuts of sensor links"
+    if any(s.active for s in sensor):
+        if any(purposes(s) for s in sensor):
+            return "sensor links with jitter or loss (each draw would step at its own packets; the batched engine runs a fixed sensor delay)"
+        if len({s.delay_ms for s in sensor}) > 1:
+            return "sensor links of different delays (the batched engine runs one sensor delay for every agent)"
+        if sc.plant == "prescribed":
+            return "a sensor delay on a prescribed truth (the batched §3/§4 measures read each estimate at its tick; the batched engine runs sensor delays on rigid bodies)"
+        if any(sc.link_spec(f"{j}->{a.id}").active for a in sc.agents for j in a.neighbors):
+            return "a sensor delay with emulated agent→agent links (a step behind its tick reads a neighbour's message at its own time)"
     return None
 
 

@@ -20,10 +20,10 @@ import math
 import statistics
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from types import MappingProxyType, ModuleType
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -265,6 +265,38 @@ class Inbox:
             if m.spec.active:
                 links.setdefault(k, {"delivered": 0, "dropped": 0, "reordered": 0}).update(m.counters())
         return {"links": links, "malformed": self.malformed} | ({"inbox_overflow": self.overflow[0]} if self.overflow[0] else {})
+
+
+P = TypeVar("P")
+
+
+def step_ends(packets: Sequence[tuple[float, P]], t_step: float, t_end: float, period: float, newest_before: P) -> list[tuple[float, P]]:
+    """Where the steps from the last one (``t_step``) to ``t_end`` end, each with the newest
+    sensor packet at or before it: ``packets`` are ``(time, packet)`` of the packets after
+    ``t_step``, oldest first, with the newest at or before it first when there is one
+    (``Inbox.recent_packets``); ``newest_before``: the packet to read when none is newer.
+
+    Normally one step (sensors at 200 Hz, ticks at 100 Hz: the packet of the
+    tick or 5 ms before it).  After a stall, one step per clock period, each
+    ending at the last packet within a period of the previous end, or a
+    period on when the world skipped samples there (the view then reads
+    the history around that time).  The batched engine plans its delayed
+    sensor links' steps with it too (agent/batched.py).
+    """
+    ends: list[tuple[float, P]] = []
+    last, k = t_step, 0
+    while last < t_end - 1e-12:
+        limit = min(last + period * (1.0 + 1e-6), t_end)
+        best = None
+        while k < len(packets) and packets[k][0] <= limit + 1e-12:
+            best = packets[k]
+            k += 1
+        if best is not None and best[0] > last:
+            last, newest_before = best
+        else:
+            last = min(last + period, t_end)
+        ends.append((last, newest_before))
+    return ends
 
 
 def _edge_link(key: str) -> str | None:
@@ -728,32 +760,11 @@ class AgentNode:
 
     def _step_ends(self, t_end: float) -> list[tuple[float, dict[str, Any]]]:
         """Where the steps from the last one to ``t_end`` end (own clock), each with the
-        newest sensor packet at or before it.
-
-        Normally one step (sensors at 200 Hz, ticks at 100 Hz: the packet of the
-        tick or 5 ms before it).  After a stall, one step per clock period, each
-        ending at the last packet within a period of the previous end, or a
-        period on when the world skipped samples there (the view then reads
-        the history around that time).
-        """
-        period = 1.0 / self.spec.clock.rate
+        newest sensor packet at or before it (:func:`step_ends`)."""
         local = self.clock.local
         packets = [(local(p["t"]), p) for p in self.inbox.recent_packets(self.clock.world(self.t_step))]
-        ends: list[tuple[float, dict[str, Any]]] = []
-        last, k = self.t_step, 0
         newest_before = packets[0][1] if packets else self.inbox.get(self.sense_link)
-        while last < t_end - 1e-12:
-            limit = min(last + period * (1.0 + 1e-6), t_end)
-            best = None
-            while k < len(packets) and packets[k][0] <= limit + 1e-12:
-                best = packets[k]
-                k += 1
-            if best is not None and best[0] > last:
-                last, newest_before = best
-            else:
-                last = min(last + period, t_end)
-            ends.append((last, newest_before))
-        return ends
+        return step_ends(packets, self.t_step, t_end, 1.0 / self.spec.clock.rate, newest_before)
 
     def _send(self, pub: Publish, t_world: float, t_local: float) -> None:
         """Publish at the tick ``t_local`` (the links' send stamp) what refers to ``t_world``."""

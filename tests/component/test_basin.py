@@ -199,17 +199,18 @@ def test_a_draw_is_the_scenario_its_overrides_load(stem):
 def test_a_basin_under_command_delay_and_loss_is_sims_draw_by_draw(tmp_path):
     """``--set`` reaches every draw; with random links draw d runs with seed + d (its own losses:
     draws that lose the same commands would not be a Monte-Carlo over the network), and the
-    batched engine's rows are sim's, column by column (every number as written)."""
+    batched engine's rows are sim's, column by column (every number as written), with a sensor
+    delay as well (5 ms: idle ticks and catch-up steps, agent/batched.py _SensorLinks)."""
     got = {}
     for engine in ("batched", "sim"):
         out = tmp_path / engine
         cmd = [sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-5.6-hybrid7.toml"), "--draws", "3", "--duration", "30", "--threshold", "0.1", "--jobs", "2"]
-        cmd += ["--set", "links.commands.delay_ms=2", "--set", "links.commands.drop=0.1", "--engine", engine, "--out", str(out)]
+        cmd += ["--set", "links.commands.delay_ms=2", "--set", "links.commands.drop=0.1", "--set", "links.sensors.delay_ms=5", "--engine", engine, "--out", str(out)]
         p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
         assert p.returncode == 0, p.stderr
         with open(out / "basin.csv", newline="") as f:
             got[engine] = {r["draw"]: {k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(f)}
-        assert json.loads((out / "basin_def.json").read_text())["set"] == ["links.commands.delay_ms=2", "links.commands.drop=0.1"]
+        assert json.loads((out / "basin_def.json").read_text())["set"] == ["links.commands.delay_ms=2", "links.commands.drop=0.1", "links.sensors.delay_ms=5"]
     assert got["batched"] == got["sim"] and len(got["sim"]) == 3
     sc = load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override("links.commands.drop=0.1")])
     assert [basin.run_seed(sc, d) for d in range(3)] == [sc.seed, sc.seed + 1, sc.seed + 2]

@@ -83,12 +83,23 @@ def test_the_engine_says_what_it_cannot_run():
     for stem, why in cases.items():
         assert why in (batched.problem(load(TOPO / f"{stem}.toml")) or ""), stem
     text = (TOPO / "thesis-5.6-hybrid7.toml").read_text()
-    for flag, why in (("links.sensors.delay_ms=5", "emulated sensor links"), ("clock.jitter=0.001", "jitter"), ("clock.rate=300", "off the sensor grid")):
+    refused = (
+        ("links.sensors.jitter_ms=2", "sensor links with jitter or loss"),
+        ("links.sensors.drop=0.1", "sensor links with jitter or loss"),
+        ('links.per_link."world->3".delay_ms=5', "sensor links of different delays"),
+        ("clock.jitter=0.001", "jitter"),
+        ("clock.rate=300", "off the sensor grid"),
+    )
+    for flag, why in refused:
         got = batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override(flag)]))
         assert got is not None and why in got, (flag, got)
-    with pytest.raises(batched.Unsupported, match="emulated sensor links"):
+    with pytest.raises(batched.Unsupported, match="sensor links with jitter or loss"):
         batched.run([load(TOPO / "thesis-5.6-hybrid7-noisy.toml", [parse_override("links.sensors.drop=0.1")])], 0.1, 1, 0.01)
-    for flag in ("links.delay_ms=5", "links.commands.drop=0.1", 'links.per_link."2->3".jitter_ms=3'):  # agent→agent and command links run batched
+    # A fixed sensor delay: on rigid bodies with perfect agent→agent links only
+    delayed = [parse_override("links.sensors.delay_ms=5")]
+    assert "on a prescribed truth" in (batched.problem(load(TOPO / "thesis-3.2-fixed8.toml", delayed)) or "")
+    assert "emulated agent→agent links" in (batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [*delayed, parse_override("links.drop=0.1")])) or "")
+    for flag in ("links.delay_ms=5", "links.commands.drop=0.1", 'links.per_link."2->3".jitter_ms=3', "links.sensors.delay_ms=5"):  # agent→agent and command links, a sensor delay
         assert batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override(flag)])) is None, flag
     assert text  # the file the overrides were applied to
 

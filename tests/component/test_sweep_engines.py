@@ -127,3 +127,30 @@ def test_batched_rows_are_sims_with_link_cuts(tmp_path):
     topo.write_text((TOPO / "thesis-5.6-hybrid7.toml").read_text() + cuts)
     args = ["--vary", "links.delay_ms=0,10", "--set", "links.drop=0.1", "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
     assert all(r["cmd_dropped"] == "40" for r in _same_rows(tmp_path, str(topo), args))
+
+
+@pytest.mark.parametrize(
+    ("topology", "vary", "sets"),
+    [
+        # 5 ms: releases t + 5e-3 meet the ticks in round-off both ways, so idle ticks and catch-up
+        # steps (AgentNode.tick, step_ends) come every few seconds; 12.5 ms: never
+        ("thesis-5.6-hybrid7.toml", "links.sensors.delay_ms=5,12.5", []),
+        # the attitude history the velocity-free law integrates, noisy draws, lossy commands as well
+        ("thesis-5.6-velocity-free7-noisy.toml", "links.sensors.delay_ms=3,15", ["--set", "links.commands.delay_ms=2", "--set", "links.commands.drop=0.1"]),
+        # the first packet 2 ms after t = 0: the first step's prediction to it (AgentNode._advance's lag)
+        ("thesis-5.6-continuous7.toml", "links.sensors.delay_ms=2,20", []),
+    ],
+)
+def test_batched_rows_are_sims_with_a_sensor_delay(tmp_path, topology, vary, sets):
+    """A fixed delay on every sensor link (agent/batched.py _SensorLinks): every agent of every
+    draw steps at the packets its sim run steps at (the newest delivered by the tick, idle when
+    none is newer, catch-up steps after a late one) with the command lead sim gives it, so the
+    rows are sim's column by column.  The delays change the runs (the rows of two delays
+    differ), or this would compare nothing new."""
+    args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
+    sim_rows = _same_rows(tmp_path, topology, args, batches=2)  # a batch per delay: the draws of one share their steps
+    # The first packet comes a tick later at the longer delay of each pair: a command fewer per agent.
+    assert len({r["cmd_sent"] for r in sim_rows}) == 2
+    if "continuous" not in topology:  # the continuous law sits on its undesired start for these 2 s
+        assert len({r["final_attitude_error"] for r in sim_rows}) > 1
+    assert all(r["sensor_dropped"] == "0" for r in sim_rows)
