@@ -42,7 +42,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from types import MappingProxyType, ModuleType
+from types import MappingProxyType, ModuleType, SimpleNamespace
 from typing import Any, cast
 
 import numpy as np
@@ -321,6 +321,20 @@ class _SensorLinks:
         self.packets.extend(out)
         return out
 
+    def stamps(self, n_samples: int, tick_every: int, sample_dt: float) -> np.ndarray:
+        """The stamps of what the ticks of a run publish (the time of each publishing tick's last
+        step), planned ahead on a fresh instance: a shared truth's measures keep what the report
+        reads at those times (_Ticks)."""
+        out = []
+        for k in range(n_samples):
+            self.offer(k, k * sample_dt)
+            if k % tick_every == 0:
+                self.deliver((k // tick_every) * self.period)
+                mode, ends = self.plan((k // tick_every) * self.period)
+                if mode in ("first", "steps"):
+                    out.append(ends[-1][0])
+        return np.array(out)
+
     def plan(self, t_tick: float) -> tuple[str, list[tuple[float, int]]]:
         """This tick's steps (AgentNode.tick): ("none", []) before the first packet, ("idle", [])
         when none is newer than the last step, ("first", [(t, k)]) the first step at the newest
@@ -492,9 +506,11 @@ class _Ticks:
     ticks at ``k · tick_every`` samples).  The sweep rows read it where the report reads its
     CSV on the 0.1 s grid and over the last second, so only those ticks are kept."""
 
-    def __init__(self, sc: Scenario, M: int, duration: float, n_samples: int, tick_every: int, sample_dt: float, grid_s: float, rows: bool) -> None:
+    def __init__(self, sc: Scenario, M: int, duration: float, n_samples: int, tick_every: int, sample_dt: float, grid_s: float, rows: bool, stamps: np.ndarray | None = None) -> None:
         self.sc, self.M, self.duration, self.grid_s, self.rows = sc, M, duration, grid_s, rows
-        self.t_ticks = np.arange(0, n_samples, tick_every) * sample_dt  # k · sample_dt, as the loop computes them
+        # The estimates' stamps: k · sample_dt at every tick, as the loop computes them; with a
+        # sensor delay the packet times the ticks that publish stepped to (_SensorLinks.stamps).
+        self.t_ticks = np.arange(0, n_samples, tick_every) * sample_dt if stamps is None else stamps
         self.n = 0  # ticks seen
         self.basin: list[np.ndarray] = []  # the basin measure (M,) at every tick
         self.kept: dict[int, Any] = {}  # tick index -> what the rows read there
@@ -753,7 +769,9 @@ def run(
     coarse_set = set(coarse_at.tolist()) if rows else set()
     final_from = grid_all[-1] - FINAL_WINDOW_S if rows and len(grid_all) else math.inf
     final_v: list[np.ndarray] = []
-    measure = _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows) if shared else None
+    stamps = None if sensor_links is None else _SensorLinks(sensor_spec, period).stamps(n_samples, tick_every, sample_dt)
+    measure = _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows, stamps) if shared else None
+    truths: dict[int, Any] = {}  # with a sensor delay on a shared truth: sample -> the truth there (what an estimate stamped then is measured on)
     edge_messages = commands = 0
     jumps = np.zeros(M, dtype=np.int64)
     agent_jumps = np.zeros(M, dtype=np.int64)
@@ -782,8 +800,14 @@ def run(
                 measured = sensing.measure(R, plant.p, plant.omega_now(), V)
             for i, m in measured.items():
                 m["t"] = t
-                packets[i].append(m)
+                if sensor_links is None:
+                    packets[i].append(m)
+                else:
+                    store[i][k] = m
                 sensed[i] = m
+            if sensor_links is not None:
+                sensor_links.offer(k, t)
+                truths[k] = SimpleNamespace(R=plant.R.copy(), p=plant.p.copy())
         else:
             plant.advance_to(t)
             R = plant.R.reshape(M, n, 3, 3)
@@ -841,6 +865,8 @@ def run(
         else:
             for t_p, k_p in sensor_links.deliver(t_tick):  # what the agents' inboxes hold from now on
                 for i in ids:
+                    if shared:
+                        packets[i].append(store[i][k_p])
                     for f, hist in histories[i].items():
                         hist.append((t_p, store[i][k_p][f]))
             if sensor_links.packets:  # the oldest packet a step may still read: the older ones go
@@ -848,6 +874,8 @@ def run(
                 for i in ids:
                     while next(iter(store[i])) < lo:
                         del store[i][next(iter(store[i]))]
+                while truths and next(iter(truths)) < lo:
+                    del truths[next(iter(truths))]
             mode, ends = sensor_links.plan(t_tick)
             if mode in ("none", "idle"):  # nothing measured yet, or nothing newer: no step, nothing sent (AgentNode.tick)
                 continue
@@ -905,7 +933,7 @@ def run(
                     edge_links.send(i, j, seq, t_stamp, t_tick, dict(fields))
             estimates[i] = pub.estimate
         if measure is not None:
-            measure.tick(plant, estimates)
+            measure.tick(plant if sensor_links is None else truths[ends[-1][1]], estimates)  # the truth at the estimates' stamp
         if started:
             steps += 1
         started, last = True, ends[-1][0]

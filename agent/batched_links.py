@@ -43,8 +43,6 @@ def problem(sc: Scenario) -> str | None:
             return "sensor links with jitter or loss (each draw would step at its own packets; the batched engine runs a fixed sensor delay)"
         if len({s.delay_ms for s in sensor}) > 1:
             return "sensor links of different delays (the batched engine runs one sensor delay for every agent)"
-        if sc.plant == "prescribed":
-            return "a sensor delay on a prescribed truth (the batched §3/§4 measures read each estimate at its tick; the batched engine runs sensor delays on rigid bodies)"
         if any(sc.link_spec(f"{j}->{a.id}").active for a in sc.agents for j in a.neighbors):
             return "a sensor delay with emulated agent→agent links (a step behind its tick reads a neighbour's message at its own time)"
     return None

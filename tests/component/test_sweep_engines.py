@@ -139,18 +139,24 @@ def test_batched_rows_are_sims_with_link_cuts(tmp_path):
         ("thesis-5.6-velocity-free7-noisy.toml", "links.sensors.delay_ms=3,15", ["--set", "links.commands.delay_ms=2", "--set", "links.commands.drop=0.1"]),
         # the first packet 2 ms after t = 0: the first step's prediction to it (AgentNode._advance's lag)
         ("thesis-5.6-continuous7.toml", "links.sensors.delay_ms=2,20", []),
+        # a shared truth: the bearings and relative attitudes read from the delivered packets, the
+        # estimates measured on the truth at their stamps (the report's estimates_with_truth)
+        ("thesis-3.2-fixed8-noisy.toml", "links.sensors.delay_ms=5,12.5", []),
+        ("thesis-3.3-moving5.toml", "links.sensors.delay_ms=5,12.5", []),
+        ("thesis-4.5-hybrid5.toml", "links.sensors.delay_ms=5,12.5", []),
     ],
 )
 def test_batched_rows_are_sims_with_a_sensor_delay(tmp_path, topology, vary, sets):
-    """A fixed delay on every sensor link (agent/batched.py _SensorLinks): every agent of every
-    draw steps at the packets its sim run steps at (the newest delivered by the tick, idle when
+    """A fixed delay on every sensor link (agent/batched.py _SensorLinks), for each family the
+    batched engine runs (§5.6, §3, §4.5): every agent of every draw steps at the packets its sim run steps at (the newest delivered by the tick, idle when
     none is newer, catch-up steps after a late one) with the command lead sim gives it, so the
     rows are sim's column by column.  The delays change the runs (the rows of two delays
     differ), or this would compare nothing new."""
     args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "2", "--thresholds", "0.7,0.1", "--jobs", "1"]
     sim_rows = _same_rows(tmp_path, topology, args, batches=2)  # a batch per delay: the draws of one share their steps
-    # The first packet comes a tick later at the longer delay of each pair: a command fewer per agent.
-    assert len({r["cmd_sent"] for r in sim_rows}) == 2
+    # The first packet comes a tick later at the longer delay of each pair: a message fewer per
+    # edge, a command fewer per agent (the continuous §5.6 law sends no messages, §3 and §4.5 no commands).
+    assert len({(r["edge_sent"], r["cmd_sent"]) for r in sim_rows}) == 2
     if "continuous" not in topology:  # the continuous law sits on its undesired start for these 2 s
         assert len({r["final_attitude_error"] for r in sim_rows}) > 1
     assert all(r["sensor_dropped"] == "0" for r in sim_rows)
