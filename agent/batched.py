@@ -21,7 +21,8 @@ algebra sums in another order), which the dynamics then carries: tests/component
 Lockstep needs what it says: every agent on the same clock with no jitter, drift or offset,
 its ticks on the sensor grid, no faults but link cuts (the
 agent→agent and command links are emulated draw by draw: agent/batched_links.py, _step_groups;
-a sensor delay, the same on every sensor link, is stepped as the runtime steps it: _SensorLinks),
+a sensor delay, the same on every sensor link, is stepped as the runtime steps it: _SensorLinks;
+sensor jitter and loss on rigid bodies, each draw at its own packets: _DrawSensorLinks, _tick_draws),
 leaders (if any) that only publish,
 sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), the
 plant its report family is measured on here (MEASURES: the rigid-body plant for the §5.6
@@ -171,7 +172,10 @@ class BatchedView(timing.HistoryReads):
         self.read_js: set[int] = set()  # in-neighbours this step read (their stale reads are counted)
 
     def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
-        self.t = self.t_world = self.sense_t = self.sense_t_world = t
+        self.t = self.t_world = t
+        # The packet's own time: the step's end but where packets were lost before it
+        # (_DrawSensorLinks; relative_attitude and body_rate then read the history there).
+        self.sense_t = self.sense_t_world = sense.get("t", t)
         self.sense, self.first = sense, first
         self._cache.clear()
 
@@ -288,6 +292,12 @@ class Result:
     command_links: batched_links.Commands | None = None  # emulated command links: their counters per draw (None: perfect, none lost, late or expired)
     edge_links: batched_links.Edges | None = None  # emulated agent→agent links: their counters per draw (None: perfect)
     t_end: float = 0.0  # the last sample's time: what a link released by then was delivered
+    # Sensor links with jitter or loss (_DrawSensorLinks): per draw, what its agents sent (they idle
+    # in some draws and not in others), its lost sensor packets and its stale reads.
+    draw_edge_messages: np.ndarray | None = None
+    draw_commands: np.ndarray | None = None
+    sensor_dropped: np.ndarray | None = None
+    stale_terms: np.ndarray | None = None
 
 
 class _SensorLinks:
@@ -361,6 +371,115 @@ class _SensorLinks:
                 raise Unsupported(f"a step at {t_e:g} s between sensor packets (the batched engine keeps no history to read there)")
         self.t_step = ends[-1][0]
         return "steps", ends
+
+
+class _DrawSensorLinks:
+    """One agent's sensor link in M draws, each with its own delays and losses (jitter, Bernoulli
+    and Gilbert–Elliott loss, FIFO; batched_links.problem): the packets each draw's inbox holds
+    at a tick (the link's LinkStack admits every sample for all draws when it is sent) and the
+    steps that draw's AgentNode takes on them (AgentNode.tick, step_ends).  Draws that take the
+    same steps form a group (:meth:`plan`); a step between packets (two or more lost) reads the
+    group's history there, as the runtime reads its inbox's."""
+
+    MAX_GAP = 62  # samples between a draw's last step and its newest packet (a group key's bits)
+
+    def __init__(self, specs: Sequence[LinkSpec], name: str, seeds: Sequence[int], period: float, sample_dt: float) -> None:
+        self.stack = batched_links.LinkStack(specs, name, seeds)
+        self.M = M = len(seeds)
+        self.period, self.sample_dt = period, sample_dt
+        self.k0 = 0  # the sample of rel[0]
+        self.rel: list[np.ndarray] = []  # per sample from k0: its release (M,), NaN where lost
+        self.kmax = np.full(M, -1, dtype=np.int64)  # the newest packet delivered (FIFO: all the older ones not lost too)
+        self.kfirst = np.full(M, -1, dtype=np.int64)
+        self.delivered = np.zeros(M, dtype=np.int64)
+        self.started = np.zeros(M, dtype=bool)
+        self.t_step = np.zeros(M)  # the last step's end
+        self.kstep = np.full(M, -1, dtype=np.int64)  # the newest packet at or before it
+
+    def offer(self, k: int, t: float) -> None:
+        """Sample ``k``, sent at ``t`` (sim's bus delivers it at once: it arrives at ``t``)."""
+        self.rel.append(self.stack.admit(t))
+
+    def deliver(self, t_tick: float) -> None:
+        """Each draw's inbox at the tick: FIFO releases do not decrease, so the packets delivered
+        by then are every packet not lost up to the newest one due."""
+        R = np.array(self.rel)
+        due = R <= t_tick  # NaN (lost) compares False
+        ks = self.k0 + np.arange(len(R))[:, None]
+        newest = np.where(due, ks, -1).max(axis=0)
+        self.delivered += (due & (ks > self.kmax)).sum(axis=0)
+        first = (self.kfirst < 0) & (newest >= 0)
+        self.kfirst = np.where(first, self.k0 + np.argmax(due, axis=0), self.kfirst)
+        self.kmax = np.maximum(self.kmax, newest)
+
+    def dropped(self) -> np.ndarray:
+        """LinkCounter's lost count per draw: the gaps between the first and newest delivered."""
+        return np.where(self.kfirst >= 0, self.kmax - self.kfirst + 1 - self.delivered, 0)
+
+    def oldest_needed(self) -> int:
+        """The oldest sample a later tick may read (a step's packet at or before its start)."""
+        waiting = int(self.kmax.min()) + 1
+        return min(waiting, int(self.kstep[self.started].min())) if self.started.any() else waiting
+
+    def trim(self, lo: int) -> None:
+        if lo > self.k0:
+            del self.rel[: lo - self.k0]
+            self.k0 = lo
+
+    def plan(self, t_tick: float) -> list[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]]:
+        """This tick's steps per group of draws (AgentNode.tick): ``(mode, draws, t_step, ends,
+        packets)``: "first" (the first step, at the newest packet) or "steps" (step_ends' ends
+        from ``t_step``); ``packets``: the samples the group's inbox holds from the one at or
+        before ``t_step`` on (its history).  Draws with no packet yet, or none newer than their
+        last step (idle), are in no group: they neither step nor send."""
+        dt = self.sample_dt
+        out = []
+        t_m = self.kmax * dt  # a packet's stamp: k · sample_dt (World.next_time)
+        first = ~self.started & (self.kmax >= 0)
+        if first.any():
+            # The first step: at the newest packet, its history every packet delivered so far (all
+            # at this tick: the draw had none before, so nothing was trimmed, k0 = 0).
+            idx = np.flatnonzero(first)
+            top = int(self.kmax[idx].max())
+            if top > self.MAX_GAP:
+                raise Unsupported(f"a first sensor packet {top} samples into the run (the batched engine plans up to {self.MAX_GAP})")
+            got = ~np.isnan(np.array(self.rel)[: top + 1, idx]) & (np.arange(top + 1)[:, None] <= self.kmax[idx])
+            bits = (got.astype(np.int64) << np.arange(top + 1)[:, None]).sum(axis=0)
+            groups, inv = np.unique(np.stack([self.kmax[idx], bits], axis=1), axis=0, return_inverse=True)
+            inv = inv.reshape(-1)
+            for u, (km, b) in enumerate(groups):
+                G = np.zeros(self.M, dtype=bool)
+                G[idx[inv == u]] = True
+                out.append(("first", G, 0.0, [(float(km * dt), int(km))], [k for k in range(int(km) + 1) if (int(b) >> k) & 1]))
+        steps = self.started & (t_m > self.t_step)
+        idx = np.flatnonzero(steps)
+        if idx.size:
+            W = self.kmax[idx] - self.kstep[idx]
+            if int(W.max()) > self.MAX_GAP:
+                raise Unsupported(f"a draw {int(W.max())} sensor samples behind its newest packet (the batched engine plans up to {self.MAX_GAP})")
+            lost = np.isnan(np.array(self.rel)[:, idx])  # (K, len(idx))
+            bits = np.zeros(idx.size, dtype=np.int64)
+            for w in range(1, int(W.max()) + 1):
+                row = np.clip(self.kstep[idx] + w - self.k0, 0, len(self.rel) - 1)
+                got = (w <= W) & ~lost[row, np.arange(idx.size)]
+                bits |= got.astype(np.int64) << (w - 1)
+            key = np.stack([self.kstep[idx], self.kmax[idx], self.t_step[idx].view(np.int64), bits], axis=1)
+            groups, inv = np.unique(key, axis=0, return_inverse=True)
+            inv = inv.reshape(-1)
+            for u, (ks, km, _, b) in enumerate(groups):
+                members = idx[inv == u]
+                G = np.zeros(self.M, dtype=bool)
+                G[members] = True
+                t_step = float(self.t_step[members[0]])
+                held = [int(ks)] + [int(ks) + w for w in range(1, int(km - ks) + 1) if (int(b) >> (w - 1)) & 1]
+                ends = step_ends([(k * dt, k) for k in held], t_step, float(km * dt), self.period, int(ks))
+                out.append(("steps", G, t_step, ends, held))
+                self.t_step[G] = ends[-1][0]
+                self.kstep[G] = ends[-1][1]
+        self.t_step = np.where(first, t_m, self.t_step)
+        self.kstep = np.where(first, self.kmax, self.kstep)
+        self.started |= first
+        return out
 
 
 class _Torques:
@@ -752,8 +871,17 @@ def run(
     # A sensor delay (the same on every sensor link: batched_links.problem): the packets' releases
     # and the steps the agents take on them, one plan for every agent and draw.
     sensor_spec = sc.link_spec(f"world->{ids[0]}")
-    sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active else None
+    per_draw = batched_links.per_draw_sensors(sc)  # jitter or loss: each draw's agents step at packets of their own
+    sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active and not per_draw else None
     store: dict[int, dict[int, dict[str, Any]]] = {i: {} for i in ids}  # sample -> packet, while some tick may read it
+    draw_links: dict[int, _DrawSensorLinks] = {}
+    draw_inbox: batched_links.DrawInbox | None = None
+    if per_draw:
+        draw_links = {i: _DrawSensorLinks([d.link_spec(f"world->{i}") for d in draws], f"world->{i}", seeds, period, 1.0 / sc.sensor_rate) for i in ids}
+        draw_inbox = batched_links.DrawInbox(sc, M, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids})
+    draw_edges = np.zeros(M, dtype=np.int64)  # per draw (per_draw): messages and commands sent
+    draw_commands = np.zeros(M, dtype=np.int64)
+    n_tick = 0
 
     sample_dt = 1.0 / sc.sensor_rate
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
@@ -831,7 +959,7 @@ def run(
             # in full and kept (store) until the ticks that deliver and read it.
             for i in ids:
                 a = col[i]
-                need = want[i] if tick or sensor_links is not None else histories[i].keys()
+                need = want[i] if tick or sensor_links is not None or per_draw else histories[i].keys()
                 # The world's noise, drawn at every sample in its order (gyro, then rel_att per neighbour,
                 # then attitude) from its generator per agent and seed (_Noise).
                 nz = noise[i].next()
@@ -846,7 +974,7 @@ def run(
                         sense["rel_att"] = {j: mul(R_ij, exp(n_rel[j])) for j, R_ij in sense["rel_att"].items()}
                 if "attitude" in need:
                     sense["attitude"] = R[:, a] if n_att is None else mul(R[:, a], exp(n_att))
-                if sensor_links is None:
+                if sensor_links is None and not per_draw:
                     for f, hist in histories[i].items():
                         hist.append((t, sense[f].copy()))
                 else:
@@ -856,10 +984,25 @@ def run(
                 sensed[i] = sense
             if sensor_links is not None:
                 sensor_links.offer(k, t)
+            for dl in draw_links.values():
+                dl.offer(k, t)
         if not tick:
             continue
         estimates: dict[int, Mapping[str, Any]] = {}
         t_tick = (k // tick_every) * period  # the agents' clock at this tick (AgentClock): the links' send and release times
+        if per_draw:
+            assert draw_inbox is not None
+            for i in ids:
+                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3), draw_edges, draw_commands)
+            n_tick += 1
+            for i in ids:  # the samples no later tick reads
+                lo = draw_links[i].oldest_needed()
+                draw_links[i].trim(lo)
+                while store[i] and next(iter(store[i])) < lo:
+                    del store[i][next(iter(store[i]))]
+            if progress is not None and k % int(sc.sensor_rate) == 0:
+                progress(t)
+            continue
         if sensor_links is None:
             mode, ends = ("steps" if started else "first"), [(t, k)]
         else:
@@ -945,6 +1088,12 @@ def run(
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all)
     res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt)
+    if per_draw:
+        assert draw_inbox is not None
+        res.draw_edge_messages, res.draw_commands = draw_edges, draw_commands
+        res.edge_messages, res.commands = int(draw_edges.max()), int(draw_commands.max())
+        res.sensor_dropped = np.sum([dl.dropped() for dl in draw_links.values()], axis=0)
+        res.stale_terms = np.sum(list(draw_inbox.stale_terms.values()), axis=0)
     if rows and grid_t:
         fin = np.array(final_v)  # (window, M, edges)
         t_fin = grid_all[grid_all >= final_from]
@@ -953,6 +1102,74 @@ def run(
         res.t_coarse = coarse_t
         res.att_coarse = np.array([coarse_v[g] for g in coarse_at]).T
     return res
+
+
+def _tick_draws(
+    i: int,
+    a: int,
+    t_tick: float,
+    n_tick: int,
+    links: _DrawSensorLinks,
+    store: Mapping[int, dict[str, Any]],
+    v: BatchedView,
+    mod: ModuleType,
+    g: Any,
+    part: Any,
+    states: dict[int, Any],
+    hybrid: bool,
+    jumps: np.ndarray,
+    agent_jumps: np.ndarray,
+    inbox: batched_links.DrawInbox,
+    u: np.ndarray,
+    sent_edges: np.ndarray,
+    sent_commands: np.ndarray,
+) -> None:
+    """Agent i's tick at ``t_tick`` in M draws whose sensor links lose and delay packets each its
+    own way (_DrawSensorLinks): each group of draws that takes the same steps (AgentNode.tick and
+    _advance) steps on its own packets and history, reads its neighbours' messages stamped at or
+    before each step (DrawInbox), and sends what it publishes, stamped with its last step's time;
+    idle draws send nothing.  ``u``: the torques the plant holds, (M, n, 3)."""
+    links.deliver(t_tick)
+    stale = inbox.stale_terms[i]
+    for mode, G, t_step, ends, held in links.plan(t_tick):
+        v._packets = deque(store[k] for k in held)  # the group's inbox history (packets from the one at or before its last step)
+        outputs = None
+        if mode == "first":
+            t_e, k_e = ends[0]
+            v.begin(t_e, store[k_e], first=True)
+            v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period  # AgentNode._begin
+            if part is not None:
+                reads = inbox.read(i, t_e)  # heard_all: what has come (neighbor() reads nothing at the first step)
+                if hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
+                    v.dt = 0.0
+                    _step_groups(part, states, i, v, g, 0.0, jumps, agent_jumps, reads, stale, base=G)
+                if 0.0 < t_e <= 0.5:
+                    v.dt = t_e  # the initial estimate (at t = 0) brought to the first packet: prediction only
+                    _step_groups(part, states, i, v, g, t_e, jumps, agent_jumps, reads, stale, base=G)
+        else:
+            prev = t_step
+            for n_e, (t_e, k_e) in enumerate(ends, 1):
+                v.begin(t_e, store[k_e], first=False)
+                # only the last step's command is sent (AgentNode._advance): a catch-up step's has no lead
+                v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period if n_e == len(ends) else 0.0
+                v.dt = t_e - prev
+                if part is not None:
+                    out = _step_groups(part, states, i, v, g, t_e - prev, jumps, agent_jumps, inbox.read(i, t_e), stale, base=G)
+                    outputs = out or outputs
+                prev = t_e
+        pub = mod.publish(states[i], outputs, v)
+        v._packets = None
+        if pub is None:
+            continue
+        t_stamp = v.t_world if pub.t is None else pub.t
+        sent_edges += G * len(pub.edges)
+        if pub.command is not None:
+            sent_commands += G
+            if "tau" in pub.command:
+                tau = np.broadcast_to(np.asarray(pub.command["tau"], dtype=float), (len(G), 3))
+                u[G, a] = tau[G]
+        for j, fields in pub.edges.items():
+            inbox.send(i, j, G, t_stamp, fields, n_tick)
 
 
 def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray) -> Any:
@@ -973,21 +1190,23 @@ def _count_jumps(outputs: Any, jumps: np.ndarray, agent_jumps: np.ndarray, G: np
         agent_jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(agent_jumps.shape) if np.ndim(after) else True) & G
 
 
-def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray, reads: Mapping[int, batched_links.Read], stale_terms: np.ndarray) -> Any:
+def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray, reads: Mapping[int, batched_links.Read], stale_terms: np.ndarray, base: np.ndarray | None = None) -> Any:
     """One step of agent i's draws over emulated links: the draws differ in which neighbours'
     messages they hold (lost, late, stale) and in those messages' stamps, so they are stepped in
     groups that share what the law reads: which in-neighbours are present (and heard from at
     all), and, where a law reads a neighbour's stamp or age (batched_links.Split), that stamp.
     Each group is stepped on the whole stack (every draw's own message, the others' filled in)
-    and its draws' results kept; one group when every draw holds the same, as on perfect links."""
+    and its draws' results kept; one group when every draw holds the same, as on perfect links.
+    ``base``: only these draws step (the others keep their state: _DrawSensorLinks' plans)."""
     M = len(jumps)
+    base = np.ones(M, dtype=bool) if base is None else base
     key = np.stack([np.stack([r.present, r.has]) for r in reads.values()]).reshape(-1, M).T if reads else None
-    if key is not None and not (key == key[0]).all():
+    if key is not None and not (key[base] == key[base][0]).all():
         _, inv = np.unique(key, axis=0, return_inverse=True)
         inv = inv.reshape(-1)
-        queue = [inv == u for u in range(int(inv.max()) + 1)]
+        queue = [G for G in (base & (inv == u) for u in range(int(inv.max()) + 1)) if G.any()]
     else:
-        queue = [np.ones(M, dtype=bool)]
+        queue = [base]
     s0 = states[i]
     state, outputs, nones = s0, None, np.zeros(M, dtype=bool)
     try:
@@ -1014,7 +1233,7 @@ def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, g
     finally:
         view.group = None
         view._cache.clear()
-    if outputs is not None and nones.any():
+    if outputs is not None and (nones & base).any():
         raise Unsupported(f"agent {i}: its law had inputs in some draws and none in others at one tick (the batched engine cannot publish both)")
     states[i] = state
     return outputs

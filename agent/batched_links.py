@@ -16,11 +16,12 @@ the world reports (``links``, ``commands``), per draw.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from agent.runtime import RECENT_EDGE_MESSAGES as RECENT  # edge messages an agent keeps per link
 from zswarm.links import PURPOSES, LinkSpec, block, link_seed, purposes
 from zswarm.scenario import Scenario
 
@@ -32,20 +33,37 @@ def problem(sc: Scenario) -> str | None:
     """Which emulated links the batched engine does not run yet (None: it runs them all).
 
     The agent→agent and command links: every model, each draw its own randomness.  The sensor
-    links (world→agent): one fixed delay on all of them, so that every agent of every draw
-    receives the same packets at the same ticks and takes the same steps (agent/batched.py
-    ``_SensorLinks``); with jitter, loss or a cut each draw would step at its own packets."""
+    links (world→agent): one fixed delay on all of them on any family (every agent of every
+    draw receives the same packets at the same ticks: agent/batched.py ``_SensorLinks``); any
+    other model (jitter, loss, bursts, a delay of its own per agent) on the rigid-body laws,
+    each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
+    ``_DrawSensorLinks``), with perfect agent→agent and command links beside them."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
     if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
         return "cuts of sensor links"
-    if any(s.active for s in sensor):
-        if any(purposes(s) for s in sensor):
-            return "sensor links with jitter or loss (each draw would step at its own packets; the batched engine runs a fixed sensor delay)"
-        if len({s.delay_ms for s in sensor}) > 1:
-            return "sensor links of different delays (the batched engine runs one sensor delay for every agent)"
-        if any(sc.link_spec(f"{j}->{a.id}").active for a in sc.agents for j in a.neighbors):
+    if not any(s.active for s in sensor):
+        return None
+    agent_links = any(sc.link_spec(f"{j}->{a.id}").active for a in sc.agents for j in a.neighbors)
+    if not per_draw_sensors(sc):
+        if agent_links:
             return "a sensor delay with emulated agent→agent links (a step behind its tick reads a neighbour's message at its own time)"
+        return None
+    if any(s.reorder for s in sensor):
+        return "reordering sensor links (the batched engine runs FIFO sensor links)"
+    if sc.plant == "prescribed":
+        return "sensor links with jitter, loss or delays of their own on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
+    if agent_links:
+        return "sensor links with jitter, loss or delays of their own beside emulated agent→agent links"
+    if any(sc.link_spec(f"{i}->world").active for i in sc.ids):
+        return "sensor links with jitter, loss or delays of their own beside emulated command links"
     return None
+
+
+def per_draw_sensors(sc: Scenario) -> bool:
+    """The sensor links draw random numbers (jitter, loss, bursts) or differ between agents: each
+    draw's agents then step at packets of their own (not one fixed delay for all)."""
+    sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
+    return any(s.active for s in sensor) and (any(purposes(s) for s in sensor) or len(set(sensor)) > 1)
 
 
 class LinkStack:
@@ -283,7 +301,8 @@ class Read:
     def __init__(self, ring: _Ring, sel: np.ndarray, t: float, max_age: float, drop: bool) -> None:
         self.has = sel >= 0
         self.ring, self.sel = ring, sel
-        self.stamp = np.where(self.has, ring.stamp[sel % ring.cap], np.nan)
+        st = ring.stamp[sel % ring.cap] if ring.stamp.ndim == 1 else ring.stamp[sel % ring.cap, np.arange(len(sel))]  # 2-D: a stamp per draw (DrawInbox)
+        self.stamp = np.where(self.has, st, np.nan)
         self.stale = self.has & ((t - np.where(self.has, self.stamp, t)) > max_age)
         self.present = self.has & ~(self.stale & drop)
 
@@ -407,4 +426,83 @@ class Edges:
                     d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
             d["sent"] = self.sent[(j, i)]
             out[f"{j}->{i}"] = d
+        return out
+
+
+class _DrawRing:
+    """One perfect agent→agent link whose sender's draws publish at ticks and stamps of their
+    own: the messages of its last ``cap`` ticks, each with a stamp per draw (NaN: that draw sent
+    nothing at that tick) and its fields per draw; the layout :class:`Read` and
+    :class:`GroupMsg` read (``stamp`` (cap, M), ``fields`` (cap, M, ...), ``cap``)."""
+
+    def __init__(self, M: int, cap: int) -> None:
+        self.M, self.cap = M, cap
+        self.n = 0  # messages (ticks with a send in some draw) so far
+        self.tick = -1  # the tick of message n − 1
+        self.stamp = np.full((cap, M), np.nan)
+        self.fields: dict[str, np.ndarray] = {}
+        self.sent = np.zeros(M, dtype=np.int64)
+
+
+class DrawInbox:
+    """The perfect agent→agent links of M draws whose agents step at packets of their own (sensor
+    links with jitter or loss, agent/batched.py ``_DrawSensorLinks``): a draw's agent may skip a
+    tick (idle) or stamp its message with an older packet's time, so every message carries a
+    stamp per draw, and a step at ``t`` reads in each draw the newest message stamped at or
+    before ``t`` (Inbox.at_or_before), held or dropped when stale as the runtime does."""
+
+    CAP = 2 * RECENT  # ticks kept per link: a draw's RECENT newest messages are among them unless it idled half of them
+
+    def __init__(self, sc: Scenario, M: int, ndim: dict[int, dict[str, int]]) -> None:
+        self.M = M
+        self.into = {i: tuple(sc.agent(i).neighbors) for i in sc.ids}
+        self.rings = {(j, i): _DrawRing(M, self.CAP) for i in sc.ids for j in sc.agent(i).neighbors}
+        self.ndim = ndim
+        self.max_age, self.drop = sc.stale.max_age, sc.stale.policy == "drop"
+        self.stale_terms = {i: np.zeros(M, dtype=np.int64) for i in sc.ids}
+
+    def send(self, j: int, i: int, G: np.ndarray, stamp: float, fields: Mapping[str, Any], tick: int) -> None:
+        """Agent j's draws ``G`` send ``fields`` to i at tick number ``tick``, stamped ``stamp``."""
+        ring = self.rings.get((j, i))
+        if ring is None:
+            return  # i does not listen to j
+        if ring.tick != tick:  # the tick's first send on this link: a new message
+            ring.tick = tick
+            ring.stamp[ring.n % ring.cap] = np.nan
+            ring.n += 1
+        slot = (ring.n - 1) % ring.cap
+        ring.stamp[slot, G] = stamp
+        ring.sent += G
+        for name, v in fields.items():
+            v = np.asarray(v, dtype=float)
+            if v.ndim <= self.ndim[i].get(name, v.ndim):  # one value for every draw
+                v = np.broadcast_to(v, (self.M, *v.shape))
+            buf = ring.fields.get(name)
+            if buf is None:
+                buf = ring.fields[name] = np.zeros((ring.cap, *v.shape))
+            buf[slot][G] = v[G]
+
+    def read(self, i: int, t: float) -> dict[int, Read]:
+        """What each in-neighbour's link of ``i`` holds for a step at ``t``, per draw: the newest
+        message stamped at or before ``t``."""
+        out = {}
+        for j in self.into[i]:
+            ring = self.rings[(j, i)]
+            if not ring.n:
+                out[j] = Read(ring, np.full(self.M, -1), t, self.max_age, self.drop)  # type: ignore[arg-type]
+                continue
+            live = np.arange(max(0, ring.n - ring.cap), ring.n)[:, None]
+            S = ring.stamp[live[:, 0] % ring.cap]  # (L, M), NaN: not sent
+            sent = ~np.isnan(S)
+            held = sent.sum(axis=0)
+            c = np.cumsum(sent[::-1], axis=0)[::-1]  # per entry: the draw's messages from it on
+            recent = sent & (c <= RECENT)  # the draw's RECENT newest (Inbox.recent's deque)
+            sel = np.where(recent & (S <= t), live, -1).max(axis=0)
+            # Every recent one newer than t: the oldest of them (Inbox.at_or_before)
+            oldest = np.where(sent & (c == np.minimum(RECENT, held)), live, -1).max(axis=0)
+            fall = (sel < 0) & (ring.sent > 0)
+            if np.any(fall & (held < RECENT) & (ring.sent > held)):
+                raise ValueError(f"agent {i}'s step at {t:g} s is behind every message of agent {j} the batched engine keeps ({ring.cap} ticks)")
+            sel = np.where(fall, oldest, sel)
+            out[j] = Read(ring, sel, t, self.max_age, self.drop)  # type: ignore[arg-type]
         return out

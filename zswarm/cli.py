@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("auto", "batched", "sim", "run"),
         default="auto",
         help="batched: the runs that share a schedule (differing in seeds, noise variances, starts) stepped together on arrays, the same rows as sim; "
-        "sim: each run a zswarm sim; run: real processes over Zenoh; auto (default): batched where it applies (the §3, §4.5 and §5.6 schemes on one clock, no sensor-link jitter or loss, no faults but link cuts), else sim, saying why",
+        "sim: each run a zswarm sim; run: real processes over Zenoh; auto (default): batched where it applies (the §3, §4.5 and §5.6 schemes on one clock, no faults but link cuts; see the README for the links), else sim, saying why",
     )
     sw.add_argument("--chunk", type=procutil.positive_int, default=None, help="runs stepped together per task of the batched engine (default: shared out among the jobs, at most 1000)")
     sw.add_argument("--jobs", type=procutil.positive_int, default=None, help="runs (or batches) at a time (default: the number of cores for sim and batched, 1 for run)")

@@ -580,6 +580,8 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
         pos = res.pos_coarse[n] if res.pos_coarse is not None else None
         final_pos = float(res.final_pos[n]) if res.final_pos is not None and np.isfinite(res.final_pos[n]) else None
         sent, cmds = res.edge_messages, res.commands
+        if res.draw_edge_messages is not None and res.draw_commands is not None:  # sensor jitter or loss: each draw sent its own count
+            sent, cmds = int(res.draw_edge_messages[n]), int(res.draw_commands[n])
         cmd_dropped, cmd_latency, cmd_expired = 0, 0.0 if cmds else None, 0
         if res.command_links is not None:  # emulated command links: the world's counters of this draw
             links = res.command_links.link_counters(n)
@@ -594,6 +596,8 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
             e_dropped = sum(v["dropped"] for v in elinks.values())
             e_latency = _median([v["latency_p50_ms"] for v in elinks.values() if "latency_p50_ms" in v])
             stale = int(sum(int(st[n]) for st in res.edge_links.stale_terms.values()))
+        if res.stale_terms is not None:
+            stale = int(res.stale_terms[n])
         rows.append(
             {
                 "final_attitude_error": float(res.final_att[n]) if np.isfinite(res.final_att[n]) else None,
@@ -606,7 +610,7 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
                 "edge_drop_ratio": e_dropped / sent if sent else None,
                 "edge_latency_p50_ms": e_latency,
                 "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1) if sync else None,
-                "sensor_dropped": 0,
+                "sensor_dropped": int(res.sensor_dropped[n]) if res.sensor_dropped is not None else 0,
                 "cmd_sent": c_sent if commanded else None,
                 "cmd_dropped": cmd_dropped if commanded else None,
                 "cmd_drop_ratio": cmd_dropped / c_sent if c_sent else None,

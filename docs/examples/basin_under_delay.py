@@ -9,7 +9,7 @@ loses its own commands.  Each cell is a basin folder under ``--out`` (an existin
 resumes), then one figure (the fraction that synchronizes with its 95 % Wilson interval, and
 the settle-time median with its 10-90 % band, against the delay) and a Markdown table::
 
-    .venv/bin/python docs/examples/basin_under_delay.py --draws 200 --out basins/delay --figure docs/figures/basin-delay-5.6.png
+    .venv/bin/python docs/examples/basin_under_delay.py --draws 1001 --out basins/delay --figure docs/figures/basin-delay-5.6.png
 """
 
 from __future__ import annotations

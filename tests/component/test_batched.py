@@ -83,24 +83,28 @@ def test_the_engine_says_what_it_cannot_run():
     for stem, why in cases.items():
         assert why in (batched.problem(load(TOPO / f"{stem}.toml")) or ""), stem
     text = (TOPO / "thesis-5.6-hybrid7.toml").read_text()
+    def why(stem, *flags):
+        return batched.problem(load(TOPO / f"{stem}.toml", [parse_override(f) for f in flags])) or ""
+
     refused = (
-        ("links.sensors.jitter_ms=2", "sensor links with jitter or loss"),
-        ("links.sensors.drop=0.1", "sensor links with jitter or loss"),
-        ('links.per_link."world->3".delay_ms=5', "sensor links of different delays"),
-        ("clock.jitter=0.001", "jitter"),
-        ("clock.rate=300", "off the sensor grid"),
+        (["links.sensors.jitter_ms=2", "links.sensors.reorder=true"], "reordering sensor links"),
+        (["links.sensors.drop=0.1", "links.delay_ms=3"], "beside emulated agent→agent links"),
+        (["links.sensors.drop=0.1", "links.commands.delay_ms=3"], "beside emulated command links"),
+        (["links.sensors.delay_ms=5", "links.drop=0.1"], "a sensor delay with emulated agent→agent links"),
+        (["clock.jitter=0.001"], "jitter"),
+        (["clock.rate=300"], "off the sensor grid"),
     )
-    for flag, why in refused:
-        got = batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override(flag)]))
-        assert got is not None and why in got, (flag, got)
-    with pytest.raises(batched.Unsupported, match="sensor links with jitter or loss"):
-        batched.run([load(TOPO / "thesis-5.6-hybrid7-noisy.toml", [parse_override("links.sensors.drop=0.1")])], 0.1, 1, 0.01)
-    # A fixed sensor delay: with perfect agent→agent links only
-    delayed = [parse_override("links.sensors.delay_ms=5")]
-    assert batched.problem(load(TOPO / "thesis-3.2-fixed8.toml", delayed)) is None  # on a prescribed truth too
-    assert "emulated agent→agent links" in (batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [*delayed, parse_override("links.drop=0.1")])) or "")
-    for flag in ("links.delay_ms=5", "links.commands.drop=0.1", 'links.per_link."2->3".jitter_ms=3', "links.sensors.delay_ms=5"):  # agent→agent and command links, a sensor delay
-        assert batched.problem(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override(flag)])) is None, flag
+    for flags, reason in refused:
+        got = why("thesis-5.6-hybrid7", *flags)
+        assert reason in got, (flags, got)
+    assert "on a prescribed truth" in why("thesis-3.2-fixed8", "links.sensors.drop=0.1")
+    with pytest.raises(batched.Unsupported, match="reordering sensor links"):
+        batched.run([load(TOPO / "thesis-5.6-hybrid7-noisy.toml", [parse_override("links.sensors.jitter_ms=1"), parse_override("links.sensors.reorder=true")])], 0.1, 1, 0.01)
+    # Run batched: agent→agent and command links; a fixed sensor delay (on a prescribed truth too);
+    # sensor jitter, loss, bursts and a delay of one agent's own on rigid bodies.
+    assert why("thesis-3.2-fixed8", "links.sensors.delay_ms=5") == ""
+    for flag in ("links.delay_ms=5", "links.commands.drop=0.1", 'links.per_link."2->3".jitter_ms=3', "links.sensors.delay_ms=5", "links.sensors.drop=0.1", "links.sensors.jitter_ms=2", "links.sensors.ge_p_gb=0.1", 'links.per_link."world->3".delay_ms=5'):
+        assert why("thesis-5.6-hybrid7", flag) == "", flag
     assert text  # the file the overrides were applied to
 
 

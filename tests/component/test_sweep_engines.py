@@ -160,3 +160,29 @@ def test_batched_rows_are_sims_with_a_sensor_delay(tmp_path, topology, vary, set
     if "continuous" not in topology:  # the continuous law sits on its undesired start for these 2 s
         assert len({r["final_attitude_error"] for r in sim_rows}) > 1
     assert all(r["sensor_dropped"] == "0" for r in sim_rows)
+
+
+@pytest.mark.parametrize(
+    ("topology", "vary", "sets"),
+    [
+        # Bernoulli loss and normal jitter: each draw's agents idle, catch up and stamp at packets of their own
+        ("thesis-5.6-hybrid7.toml", "links.sensors.drop=0.1,0.3", ["--set", "links.sensors.delay_ms=3", "--set", "links.sensors.jitter_ms=2"]),
+        # bursts (two or more packets lost: steps between packets read the history), noisy draws,
+        # the attitude history the velocity-free law integrates, with and without jitter
+        ("thesis-5.6-velocity-free7-noisy.toml", "links.sensors.jitter_ms=0,4", ["--set", "links.sensors.delay_ms=2", "--set", "links.sensors.ge_p_gb=0.1", "--set", "links.sensors.ge_p_bg=0.3"]),
+        # one agent's sensors later than the others' (a neighbour's message newer than a step), exponential jitter
+        ("thesis-5.6-hybrid7-noisy.toml", "links.sensors.drop=0,0.2", ["--set", 'links.per_link."world->3".delay_ms=7', "--set", 'links.sensors.jitter="exponential"', "--set", "links.sensors.jitter_ms=3"]),
+    ],
+)
+def test_batched_rows_are_sims_with_lossy_sensor_links(tmp_path, topology, vary, sets):
+    """Sensor links with jitter, loss and bursts (agent/batched.py _DrawSensorLinks): each draw
+    loses and delays the packets its sim run does, so its agents idle, catch up and step between
+    packets at its own ticks, read their neighbours' messages stamped at or before each step
+    (batched_links.DrawInbox) and send at their own ticks: the rows are sim's column by column,
+    lost sensor packets and messages sent included.  Each draw loses packets of its own (the two
+    repeats of a lossy point differ)."""
+    args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "1"]
+    sim_rows = _same_rows(tmp_path, topology, args)
+    lossy = [r for r in sim_rows if int(r["sensor_dropped"]) > 0]
+    assert len(lossy) >= 2 and len({r["sensor_dropped"] for r in lossy}) >= 2
+    assert len({r["edge_sent"] for r in sim_rows}) >= 3  # idle ticks: each draw sent its own count
