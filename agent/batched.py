@@ -49,7 +49,7 @@ from typing import Any, cast
 import numpy as np
 
 from agent import batched_links
-from agent.runtime import RECENT_EDGE_MESSAGES, setup, step_ends
+from agent.runtime import RECENT_EDGE_MESSAGES, setup, since, step_ends
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
 from world.plant import RigidBodyPlant
@@ -358,12 +358,7 @@ class _SensorLinks:
             return "first", [(t_end, k_m)]
         if t_end <= self.t_step:
             return "idle", []
-        recent: list[tuple[float, int]] = []  # Inbox.recent_packets(t_step)
-        for p in reversed(self.packets):
-            recent.append(p)
-            if p[0] <= self.t_step:
-                break
-        recent.reverse()
+        recent = since(self.packets, self.t_step, lambda p: p[0])  # Inbox.recent_packets(t_step)
         ends = step_ends(recent, self.t_step, t_end, self.period, recent[0][1])
         at = {k: t for t, k in recent}
         for t_e, k in ends:
@@ -389,6 +384,7 @@ class _DrawSensorLinks:
         self.period, self.sample_dt = period, sample_dt
         self.k0 = 0  # the sample of rel[0]
         self.rel: list[np.ndarray] = []  # per sample from k0: its release (M,), NaN where lost
+        self.R = np.zeros((0, M))  # rel as one array (K, M), as of the last deliver
         self.kmax = np.full(M, -1, dtype=np.int64)  # the newest packet delivered (FIFO: all the older ones not lost too)
         self.kfirst = np.full(M, -1, dtype=np.int64)
         self.delivered = np.zeros(M, dtype=np.int64)
@@ -403,7 +399,7 @@ class _DrawSensorLinks:
     def deliver(self, t_tick: float) -> None:
         """Each draw's inbox at the tick: FIFO releases do not decrease, so the packets delivered
         by then are every packet not lost up to the newest one due."""
-        R = np.array(self.rel)
+        R = self.R = np.array(self.rel)
         due = R <= t_tick  # NaN (lost) compares False
         ks = self.k0 + np.arange(len(R))[:, None]
         newest = np.where(due, ks, -1).max(axis=0)
@@ -431,7 +427,7 @@ class _DrawSensorLinks:
         packets)``: "first" (the first step, at the newest packet) or "steps" (step_ends' ends
         from ``t_step``); ``packets``: the samples the group's inbox holds from the one at or
         before ``t_step`` on (its history).  Draws with no packet yet, or none newer than their
-        last step (idle), are in no group: they neither step nor send."""
+        last step (idle), are in no group: they neither step nor send.  After :meth:`deliver`."""
         dt = self.sample_dt
         out = []
         t_m = self.kmax * dt  # a packet's stamp: k · sample_dt (World.next_time)
@@ -443,7 +439,7 @@ class _DrawSensorLinks:
             top = int(self.kmax[idx].max())
             if top > self.MAX_GAP:
                 raise Unsupported(f"a first sensor packet {top} samples into the run (the batched engine plans up to {self.MAX_GAP})")
-            got = ~np.isnan(np.array(self.rel)[: top + 1, idx]) & (np.arange(top + 1)[:, None] <= self.kmax[idx])
+            got = ~np.isnan(self.R[: top + 1, idx]) & (np.arange(top + 1)[:, None] <= self.kmax[idx])
             bits = (got.astype(np.int64) << np.arange(top + 1)[:, None]).sum(axis=0)
             groups, inv = np.unique(np.stack([self.kmax[idx], bits], axis=1), axis=0, return_inverse=True)
             inv = inv.reshape(-1)
@@ -457,7 +453,7 @@ class _DrawSensorLinks:
             W = self.kmax[idx] - self.kstep[idx]
             if int(W.max()) > self.MAX_GAP:
                 raise Unsupported(f"a draw {int(W.max())} sensor samples behind its newest packet (the batched engine plans up to {self.MAX_GAP})")
-            lost = np.isnan(np.array(self.rel)[:, idx])  # (K, len(idx))
+            lost = np.isnan(self.R[:, idx])  # (K, len(idx))
             bits = np.zeros(idx.size, dtype=np.int64)
             for w in range(1, int(W.max()) + 1):
                 row = np.clip(self.kstep[idx] + w - self.k0, 0, len(self.rel) - 1)
@@ -998,8 +994,7 @@ def run(
             for i in ids:  # the samples no later tick reads
                 lo = draw_links[i].oldest_needed()
                 draw_links[i].trim(lo)
-                while store[i] and next(iter(store[i])) < lo:
-                    del store[i][next(iter(store[i]))]
+                _drop_before(store[i], lo)
             if progress is not None and k % int(sc.sensor_rate) == 0:
                 progress(t)
             continue
@@ -1015,10 +1010,8 @@ def run(
             if sensor_links.packets:  # the oldest packet a step may still read: the older ones go
                 lo = sensor_links.packets[0][1]
                 for i in ids:
-                    while next(iter(store[i])) < lo:
-                        del store[i][next(iter(store[i]))]
-                while truths and next(iter(truths)) < lo:
-                    del truths[next(iter(truths))]
+                    _drop_before(store[i], lo)
+                _drop_before(truths, lo)
             mode, ends = sensor_links.plan(t_tick)
             if mode in ("none", "idle"):  # nothing measured yet, or nothing newer: no step, nothing sent (AgentNode.tick)
                 continue
@@ -1102,6 +1095,12 @@ def run(
         res.t_coarse = coarse_t
         res.att_coarse = np.array([coarse_v[g] for g in coarse_at]).T
     return res
+
+
+def _drop_before(by_sample: dict[int, Any], lo: int) -> None:
+    """Forget the samples before ``lo`` (keys inserted in sample order)."""
+    while by_sample and next(iter(by_sample)) < lo:
+        del by_sample[next(iter(by_sample))]
 
 
 def _tick_draws(

@@ -224,13 +224,7 @@ class Inbox:
     def recent_packets(self, after: float) -> list[dict[str, Any]]:
         """Sensor packets acquired after world time ``after`` (oldest first), with the
         newest one at or before it first when there is one."""
-        out: list[dict[str, Any]] = []
-        for p in reversed(self.packets):
-            out.append(p)
-            if p["t"] <= after:
-                break
-        out.reverse()
-        return out
+        return since(self.packets, after, lambda p: p["t"])
 
     def at_or_before(self, link: str, t_world: float) -> dict[str, Any] | None:
         """The newest message on an edge stamped at or before ``t_world``; if every
@@ -268,6 +262,19 @@ class Inbox:
 
 
 P = TypeVar("P")
+
+
+def since(items: Sequence[P], after: float, time: Callable[[P], float]) -> list[P]:
+    """The items of a time-ordered sequence acquired after ``after`` (oldest first), with the
+    newest one at or before it first when there is one (Inbox.recent_packets; the batched
+    engine's sensor-delay plan reads its packets the same way)."""
+    out: list[P] = []
+    for p in reversed(items):
+        out.append(p)
+        if time(p) <= after:
+            break
+    out.reverse()
+    return out
 
 
 def step_ends(packets: Sequence[tuple[float, P]], t_step: float, t_end: float, period: float, newest_before: P) -> list[tuple[float, P]]:
