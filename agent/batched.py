@@ -76,6 +76,11 @@ MEASURES = {"sync": "rigid_body", "tree": "prescribed", "leader_follower": "pres
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
 
 
+class HistorySplit(Exception):
+    """A law read the sensor history in a step whose draws hold different histories
+    (_tick_draws then steps them apart)."""
+
+
 class Unsupported(ValueError):
     """A scenario (or a request of its algorithm) that lockstep cannot reproduce."""
 
@@ -165,6 +170,9 @@ class BatchedView(timing.HistoryReads):
         self._inbox = inbox
         self._history = history
         self._packets = packets
+        # The per-draw sensor links' history of a step, built when a law reads it (_tick_draws):
+        # None, or a function that returns it (or raises HistorySplit).
+        self.history: Callable[[], deque[dict[str, Any]]] | None = None
         self._cache: dict[Any, Any] = {}
         # Emulated agent→agent links: what each in-neighbour's link holds per draw, and the draws
         # of the group being stepped (_step_groups); None: lockstep's perfect links (the inbox).
@@ -211,8 +219,9 @@ class BatchedView(timing.HistoryReads):
     def _samples(self, name: str) -> list[tuple[float, np.ndarray]]:
         key = ("s", name)
         if key not in self._cache:
-            if self._packets is not None:  # as the runtime's inbox.series
-                self._cache[key] = [(p["t"], p[name]) for p in self._packets if name in p]
+            packets = self._packets_now()
+            if packets is not None:  # as the runtime's inbox.series
+                self._cache[key] = [(p["t"], p[name]) for p in packets if name in p]
             elif name in self._history:
                 self._cache[key] = list(self._history[name])
             else:
@@ -220,8 +229,14 @@ class BatchedView(timing.HistoryReads):
         return self._cache[key]  # type: ignore[no-any-return]
 
     def _shared(self, what: str) -> deque[dict[str, Any]]:
-        if self._packets is None:
+        packets = self._packets_now()
+        if packets is None:
             raise Unsupported(f"{what} need the shared truth (prescribed motion)")
+        return packets
+
+    def _packets_now(self) -> deque[dict[str, Any]] | None:
+        if self.history is not None:
+            self._packets, self.history = self.history(), None
         return self._packets
 
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
@@ -1124,51 +1139,155 @@ def _tick_draws(
     sent_commands: np.ndarray,
 ) -> None:
     """Agent i's tick at ``t_tick`` in M draws whose sensor links lose and delay packets each its
-    own way (_DrawSensorLinks): each group of draws that takes the same steps (AgentNode.tick and
-    _advance) steps on its own packets and history, reads its neighbours' messages stamped at or
-    before each step (DrawInbox), and sends what it publishes, stamped with its last step's time;
-    idle draws send nothing.  ``u``: the torques the plant holds, (M, n, 3)."""
+    own way (_DrawSensorLinks): each draw takes its steps (AgentNode.tick and _advance) on its
+    own packets and history, reads its neighbours' messages stamped at or before each step
+    (DrawInbox), and after its last step sends what it publishes, stamped with that step's
+    time; idle draws send nothing.  ``u``: the torques the plant holds, (M, n, 3).
+
+    The draws' n-th steps are stepped together where they share what the law takes as one
+    value (the step's start and end, its packet, whether it is the tick's last: dt, t and the
+    command lead), on a sub-stack of those draws only (:func:`_take`, :func:`_put`); a step
+    whose law reads the sensor history is stepped apart for each history the draws hold."""
     links.deliver(t_tick)
-    stale = inbox.stale_terms[i]
-    for mode, G, t_step, ends, held in links.plan(t_tick):
-        v._packets = deque(store[k] for k in held)  # the group's inbox history (packets from the one at or before its last step)
-        outputs = None
+    plans = links.plan(t_tick)
+    done: list[tuple[np.ndarray, Any, int]] = []  # this tick's outputs: (draws, their sub-stack's, its rows)
+    merged: dict[tuple[Any, ...], list[int]] = {}
+    for n_p, (mode, _G, t_step, ends, held) in enumerate(plans):
+        prev = t_step
+        for r, (t_e, k_e) in enumerate(ends):
+            # A step between packets reads the history (View.relative_attitude): by history at once
+            apart = tuple(held) if t_e != k_e * links.sample_dt else ()
+            merged.setdefault((mode, prev, t_e, k_e, r == len(ends) - 1, apart), []).append(n_p)
+            prev = t_e
+    # In the order of their ends: a draw's steps end later and later, so each step comes after
+    # the draw's step before it, whichever of its tick's steps it is.
+    for (mode, prev, t_e, k_e, last, _), members in sorted(merged.items(), key=lambda kv: (kv[0][2], kv[0][1])):
+        histories = {tuple(plans[n_p][4]) for n_p in members}
+        try:
+            _round_step(i, a, t_tick, n_tick, [plans[n_p] for n_p in members], mode, prev, t_e, k_e, last, len(histories) > 1, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands, done)
+        except HistorySplit:
+            for h in histories:
+                _round_step(i, a, t_tick, n_tick, [plans[n_p] for n_p in members if tuple(plans[n_p][4]) == h], mode, prev, t_e, k_e, last, False, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands, done)
+
+
+def _round_step(
+    i: int,
+    a: int,
+    t_tick: float,
+    n_tick: int,
+    plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]],
+    mode: str,
+    prev: float,
+    t_e: float,
+    k_e: int,
+    last: bool,
+    mixed: bool,
+    store: Mapping[int, dict[str, Any]],
+    v: BatchedView,
+    mod: ModuleType,
+    g: Any,
+    part: Any,
+    states: dict[int, Any],
+    hybrid: bool,
+    jumps: np.ndarray,
+    agent_jumps: np.ndarray,
+    inbox: batched_links.DrawInbox,
+    u: np.ndarray,
+    sent_edges: np.ndarray,
+    sent_commands: np.ndarray,
+    done: list[tuple[np.ndarray, Any, int]],
+) -> None:
+    """One step, from ``prev`` to the packet ``k_e`` at ``t_e``, of the draws of ``plans``
+    (_tick_draws); ``last``: their tick's last, after which they publish.  ``mixed``: the draws
+    hold different histories (reading it raises HistorySplit)."""
+    M = len(jumps)
+    idx = np.flatnonzero(np.logical_or.reduce([p[1] for p in plans]))
+    whole = len(idx) == M
+    rows = idx if whole else _sub_rows(idx)
+    m, n = len(rows), len(idx)
+    sub = {i: states[i] if whole else _take(states[i], rows, M)}
+    g_sub = g if whole else _take_gains(g, rows, M)
+    sub_jumps, sub_agent, stale = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
+
+    def history() -> deque[dict[str, Any]]:
+        # The draws' inbox history (the packets from the one at or before their tick's first step on)
+        if mixed:
+            raise HistorySplit
+        return deque(store[k] if whole else _take(store[k], rows, M) for k in plans[0][4])
+
+    v.begin(t_e, store[k_e] if whole else _take(store[k_e], rows, M), first=mode == "first")
+    v._packets, v.history = None, history
+    out = None
+    try:
         if mode == "first":
-            t_e, k_e = ends[0]
-            v.begin(t_e, store[k_e], first=True)
             v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period  # AgentNode._begin
             if part is not None:
-                reads = inbox.read(i, t_e)  # heard_all: what has come (neighbor() reads nothing at the first step)
+                reads = inbox.read(i, t_e, rows)  # heard_all: what has come (neighbor() reads nothing at the first step)
                 if hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
                     v.dt = 0.0
-                    _step_groups(part, states, i, v, g, 0.0, jumps, agent_jumps, reads, stale, base=G)
+                    _step_groups(part, sub, i, v, g_sub, 0.0, sub_jumps, sub_agent, reads, stale)
                 if 0.0 < t_e <= 0.5:
                     v.dt = t_e  # the initial estimate (at t = 0) brought to the first packet: prediction only
-                    _step_groups(part, states, i, v, g, t_e, jumps, agent_jumps, reads, stale, base=G)
+                    _step_groups(part, sub, i, v, g_sub, t_e, sub_jumps, sub_agent, reads, stale)
         else:
-            prev = t_step
-            for n_e, (t_e, k_e) in enumerate(ends, 1):
-                v.begin(t_e, store[k_e], first=False)
-                # only the last step's command is sent (AgentNode._advance): a catch-up step's has no lead
-                v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period if n_e == len(ends) else 0.0
-                v.dt = t_e - prev
-                if part is not None:
-                    out = _step_groups(part, states, i, v, g, t_e - prev, jumps, agent_jumps, inbox.read(i, t_e), stale, base=G)
-                    outputs = out or outputs
-                prev = t_e
-        pub = mod.publish(states[i], outputs, v)
-        v._packets = None
-        if pub is None:
-            continue
-        t_stamp = v.t_world if pub.t is None else pub.t
-        sent_edges += G * len(pub.edges)
-        if pub.command is not None:
-            sent_commands += G
-            if "tau" in pub.command:
-                tau = np.broadcast_to(np.asarray(pub.command["tau"], dtype=float), (len(G), 3))
-                u[G, a] = tau[G]
-        for j, fields in pub.edges.items():
-            inbox.send(i, j, G, t_stamp, fields, n_tick)
+            # only the last step's command is sent (AgentNode._advance): a catch-up step's has no lead
+            v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period if last else 0.0
+            v.dt = t_e - prev
+            if part is not None:
+                out = _step_groups(part, sub, i, v, g_sub, t_e - prev, sub_jumps, sub_agent, inbox.read(i, t_e, rows), stale)
+    finally:
+        v._packets = v.history = None
+    jumps[idx] += sub_jumps[:n]
+    agent_jumps[idx] += sub_agent[:n]
+    inbox.stale_terms[i][idx] += stale[:n]
+    states[i] = sub[i] if whole else _put(states[i], sub[i], idx, M, m)
+    if out is not None:
+        done.append((idx, out, m))
+    if not last:
+        return
+    if out is None and mode != "first":
+        # No outputs at this step: the newest of an earlier step this tick, per draw (else None)
+        had = np.zeros(M, dtype=bool)
+        for d, _, _ in done:
+            had[d] = True
+        if had[idx].any():
+            for part_idx in (idx[had[idx]], idx[~had[idx]]):
+                if part_idx.size:
+                    _publish_rows(i, a, n_tick, part_idx, states, done if had[part_idx[0]] else [], v, mod, inbox, u, sent_edges, sent_commands, M)
+            return
+    _send(i, a, n_tick, idx, m, mod.publish(sub[i], out, v), v, inbox, u, sent_edges, sent_commands)
+
+
+def _publish_rows(i: int, a: int, n_tick: int, idx: np.ndarray, states: dict[int, Any], done: list[tuple[np.ndarray, Any, int]], v: BatchedView, mod: ModuleType, inbox: batched_links.DrawInbox, u: np.ndarray, sent_edges: np.ndarray, sent_commands: np.ndarray, M: int) -> None:
+    """Publish for the draws ``idx`` from their state, with their newest outputs of this tick
+    (``done``, oldest first; none: None)."""
+    rows = _sub_rows(idx)
+    outputs = None
+    for d, out, m in done:
+        outputs = _spread(out, d, M, m) if outputs is None else _put(outputs, out, d, M, m)
+    sub_out = None if outputs is None else _take(outputs, rows, M)
+    _send(i, a, n_tick, idx, len(rows), mod.publish(_take(states[i], rows, M), sub_out, v), v, inbox, u, sent_edges, sent_commands)
+
+
+def _send(i: int, a: int, n_tick: int, idx: np.ndarray, m: int, pub: Any, v: BatchedView, inbox: batched_links.DrawInbox, u: np.ndarray, sent_edges: np.ndarray, sent_commands: np.ndarray) -> None:
+    """What the draws ``idx`` publish (a sub-stack of ``m`` rows): their messages into the
+    inbox stamped with the step's time, their torques into the plant's."""
+    if pub is None:
+        return
+    t_stamp = v.t_world if pub.t is None else pub.t
+    sent_edges[idx] += len(pub.edges)
+    if pub.command is not None:
+        sent_commands[idx] += 1
+        if "tau" in pub.command:
+            u[idx, a] = np.broadcast_to(np.asarray(pub.command["tau"], dtype=float), (m, 3))[: len(idx)]
+    for j, fields in pub.edges.items():
+        inbox.send(i, j, idx, t_stamp, fields, n_tick, m)
+
+
+def _take_gains(g: Any, rows: np.ndarray, M: int) -> Any:
+    """The Gains of a sub-stack: the gains stacked per draw (draw_gains: (M, 1)) gathered."""
+    per = {f.name: getattr(g, f.name)[rows] for f in dataclasses.fields(g) if isinstance(getattr(g, f.name), np.ndarray) and getattr(g, f.name).shape == (M, 1)}
+    return dataclasses.replace(g, **per) if per else g
 
 
 def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray) -> Any:
@@ -1223,11 +1342,12 @@ def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, g
             for j in view.read_js:
                 r = reads[j]
                 stale_terms += G & r.has & r.stale
-            state = _where(G, st, state, M)
+            every = G is base and bool(base.all())  # one group of every draw: its results whole
+            state = st if every else _where(G, st, state, M)
             if out is None:
                 nones |= G
                 continue
-            outputs = out if outputs is None else _where(G, out, outputs, M)
+            outputs = out if outputs is None or every else _where(G, out, outputs, M)
             _count_jumps(out, jumps, agent_jumps, G)
     finally:
         view.group = None
@@ -1236,6 +1356,94 @@ def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, g
         raise Unsupported(f"agent {i}: its law had inputs in some draws and none in others at one tick (the batched engine cannot publish both)")
     states[i] = state
     return outputs
+
+
+# A sub-stack has at least this many rows (a group's draws, then copies of its first): its draw
+# axis is then never one of a law's own small axes (3-vectors, quaternions) when it is read back.
+SUB_ROWS = 16
+
+
+def _sub_rows(idx: np.ndarray) -> np.ndarray:
+    """The rows of a group's sub-stack: its draws ``idx``, padded to SUB_ROWS with the first."""
+    return idx if len(idx) >= SUB_ROWS else np.concatenate([idx, np.full(SUB_ROWS - len(idx), idx[0])])
+
+
+def _take(x: Any, rows: np.ndarray, M: int) -> Any:
+    """The draws ``rows`` of ``x`` (M draws), through dataclasses, mappings and tuples: every
+    array with the leading draw axis (shape[0] == M, as :func:`_where` and :func:`stack`) gathered;
+    what has no draw axis is the same in every draw and kept."""
+    if type(x) is np.ndarray:
+        return x[rows] if x.ndim and x.shape[0] == M else x
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return dataclasses.replace(x, **{f.name: _take(getattr(x, f.name), rows, M) for f in dataclasses.fields(x) if f.init})
+    if isinstance(x, Mapping):
+        return {k: _take(v, rows, M) for k, v in x.items()}
+    if isinstance(x, tuple | list):
+        return type(x)(_take(v, rows, M) for v in x)
+    if isinstance(x, np.ndarray) and x.ndim >= 1 and x.shape[0] == M:
+        return x[rows]
+    return x
+
+
+def _put(full: Any, sub: Any, idx: np.ndarray, M: int, m: int) -> Any:
+    """``full`` (M draws) with its draws ``idx`` replaced by the first ``len(idx)`` rows of
+    ``sub``, a sub-stack of ``m`` rows (:func:`_sub_rows`) stepped from ``_take(full, rows)``.
+    What the step created (a mapping's new key, a value that was None) is spread to every draw
+    from the group's rows (the others' values are valid numbers no later step of theirs reads
+    before setting its own: as :func:`_where` keeps ``a`` where ``b`` lacks it); a value
+    without a draw axis that now differs between draws gets one."""
+    if full is sub:
+        return full
+    if type(sub) is np.ndarray and type(full) is np.ndarray and sub.ndim and full.ndim and sub.shape[0] == m and full.shape == (M, *sub.shape[1:]):
+        out = full.astype(np.result_type(full, sub), copy=True)  # the common case: per draw, in both
+        out[idx] = sub[: len(idx)]
+        return out
+    if _kind(full) != _kind(sub):  # e.g. None before the first step
+        return _spread(sub, idx, M, m)
+    if dataclasses.is_dataclass(sub) and not isinstance(sub, type):
+        return dataclasses.replace(full, **{f.name: _put(getattr(full, f.name), getattr(sub, f.name), idx, M, m) for f in dataclasses.fields(sub) if f.init})
+    if isinstance(sub, Mapping):
+        return {k: (_put(full[k], v, idx, M, m) if k in full else _spread(v, idx, M, m)) for k, v in sub.items()}
+    if isinstance(sub, tuple | list):
+        if len(sub) != len(full):
+            return full  # e.g. the jump events of one group's step: counted per group, not merged (_where)
+        return type(sub)(_put(f, s, idx, M, m) for f, s in zip(full, sub, strict=True))
+    n = len(idx)
+    if isinstance(sub, np.ndarray) and sub.ndim >= 1 and sub.shape[0] == m:  # per draw
+        inner, part = sub.shape[1:], sub[:n]
+    else:  # the same in every draw of the group
+        if isinstance(full, np.ndarray) and full.ndim >= 1 and full.shape[0] == M and full.shape[1:] == np.shape(sub):
+            inner, part = np.shape(sub), sub
+        elif _same(full, sub):
+            return sub
+        else:
+            inner, part = np.shape(sub), sub
+    if isinstance(full, np.ndarray) and full.shape == (M, *inner):
+        out = full.astype(np.result_type(full, part), copy=True)
+    elif np.shape(full) == inner:
+        out = np.empty((M, *inner), dtype=np.result_type(full, part))
+        out[...] = full
+    else:
+        return _spread(sub, idx, M, m)
+    out[idx] = part
+    return out
+
+
+def _kind(x: Any) -> Any:
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return type(x)
+    if isinstance(x, Mapping):
+        return Mapping
+    if isinstance(x, tuple | list):
+        return tuple
+    return "number" if isinstance(x, np.ndarray | float | int | np.number) else type(x)
+
+
+def _spread(sub: Any, idx: np.ndarray, M: int, m: int) -> Any:
+    """A sub-stack's value for all M draws: draw ``idx[r]`` gets row r, every other draw row 0."""
+    where = np.zeros(M, dtype=np.int64)
+    where[idx] = np.arange(len(idx))
+    return _take(sub, where, m)
 
 
 def _where(G: np.ndarray, a: Any, b: Any, M: int) -> Any:

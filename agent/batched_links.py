@@ -296,12 +296,13 @@ class Read:
     """What in-neighbour j's link holds for receiver i at a tick, per draw: the newest message
     delivered (``sel``, the link's message index; −1: none yet), its stamp, and whether it is stale."""
 
-    __slots__ = ("has", "present", "ring", "sel", "stale", "stamp")
+    __slots__ = ("cols", "has", "present", "ring", "sel", "stale", "stamp")
 
-    def __init__(self, ring: _Ring, sel: np.ndarray, t: float, max_age: float, drop: bool) -> None:
+    def __init__(self, ring: _Ring, sel: np.ndarray, t: float, max_age: float, drop: bool, cols: np.ndarray | None = None) -> None:
         self.has = sel >= 0
         self.ring, self.sel = ring, sel
-        st = ring.stamp[sel % ring.cap] if ring.stamp.ndim == 1 else ring.stamp[sel % ring.cap, np.arange(len(sel))]  # 2-D: a stamp per draw (DrawInbox)
+        self.cols = np.arange(len(sel)) if cols is None else cols  # each entry's draw (a sub-stack's: DrawInbox.read)
+        st = ring.stamp[sel % ring.cap] if ring.stamp.ndim == 1 else ring.stamp[sel % ring.cap, self.cols]  # 2-D: a stamp per draw (DrawInbox)
         self.stamp = np.where(self.has, st, np.nan)
         self.stale = self.has & ((t - np.where(self.has, self.stamp, t)) > max_age)
         self.present = self.has & ~(self.stale & drop)
@@ -318,8 +319,7 @@ class GroupMsg:
     def __init__(self, j: int, read: Read, group: np.ndarray, t: float) -> None:
         first = int(np.flatnonzero(group)[0])
         sel = np.where(group & read.has, read.sel, read.sel[first]) % read.ring.cap
-        rows = np.arange(len(sel))
-        self.fields = {name: ring[sel, rows] for name, ring in read.ring.fields.items()}
+        self.fields = {name: ring[sel, read.cols] for name, ring in read.ring.fields.items()}
         st = read.stamp[group]
         self._j, self._t = j, t
         self._stamp = float(st[0]) if np.all(st == st[0]) else None
@@ -461,8 +461,9 @@ class DrawInbox:
         self.max_age, self.drop = sc.stale.max_age, sc.stale.policy == "drop"
         self.stale_terms = {i: np.zeros(M, dtype=np.int64) for i in sc.ids}
 
-    def send(self, j: int, i: int, G: np.ndarray, stamp: float, fields: Mapping[str, Any], tick: int) -> None:
-        """Agent j's draws ``G`` send ``fields`` to i at tick number ``tick``, stamped ``stamp``."""
+    def send(self, j: int, i: int, idx: np.ndarray, stamp: float, fields: Mapping[str, Any], tick: int, m: int) -> None:
+        """Agent j's draws ``idx`` send ``fields`` to i at tick number ``tick``, stamped ``stamp``;
+        ``fields`` per draw are a sub-stack of ``m`` rows, its first ``len(idx)`` those draws'."""
         ring = self.rings.get((j, i))
         if ring is None:
             return  # i does not listen to j
@@ -471,28 +472,28 @@ class DrawInbox:
             ring.stamp[ring.n % ring.cap] = np.nan
             ring.n += 1
         slot = (ring.n - 1) % ring.cap
-        ring.stamp[slot, G] = stamp
-        ring.sent += G
+        ring.stamp[slot, idx] = stamp
+        ring.sent[idx] += 1
         for name, v in fields.items():
             v = np.asarray(v, dtype=float)
             if v.ndim <= self.ndim[i].get(name, v.ndim):  # one value for every draw
-                v = np.broadcast_to(v, (self.M, *v.shape))
+                v = np.broadcast_to(v, (m, *v.shape))
             buf = ring.fields.get(name)
             if buf is None:
-                buf = ring.fields[name] = np.zeros((ring.cap, *v.shape))
-            buf[slot][G] = v[G]
+                buf = ring.fields[name] = np.zeros((ring.cap, self.M, *v.shape[1:]))
+            buf[slot, idx] = v[: len(idx)]
 
-    def read(self, i: int, t: float) -> dict[int, Read]:
-        """What each in-neighbour's link of ``i`` holds for a step at ``t``, per draw: the newest
-        message stamped at or before ``t``."""
+    def read(self, i: int, t: float, cols: np.ndarray) -> dict[int, Read]:
+        """What each in-neighbour's link of ``i`` holds for a step at ``t`` in the draws ``cols``
+        (a sub-stack's rows), per draw: the newest message stamped at or before ``t``."""
         out = {}
         for j in self.into[i]:
             ring = self.rings[(j, i)]
             if not ring.n:
-                out[j] = Read(ring, np.full(self.M, -1), t, self.max_age, self.drop)  # type: ignore[arg-type]
+                out[j] = Read(ring, np.full(len(cols), -1), t, self.max_age, self.drop, cols)  # type: ignore[arg-type]
                 continue
             live = np.arange(max(0, ring.n - ring.cap), ring.n)[:, None]
-            S = ring.stamp[live[:, 0] % ring.cap]  # (L, M), NaN: not sent
+            S = ring.stamp[live[:, 0] % ring.cap][:, cols]  # (L, len(cols)), NaN: not sent
             sent = ~np.isnan(S)
             held = sent.sum(axis=0)
             c = np.cumsum(sent[::-1], axis=0)[::-1]  # per entry: the draw's messages from it on
@@ -500,9 +501,10 @@ class DrawInbox:
             sel = np.where(recent & (S <= t), live, -1).max(axis=0)
             # Every recent one newer than t: the oldest of them (Inbox.at_or_before)
             oldest = np.where(sent & (c == np.minimum(RECENT, held)), live, -1).max(axis=0)
-            fall = (sel < 0) & (ring.sent > 0)
-            if np.any(fall & (held < RECENT) & (ring.sent > held)):
+            sent_all = ring.sent[cols]
+            fall = (sel < 0) & (sent_all > 0)
+            if np.any(fall & (held < RECENT) & (sent_all > held)):
                 raise ValueError(f"agent {i}'s step at {t:g} s is behind every message of agent {j} the batched engine keeps ({ring.cap} ticks)")
             sel = np.where(fall, oldest, sel)
-            out[j] = Read(ring, sel, t, self.max_age, self.drop)  # type: ignore[arg-type]
+            out[j] = Read(ring, sel, t, self.max_age, self.drop, cols)  # type: ignore[arg-type]
         return out
