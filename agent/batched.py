@@ -1004,7 +1004,7 @@ def run(
         if per_draw:
             assert draw_inbox is not None
             for i in ids:
-                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3), draw_edges, draw_commands)
+                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands)
             n_tick += 1
             for i in ids:  # the samples no later tick reads
                 lo = draw_links[i].oldest_needed()
@@ -1134,7 +1134,7 @@ def _tick_draws(
     jumps: np.ndarray,
     agent_jumps: np.ndarray,
     inbox: batched_links.DrawInbox,
-    u: np.ndarray,
+    u: np.ndarray | batched_links.Commands,
     sent_edges: np.ndarray,
     sent_commands: np.ndarray,
 ) -> None:
@@ -1142,7 +1142,8 @@ def _tick_draws(
     own way (_DrawSensorLinks): each draw takes its steps (AgentNode.tick and _advance) on its
     own packets and history, reads its neighbours' messages stamped at or before each step
     (DrawInbox), and after its last step sends what it publishes, stamped with that step's
-    time; idle draws send nothing.  ``u``: the torques the plant holds, (M, n, 3).
+    time; idle draws send nothing.  ``u``: the torques the plant holds, (M, n, 3), or the
+    command links (each draw's agent sends its own commands: Commands.send with rows).
 
     The draws' n-th steps are stepped together where they share what the law takes as one
     value (the step's start and end, its packet, whether it is the tick's last: dt, t and the
@@ -1192,7 +1193,7 @@ def _round_step(
     jumps: np.ndarray,
     agent_jumps: np.ndarray,
     inbox: batched_links.DrawInbox,
-    u: np.ndarray,
+    u: np.ndarray | batched_links.Commands,
     sent_edges: np.ndarray,
     sent_commands: np.ndarray,
     done: list[tuple[np.ndarray, Any, int]],
@@ -1253,12 +1254,12 @@ def _round_step(
         if had[idx].any():
             for part_idx in (idx[had[idx]], idx[~had[idx]]):
                 if part_idx.size:
-                    _publish_rows(i, a, n_tick, part_idx, states, done if had[part_idx[0]] else [], v, mod, inbox, u, sent_edges, sent_commands, M)
+                    _publish_rows(i, a, t_tick, n_tick, part_idx, states, done if had[part_idx[0]] else [], v, mod, inbox, u, sent_edges, sent_commands, M)
             return
-    _send(i, a, n_tick, idx, m, mod.publish(sub[i], out, v), v, inbox, u, sent_edges, sent_commands)
+    _send(i, a, n_tick, idx, m, mod.publish(sub[i], out, v), v, inbox, u, sent_edges, sent_commands, t_tick)
 
 
-def _publish_rows(i: int, a: int, n_tick: int, idx: np.ndarray, states: dict[int, Any], done: list[tuple[np.ndarray, Any, int]], v: BatchedView, mod: ModuleType, inbox: batched_links.DrawInbox, u: np.ndarray, sent_edges: np.ndarray, sent_commands: np.ndarray, M: int) -> None:
+def _publish_rows(i: int, a: int, t_tick: float, n_tick: int, idx: np.ndarray, states: dict[int, Any], done: list[tuple[np.ndarray, Any, int]], v: BatchedView, mod: ModuleType, inbox: batched_links.DrawInbox, u: np.ndarray | batched_links.Commands, sent_edges: np.ndarray, sent_commands: np.ndarray, M: int) -> None:
     """Publish for the draws ``idx`` from their state, with their newest outputs of this tick
     (``done``, oldest first; none: None)."""
     rows = _sub_rows(idx)
@@ -1266,12 +1267,13 @@ def _publish_rows(i: int, a: int, n_tick: int, idx: np.ndarray, states: dict[int
     for d, out, m in done:
         outputs = _spread(out, d, M, m) if outputs is None else _put(outputs, out, d, M, m)
     sub_out = None if outputs is None else _take(outputs, rows, M)
-    _send(i, a, n_tick, idx, len(rows), mod.publish(_take(states[i], rows, M), sub_out, v), v, inbox, u, sent_edges, sent_commands)
+    _send(i, a, n_tick, idx, len(rows), mod.publish(_take(states[i], rows, M), sub_out, v), v, inbox, u, sent_edges, sent_commands, t_tick)
 
 
-def _send(i: int, a: int, n_tick: int, idx: np.ndarray, m: int, pub: Any, v: BatchedView, inbox: batched_links.DrawInbox, u: np.ndarray, sent_edges: np.ndarray, sent_commands: np.ndarray) -> None:
+def _send(i: int, a: int, n_tick: int, idx: np.ndarray, m: int, pub: Any, v: BatchedView, inbox: batched_links.DrawInbox, u: np.ndarray | batched_links.Commands, sent_edges: np.ndarray, sent_commands: np.ndarray, t_tick: float) -> None:
     """What the draws ``idx`` publish (a sub-stack of ``m`` rows): their messages into the
-    inbox stamped with the step's time, their torques into the plant's."""
+    inbox stamped with the step's time, their torques into the plant's (``u``, (M, n, 3)) or
+    onto their command links (each draw its own next command: Commands.send)."""
     if pub is None:
         return
     t_stamp = v.t_world if pub.t is None else pub.t
@@ -1279,7 +1281,11 @@ def _send(i: int, a: int, n_tick: int, idx: np.ndarray, m: int, pub: Any, v: Bat
     if pub.command is not None:
         sent_commands[idx] += 1
         if "tau" in pub.command:
-            u[idx, a] = np.broadcast_to(np.asarray(pub.command["tau"], dtype=float), (m, 3))[: len(idx)]
+            tau = np.broadcast_to(np.asarray(pub.command["tau"], dtype=float), (m, 3))[: len(idx)]
+            if isinstance(u, batched_links.Commands):
+                u.send(a, t_tick, t_stamp, tau, idx)  # arrives at the tick, as the world stamps it
+            else:
+                u[idx, a] = tau
     for j, fields in pub.edges.items():
         inbox.send(i, j, idx, t_stamp, fields, n_tick, m)
 

@@ -37,7 +37,7 @@ def problem(sc: Scenario) -> str | None:
     draw receives the same packets at the same ticks: agent/batched.py ``_SensorLinks``); any
     other model (jitter, loss, bursts, a delay of its own per agent) on the rigid-body laws,
     each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
-    ``_DrawSensorLinks``), with perfect agent→agent and command links beside them."""
+    ``_DrawSensorLinks``), with perfect agent→agent links and any command links beside them."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
     if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
         return "cuts of sensor links"
@@ -54,8 +54,6 @@ def problem(sc: Scenario) -> str | None:
         return "sensor links with jitter, loss or delays of their own on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
     if agent_links:
         return "sensor links with jitter, loss or delays of their own beside emulated agent→agent links"
-    if any(sc.link_spec(f"{i}->world").active for i in sc.ids):
-        return "sensor links with jitter, loss or delays of their own beside emulated command links"
     return None
 
 
@@ -88,10 +86,11 @@ class LinkStack:
         used = set().union(*(purposes(s) for s in specs))
         self.streams = {p: [(np.random.default_rng(link_seed(seed, name, p)), sp.jitter) for seed, sp in zip(seeds, specs, strict=True)] for p in PURPOSES if p in used}
         self.buf: dict[str, np.ndarray] = {}
-        self.pos = AHEAD
+        self.pos = AHEAD  # the next number of every draw (admit) ...
+        self.at: np.ndarray | None = None  # ... or of each draw (admit with rows: draws that send at ticks of their own)
         self.bad = np.zeros(self.M, dtype=bool)
         self.last_release = np.full(self.M, -math.inf)
-        self.offered = 0
+        self.offered = np.zeros(self.M, dtype=np.int64)
         self.dropped = np.zeros(self.M, dtype=np.int64)
 
     def _next(self) -> dict[str, np.ndarray]:
@@ -102,32 +101,62 @@ class LinkStack:
         self.pos += 1
         return {p: b[:, k] for p, b in self.buf.items()}
 
-    def admit(self, t_arrival: float) -> np.ndarray:
+    def _next_of(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+        """The next numbers of the draws ``rows``, each draw at its own message count."""
+        if self.at is None:  # from now on a position per draw
+            if self.pos == AHEAD:
+                self.buf = {p: np.stack([block(r, p, kind, AHEAD) for r, kind in rngs]) for p, rngs in self.streams.items()}
+                self.pos = 0
+            self.at = np.full(self.M, self.pos, dtype=np.int64)
+        for m in rows[self.at[rows] == AHEAD]:  # a draw at the end of its block reads its next one
+            for p, rngs in self.streams.items():
+                r, kind = rngs[m]
+                self.buf[p][m] = block(r, p, kind, AHEAD)
+            self.at[m] = 0
+        k = self.at[rows]
+        self.at[rows] += 1
+        return {p: b[rows, k] for p, b in self.buf.items()}
+
+    def admit(self, t_arrival: float, rows: np.ndarray | None = None) -> np.ndarray:
         """Release times (M,) of a message arriving at ``t_arrival`` in every draw, NaN where lost
         (LinkModel.admit's operations, element by element; a draw whose spec is all zero gets its
-        arrival time, as LinkModel returns it)."""
-        self.offered += 1
+        arrival time, as LinkModel returns it).  ``rows``: only these draws send it, each its
+        own next numbers (its own n-th message); the release times (len(rows),) of theirs."""
+        if rows is not None and len(rows) == self.M and self.at is None:
+            rows = None  # every draw: all at the same count
+        r = slice(None) if rows is None else rows
+        self.offered[r] += 1
+        n = self.M if rows is None else len(rows)
         if not self.any_active:
-            return np.full(self.M, t_arrival)
-        x = self._next()
-        lost = x["drop"] < self.drop if "drop" in x else np.zeros(self.M, dtype=bool)  # drop = 0: never
+            return np.full(n, t_arrival)
+        if rows is None and self.at is not None:
+            rows = np.arange(self.M)
+            r = rows
+        x = self._next() if rows is None else self._next_of(rows)
+        drop, p_gb, p_bg, loss_good, loss_bad = self.drop[r], self.p_gb[r], self.p_bg[r], self.loss_good[r], self.loss_bad[r]
+        lost = x["drop"] < drop if "drop" in x else np.zeros(n, dtype=bool)  # drop = 0: never
         if "ge_move" in x:
-            on = self.p_gb > 0
-            self.bad = np.where(on, np.where(self.bad, x["ge_move"] >= self.p_bg, x["ge_move"] < self.p_gb), self.bad)
-            lost |= on & (x["ge_loss"] < np.where(self.bad, self.loss_bad, self.loss_good))
-        self.dropped += lost
+            on = p_gb > 0
+            bad = self.bad[r]
+            bad = np.where(on, np.where(bad, x["ge_move"] >= p_bg, x["ge_move"] < p_gb), bad)
+            self.bad[r] = bad
+            lost |= on & (x["ge_loss"] < np.where(bad, loss_bad, loss_good))
+        self.dropped[r] += lost
         if self.cuts is not None:  # after the model's draws, as LinkModel: outside a cut the link decides as without it
-            cut = ~lost & np.array([any(a <= t_arrival < b for a, b in c) for c in self.cuts])
-            self.cut += cut
+            cut = ~lost & np.array([any(a <= t_arrival < b for a, b in self.cuts[m]) for m in range(self.M)])[r]
+            self.cut[r] += cut
             lost = lost | cut
-        d = self.delay
+        delay = self.delay[r]
+        d = delay
         if "jitter" in x:
-            z = self.delay + self.jit * x["jitter"]
-            d = np.where(self.jit > 0, np.where(self.normal, np.maximum(0.0, z), z), self.delay)
+            jit = self.jit[r]
+            z = delay + jit * x["jitter"]
+            d = np.where(jit > 0, np.where(self.normal[r], np.maximum(0.0, z), z), delay)
+        last = self.last_release[r]
         release = t_arrival + d * 1e-3
-        release = np.where(self.reorder, release, np.maximum(release, self.last_release))
+        release = np.where(self.reorder[r], release, np.maximum(release, last))
         release = np.where(lost, np.nan, release)
-        self.last_release = np.where(lost, self.last_release, np.maximum(self.last_release, release))
+        self.last_release[r] = np.where(lost, last, np.maximum(last, release))
         return release
 
 
@@ -143,7 +172,7 @@ class Commands:
         self.links = [LinkStack([d.link_spec(f"{i}->world") for d in draws], f"{i}->world", seeds) for i in self.ids]
         self.policy = sc.commands
         self.counters = counters
-        self.pending: list[list[tuple[np.ndarray, int, float, np.ndarray]]] = [[] for _ in self.ids]  # per agent: (release (M,), seq, stamp, u (M, 3))
+        self.pending: list[list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = [[] for _ in self.ids]  # per agent: (release (M,), seq (M,), stamp (M,), u (M, 3))
         self.soonest = np.full(n, math.inf)  # per agent: the earliest release in flight
         self.u = np.zeros((M, n, 3))
         self.stamp = np.full((M, n), -math.inf)
@@ -154,26 +183,35 @@ class Commands:
         self.stale_s = np.zeros((M, n))
         self._flag = np.zeros((M, n), dtype=bool)
         # LinkCounter at admission (commands arrive in order, so only gaps count as lost).
-        self.sent = np.zeros(n, dtype=np.int64)
+        self.sent = np.zeros((M, n), dtype=np.int64)  # per draw: its agents may send at ticks of their own
         self.delivered = np.zeros((M, n), dtype=np.int64)
         self.first_seq = np.full((M, n), -1, dtype=np.int64)
         self.max_seq = np.full((M, n), -1, dtype=np.int64)
         self.latency: list[list[np.ndarray]] = [[] for _ in self.ids]  # per agent, per command: (M,) release − send stamp, NaN where lost
 
-    def send(self, a: int, t: float, stamp: float, u: np.ndarray) -> None:
+    def send(self, a: int, t: float, stamp: float, u: np.ndarray, rows: np.ndarray | None = None) -> None:
         """Agent (column) ``a`` sends the command ``u`` (M, 3) at its tick ``t``, stamped ``stamp``
-        (the world time of the measurements it was computed from)."""
-        seq = int(self.sent[a])
-        self.sent[a] += 1
-        release = self.links[a].admit(t)
+        (the world time of the measurements it was computed from).  ``rows``: only in these
+        draws (``u`` then theirs, (len(rows), 3)), each its own next command of the agent."""
+        seq = self.sent[:, a].copy()
+        if rows is None:
+            self.sent[:, a] += 1
+            release = self.links[a].admit(t)
+        else:
+            self.sent[rows, a] += 1
+            release = np.full(self.M, np.nan)
+            release[rows] = self.links[a].admit(t, rows)
+            full = np.zeros((self.M, 3))
+            full[rows] = u
+            u = full
         ok = ~np.isnan(release)
         self.delivered[:, a] += ok
         self.first_seq[:, a] = np.where(ok & (self.first_seq[:, a] < 0), seq, self.first_seq[:, a])
         self.max_seq[:, a] = np.where(ok, seq, self.max_seq[:, a])
         if self.counters:
-            self.latency[a].append(release - t)
+            self.latency[a].append(release - t)  # NaN where lost or not sent
         if ok.any():
-            self.pending[a].append((release, seq, stamp, np.broadcast_to(np.asarray(u, dtype=float), (self.M, 3)).copy()))
+            self.pending[a].append((release, seq, np.full(self.M, stamp), np.broadcast_to(np.asarray(u, dtype=float), (self.M, 3)).copy()))
             self.soonest[a] = min(self.soonest[a], float(np.nanmin(release)))
 
     def inputs_at(self, s: float, h: float) -> np.ndarray:
@@ -202,17 +240,17 @@ class Commands:
         order = np.argsort(key, axis=0, kind="stable")  # release order, ties in arrival order (the world's heap)
         cols = np.arange(self.M)
         U = np.stack([p[3] for p in pending])  # (K, M, 3)
-        S = np.array([p[1] for p in pending])
+        S = np.array([p[1] for p in pending])  # (K, M)
         T = np.array([p[2] for p in pending])
         for k in range(int(due.sum(axis=0).max())):
             e = order[k]  # per draw, its k-th release of this step
             take = due[e, cols]
-            newer = take & (S[e] > self.seq[:, a])
+            newer = take & (S[e, cols] > self.seq[:, a])
             self.superseded[:, a] += take & ~newer
             if newer.any():
                 self.u[newer, a] = U[e, cols][newer]
-                self.stamp[newer, a] = T[e][newer]
-                self.seq[newer, a] = S[e][newer]
+                self.stamp[newer, a] = T[e, cols][newer]
+                self.seq[newer, a] = S[e, cols][newer]
                 self.applied[newer, a] += 1
                 self._flag[newer, a] = False
         rel = np.where(due, np.nan, rel)
@@ -224,7 +262,7 @@ class Commands:
         """Draw ``m``'s summary ``links`` entries of the command links, as the world counts them."""
         out = {}
         for a, i in enumerate(self.ids):
-            d: dict[str, Any] = {"sent": int(self.sent[a]), "delivered": int(self.delivered[m, a])}
+            d: dict[str, Any] = {"sent": int(self.sent[m, a]), "delivered": int(self.delivered[m, a])}
             span = self.max_seq[m, a] - self.first_seq[m, a] + 1 if self.first_seq[m, a] >= 0 else 0
             d["dropped"] = int(span - self.delivered[m, a])
             lat = np.array([x[m] for x in self.latency[a]]) if self.latency[a] else np.zeros(0)
@@ -232,7 +270,7 @@ class Commands:
             if lat.size:
                 d["latency_p50_ms"] = 1e3 * float(np.percentile(lat, 50))
             if self.links[a].specs[m].active:
-                d["offered"], d["link_dropped"] = self.links[a].offered, int(self.links[a].dropped[m])
+                d["offered"], d["link_dropped"] = int(self.links[a].offered[m]), int(self.links[a].dropped[m])
             out[f"{i}->world"] = d
         return out
 

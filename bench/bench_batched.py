@@ -10,13 +10,14 @@ for M draws at once.  Sweeps (the §3 observers, which have no basin): one run t
 the report's files, the row), then M runs of the same sweep point (their seeds differ; the
 noiseless scenario, so they share a batch) on the batched engine (``sweep.run_batch``).
 Links (issue 46): the §5.6 basins once more with emulated command links (``--links``, by
-default 2 ms of delay and 10 % loss: each draw its own losses, sim's numbers), sim against
-batched the same way.
+default 2 ms of delay and 10 % loss: each draw its own losses, sim's numbers), and once with
+lossy sensor links (``--sensor-links``, by default 3 ms of delay, 2 ms of jitter and 10 % loss:
+each draw's agents step at packets of their own), sim against batched the same way.
 Printed: CPU seconds per draw and per agent-step, and the ratio sim / batched per draw.
 Process CPU time (time.process_time), so another process on the machine does not count;
 each figure is the best of REPEATS.
 
-    .venv/bin/python bench/bench_batched.py [--duration S] [--draws 1,10,100,1000] [--schemes a,b] [--sweep-schemes a,b] [--links "F=V F=V"]
+    .venv/bin/python bench/bench_batched.py [--duration S] [--draws 1,10,100,1000] [--schemes a,b] [--sweep-schemes a,b] [--links "F=V F=V"] [--sensor-links "F=V F=V"]
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import argparse
 import time
 from pathlib import Path
 
+from agent import batched
 from zswarm import basin, sweep
 from zswarm.report.base import THRESHOLDS
 from zswarm.scenario import load, parse_override
@@ -34,6 +36,7 @@ SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-
 SWEEP_SCHEMES = ("thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered", "thesis-3.3-moving5")
 REPEATS = 2
 LINKS = "links.commands.delay_ms=2 links.commands.drop=0.1"
+SENSOR_LINKS = "links.sensors.delay_ms=3 links.sensors.jitter_ms=2 links.sensors.drop=0.1"
 
 
 def cpu(f, *args):
@@ -52,20 +55,23 @@ def main() -> None:
     ap.add_argument("--schemes", default=",".join(SCHEMES), help="topologies/ stems of basins (default: the §5.6 laws and the §4.5 observers)")
     ap.add_argument("--sweep-schemes", default=",".join(SWEEP_SCHEMES), help="topologies/ stems of sweeps (default: the §3 observers; '' for none)")
     ap.add_argument("--links", default=LINKS, help=f"overrides of the link case of the §5.6 basins, space-separated (default {LINKS!r}; '' for none)")
+    ap.add_argument("--sensor-links", default=SENSOR_LINKS, help=f"overrides of the sensor-link case of the §5.6 basins (default {SENSOR_LINKS!r}; '' for none)")
     a = ap.parse_args()
     sizes = [int(x) for x in a.draws.split(",")]
     print(f"CPU per draw of {a.duration:g} s of world time (best of {REPEATS}); agent-steps per draw = agents x ticks")
     print(f"{'scheme':26} {'engine':14} {'M':>5} {'s/draw':>9} {'us/agent-step':>14} {'sim/batched':>12}")
-    cases = [(stem, "", str(ROOT / "topologies" / f"{stem}.toml")) for stem in a.schemes.split(",")]
-    sets = [parse_override(o) for o in a.links.split()]
-    for stem in a.schemes.split(",") if sets else ():
-        path = str(ROOT / "topologies" / f"{stem}.toml")
-        sc = load(path, sets)
-        if sc.info.command and any(sc.link_spec(f"{i}->world").active for i in sc.ids):  # the agents command the world
-            cases.append((stem, " +links", (sc.text, path)))
-    if sets:
-        print(f"+links: {a.links}")
-    for stem, tag, topo in cases:
+    cases: list[tuple[str, str, str | tuple[str, str], list]] = [(stem, "", str(ROOT / "topologies" / f"{stem}.toml"), []) for stem in a.schemes.split(",")]
+    for tag, text in ((" +links", a.links), (" +sensors", a.sensor_links)):
+        sets = [parse_override(o) for o in text.split()]
+        for stem in a.schemes.split(",") if sets else ():
+            path = str(ROOT / "topologies" / f"{stem}.toml")
+            sc = load(path, sets)
+            # the agents command the world (command links), or the world's bodies move by the laws (lossy sensor links)
+            if sc.info.command and batched.problem(sc) is None:
+                cases.append((stem, tag, (sc.text, path), sets))
+        if sets:
+            print(f"{tag.strip()}: {text}")
+    for stem, tag, topo, sets in cases:
         sc = load(topo) if isinstance(topo, str) else load(topo[1], sets)
         steps = len(sc.ids) * round(a.duration * sc.agent(1).clock.rate)
         sim_s = cpu(basin.run_draw, topo, 1, 1, a.duration, 0.01)

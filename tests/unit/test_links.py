@@ -163,6 +163,31 @@ def _same_as_models(LinkStack, AHEAD, specs):  # the class and constant, importe
         got = stack.admit(t)
         want = [m.admit(t) for m in models]
         assert [None if math.isnan(g) else float(g) for g in got] == want, k
-    assert stack.dropped.tolist() == [m.dropped for m in models] and stack.offered == n
+    assert stack.dropped.tolist() == [m.dropped for m in models] and stack.offered.tolist() == [n] * len(specs)
     assert stack.cut.tolist() == [m.cut for m in models]
     assert any(s.cuts for s in specs) <= (stack.cut.sum() > 0)
+
+
+@pytest.mark.parametrize("specs", [[LinkSpec(delay_ms=1.0, jitter_ms=2.0, drop=0.1, ge_p_gb=0.05, ge_p_bg=0.3)] * 5, [LinkSpec(), LinkSpec(delay_ms=2.0, jitter_ms=4.0, jitter="exponential", reorder=True), LinkSpec(drop=0.5, cuts=((1.0, 2.5),)), LinkSpec(delay_ms=3.0), LinkSpec(jitter_ms=1.0)]])
+def test_draws_that_send_at_ticks_of_their_own_each_take_their_own_numbers(specs):
+    """Agents whose sensor links lose packets step (and command) at ticks of their own, so a
+    draw's n-th command is sent when the others' are not: LinkStack.admit with ``rows`` gives
+    each of those draws its sim link's release for its own next message, first after messages
+    of every draw (one count for all), then across each draw's own block boundaries."""
+    from agent.batched_links import AHEAD, LinkStack
+
+    seeds = [3, 4, 11, 2**62 + 5, 9]
+    stack = LinkStack(specs, "2->world", seeds)
+    models = [LinkModel(sp, "2->world", s) for sp, s in zip(specs, seeds, strict=True)]
+    rng = np.random.default_rng(0)
+    sent = np.zeros(len(specs), dtype=int)
+    for k in range(2 * AHEAD + 200):
+        t = k * 0.01
+        rows = None if k < 40 else np.flatnonzero(rng.random(len(specs)) < (0.9, 0.5, 0.7, 0.95, 0.3))
+        got = stack.admit(t, rows)
+        idx = np.arange(len(specs)) if rows is None else rows
+        want = [models[m].admit(t) for m in idx]
+        assert [None if math.isnan(g) else float(g) for g in got] == want, k
+        sent[idx] += 1
+    assert sent.min() < AHEAD < sent.max()  # some draws crossed a block boundary, others not yet
+    assert stack.offered.tolist() == sent.tolist() and stack.dropped.tolist() == [m.dropped for m in models]
