@@ -305,7 +305,7 @@ class Result:
     edge_messages: int = 0  # agent -> agent messages sent (each delivered: lockstep), per draw
     commands: int = 0  # commands sent to the world, per draw
     command_links: batched_links.Commands | None = None  # emulated command links: their counters per draw (None: perfect, none lost, late or expired)
-    edge_links: batched_links.Edges | None = None  # emulated agent→agent links: their counters per draw (None: perfect)
+    edge_links: batched_links.Edges | batched_links.DrawInbox | None = None  # emulated agent→agent links: their counters per draw (link_counters, stale_terms; None: perfect)
     t_end: float = 0.0  # the last sample's time: what a link released by then was delivered
     # Sensor links with jitter or loss (_DrawSensorLinks): per draw, what its agents sent (they idle
     # in some draws and not in others), its lost sensor packets and its stale reads.
@@ -882,14 +882,19 @@ def run(
     # A sensor delay (the same on every sensor link: batched_links.problem): the packets' releases
     # and the steps the agents take on them, one plan for every agent and draw.
     sensor_spec = sc.link_spec(f"world->{ids[0]}")
-    per_draw = batched_links.per_draw_sensors(sc)  # jitter or loss: each draw's agents step at packets of their own
+    # Jitter or loss (or a delay beside emulated agent→agent links): each draw's agents step at packets of their own
+    per_draw = batched_links.per_draw_sensors(sc) or (sensor_spec.active and edge_links is not None)
+    if per_draw and any(d.link_spec(k).reorder for d in draws for k in [f"world->{i}" for i in ids] + [f"{j}->{i}" for i in ids for j in sc.agent(i).neighbors]):
+        raise Unsupported("reordering sensor or agent→agent links in a batch whose agents step at packets of their own (the batched engine runs them FIFO there)")
     sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active and not per_draw else None
     store: dict[int, dict[int, dict[str, Any]]] = {i: {} for i in ids}  # sample -> packet, while some tick may read it
     draw_links: dict[int, _DrawSensorLinks] = {}
     draw_inbox: batched_links.DrawInbox | None = None
     if per_draw:
         draw_links = {i: _DrawSensorLinks([d.link_spec(f"world->{i}") for d in draws], f"world->{i}", seeds, period, 1.0 / sc.sensor_rate) for i in ids}
-        draw_inbox = batched_links.DrawInbox(sc, M, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids})
+        ndim = {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}
+        draw_inbox = batched_links.DrawInbox(sc, M, ndim, *((draws, seeds) if edge_links is not None else (None, None)), counters=rows)
+        edge_links = None  # the draw inbox emulates them
     draw_edges = np.zeros(M, dtype=np.int64)  # per draw (per_draw): messages and commands sent
     draw_commands = np.zeros(M, dtype=np.int64)
     n_tick = 0
@@ -1003,6 +1008,7 @@ def run(
         t_tick = (k // tick_every) * period  # the agents' clock at this tick (AgentClock): the links' send and release times
         if per_draw:
             assert draw_inbox is not None
+            draw_inbox.now = t_tick
             for i in ids:
                 _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands)
             n_tick += 1
@@ -1102,6 +1108,8 @@ def run(
         res.edge_messages, res.commands = int(draw_edges.max()), int(draw_commands.max())
         res.sensor_dropped = np.sum([dl.dropped() for dl in draw_links.values()], axis=0)
         res.stale_terms = np.sum(list(draw_inbox.stale_terms.values()), axis=0)
+        if draw_inbox.links:
+            res.edge_links = draw_inbox  # the receivers' counters per draw (link_counters)
     if rows and grid_t:
         fin = np.array(final_v)  # (window, M, edges)
         t_fin = grid_all[grid_all >= final_from]
@@ -1287,7 +1295,7 @@ def _send(i: int, a: int, n_tick: int, idx: np.ndarray, m: int, pub: Any, v: Bat
             else:
                 u[idx, a] = tau
     for j, fields in pub.edges.items():
-        inbox.send(i, j, idx, t_stamp, fields, n_tick, m)
+        inbox.send(i, j, idx, t_stamp, fields, n_tick, m, t_tick)
 
 
 def _take_gains(g: Any, rows: np.ndarray, M: int) -> Any:

@@ -37,23 +37,24 @@ def problem(sc: Scenario) -> str | None:
     draw receives the same packets at the same ticks: agent/batched.py ``_SensorLinks``); any
     other model (jitter, loss, bursts, a delay of its own per agent) on the rigid-body laws,
     each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
-    ``_DrawSensorLinks``), with perfect agent→agent links and any command links beside them."""
+    ``_DrawSensorLinks``), with any command links and FIFO agent→agent links beside them
+    (``DrawInbox``); any sensor delay beside emulated agent→agent links is run that way too."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
     if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
         return "cuts of sensor links"
     if not any(s.active for s in sensor):
         return None
-    agent_links = any(sc.link_spec(f"{j}->{a.id}").active for a in sc.agents for j in a.neighbors)
-    if not per_draw_sensors(sc):
-        if agent_links:
-            return "a sensor delay with emulated agent→agent links (a step behind its tick reads a neighbour's message at its own time)"
+    agent_links = [sc.link_spec(f"{j}->{a.id}") for a in sc.agents for j in a.neighbors]
+    emulated = any(s.active for s in agent_links)
+    if not per_draw_sensors(sc) and not emulated:
         return None
+    # Each draw's agents step at packets of their own (agent/batched.py _DrawSensorLinks)
     if any(s.reorder for s in sensor):
         return "reordering sensor links (the batched engine runs FIFO sensor links)"
     if sc.plant == "prescribed":
-        return "sensor links with jitter, loss or delays of their own on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
-    if agent_links:
-        return "sensor links with jitter, loss or delays of their own beside emulated agent→agent links"
+        return "sensor links with jitter, loss or delays of their own, or a sensor delay beside emulated agent→agent links, on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
+    if any(s.reorder for s in agent_links):
+        return "reordering agent→agent links beside sensor links with jitter, loss or a delay (the batched engine runs them FIFO there)"
     return None
 
 
@@ -468,49 +469,93 @@ class Edges:
 
 
 class _DrawRing:
-    """One perfect agent→agent link whose sender's draws publish at ticks and stamps of their
-    own: the messages of its last ``cap`` ticks, each with a stamp per draw (NaN: that draw sent
-    nothing at that tick) and its fields per draw; the layout :class:`Read` and
-    :class:`GroupMsg` read (``stamp`` (cap, M), ``fields`` (cap, M, ...), ``cap``)."""
+    """One agent→agent link whose sender's draws publish at ticks and stamps of their own: the
+    messages of its last ``cap`` ticks, each with a stamp per draw (NaN: that draw sent nothing
+    at that tick), a release time per draw (NaN: not sent, or lost on an emulated link) and its
+    fields per draw; the layout :class:`Read` and :class:`GroupMsg` read (``stamp`` (cap, M),
+    ``fields`` (cap, M, ...), ``cap``)."""
 
     def __init__(self, M: int, cap: int) -> None:
         self.M, self.cap = M, cap
         self.n = 0  # messages (ticks with a send in some draw) so far
         self.tick = -1  # the tick of message n − 1
         self.stamp = np.full((cap, M), np.nan)
+        self.release = np.full((cap, M), np.nan)
         self.fields: dict[str, np.ndarray] = {}
         self.sent = np.zeros(M, dtype=np.int64)
+        self.gone = np.zeros(M, dtype=np.int64)  # messages no longer kept that each draw received
+
+    def grow(self) -> None:
+        """Twice the ticks kept (a message still in flight on the slot the next one takes)."""
+        cap = 2 * self.cap
+        live = np.arange(max(0, self.n - self.cap), self.n)
+
+        def moved(old: np.ndarray, fill: float) -> np.ndarray:
+            new = np.full((cap, *old.shape[1:]), fill)
+            new[live % cap] = old[live % self.cap]
+            return new
+
+        self.stamp, self.release = moved(self.stamp, np.nan), moved(self.release, np.nan)
+        self.fields = {k: moved(v, 0.0) for k, v in self.fields.items()}
+        self.cap = cap
 
 
 class DrawInbox:
-    """The perfect agent→agent links of M draws whose agents step at packets of their own (sensor
-    links with jitter or loss, agent/batched.py ``_DrawSensorLinks``): a draw's agent may skip a
-    tick (idle) or stamp its message with an older packet's time, so every message carries a
+    """The agent→agent links of M draws whose agents step at packets of their own (sensor links
+    with jitter, loss or a delay: agent/batched.py ``_DrawSensorLinks``): a draw's agent may skip
+    a tick (idle) or stamp its message with an older packet's time, so every message carries a
     stamp per draw, and a step at ``t`` reads in each draw the newest message stamped at or
-    before ``t`` (Inbox.at_or_before), held or dropped when stale as the runtime does."""
+    before ``t`` (Inbox.at_or_before) among the RECENT newest it has received, held or dropped
+    when stale as the runtime does.  With emulated agent→agent links (``draws``), each draw's
+    message is admitted to its link when sent (:meth:`LinkStack.admit` with rows: the draw's own
+    n-th message takes its own numbers) and received at its release (FIFO links)."""
 
-    CAP = 2 * RECENT  # ticks kept per link: a draw's RECENT newest messages are among them unless it idled half of them
+    CAP = 2 * RECENT  # ticks kept per link (more while messages are in flight): a draw's RECENT newest messages are among them unless it idled half of them
 
-    def __init__(self, sc: Scenario, M: int, ndim: dict[int, dict[str, int]]) -> None:
+    def __init__(self, sc: Scenario, M: int, ndim: dict[int, dict[str, int]], draws: Sequence[Scenario] | None = None, seeds: Sequence[int] | None = None, counters: bool = False) -> None:
         self.M = M
         self.into = {i: tuple(sc.agent(i).neighbors) for i in sc.ids}
         self.rings = {(j, i): _DrawRing(M, self.CAP) for i in sc.ids for j in sc.agent(i).neighbors}
         self.ndim = ndim
         self.max_age, self.drop = sc.stale.max_age, sc.stale.policy == "drop"
         self.stale_terms = {i: np.zeros(M, dtype=np.int64) for i in sc.ids}
+        self.now = 0.0  # the tick being stepped: what has been released by then is received
+        self.links: dict[tuple[int, int], LinkStack] = {}
+        if draws is not None and seeds is not None:
+            self.links = {k: LinkStack([d.link_spec(f"{k[0]}->{k[1]}") for d in draws], f"{k[0]}->{k[1]}", seeds) for k in self.rings}
+        # With counters: per link, each message's release per draw (NaN: not sent or lost), the
+        # draw's sequence number (-1: not sent) and its send time (the receivers' LinkCounter).
+        self.counters = counters
+        self.log: dict[tuple[int, int], list[tuple[np.ndarray, np.ndarray, float]]] = {k: [] for k in self.rings}
+        self._counts: dict[tuple[int, int], dict[str, np.ndarray]] | None = None
 
-    def send(self, j: int, i: int, idx: np.ndarray, stamp: float, fields: Mapping[str, Any], tick: int, m: int) -> None:
-        """Agent j's draws ``idx`` send ``fields`` to i at tick number ``tick``, stamped ``stamp``;
-        ``fields`` per draw are a sub-stack of ``m`` rows, its first ``len(idx)`` those draws'."""
+    def send(self, j: int, i: int, idx: np.ndarray, stamp: float, fields: Mapping[str, Any], tick: int, m: int, t_send: float) -> None:
+        """Agent j's draws ``idx`` send ``fields`` to i at tick number ``tick`` (time ``t_send``),
+        stamped ``stamp``; ``fields`` per draw are a sub-stack of ``m`` rows, its first
+        ``len(idx)`` those draws'."""
         ring = self.rings.get((j, i))
         if ring is None:
             return  # i does not listen to j
         if ring.tick != tick:  # the tick's first send on this link: a new message
             ring.tick = tick
-            ring.stamp[ring.n % ring.cap] = np.nan
+            slot = ring.n % ring.cap
+            if ring.n >= ring.cap and np.any(ring.release[slot] > t_send):  # still in flight in some draw (NaN compares False)
+                ring.grow()
+                slot = ring.n % ring.cap
+            elif ring.n >= ring.cap:
+                ring.gone += ~np.isnan(ring.release[slot])
+            ring.stamp[slot] = np.nan
+            ring.release[slot] = np.nan
             ring.n += 1
         slot = (ring.n - 1) % ring.cap
         ring.stamp[slot, idx] = stamp
+        link = self.links.get((j, i))
+        release = link.admit(t_send, idx) if link is not None else np.full(len(idx), t_send)
+        ring.release[slot, idx] = release
+        if self.counters:
+            rel, seq = np.full(self.M, np.nan), np.full(self.M, -1, dtype=np.int64)
+            rel[idx], seq[idx] = release, ring.sent[idx]
+            self.log[(j, i)].append((rel, seq, t_send))
         ring.sent[idx] += 1
         for name, v in fields.items():
             v = np.asarray(v, dtype=float)
@@ -523,7 +568,8 @@ class DrawInbox:
 
     def read(self, i: int, t: float, cols: np.ndarray) -> dict[int, Read]:
         """What each in-neighbour's link of ``i`` holds for a step at ``t`` in the draws ``cols``
-        (a sub-stack's rows), per draw: the newest message stamped at or before ``t``."""
+        (a sub-stack's rows), per draw: the newest message stamped at or before ``t`` among
+        those received by the tick (:attr:`now`)."""
         out = {}
         for j in self.into[i]:
             ring = self.rings[(j, i)]
@@ -532,17 +578,41 @@ class DrawInbox:
                 continue
             live = np.arange(max(0, ring.n - ring.cap), ring.n)[:, None]
             S = ring.stamp[live[:, 0] % ring.cap][:, cols]  # (L, len(cols)), NaN: not sent
-            sent = ~np.isnan(S)
+            sent = ring.release[live[:, 0] % ring.cap][:, cols] <= self.now  # received (NaN: not sent or lost)
             held = sent.sum(axis=0)
             c = np.cumsum(sent[::-1], axis=0)[::-1]  # per entry: the draw's messages from it on
-            recent = sent & (c <= RECENT)  # the draw's RECENT newest (Inbox.recent's deque)
+            recent = sent & (c <= RECENT)  # the draw's RECENT newest (Inbox.recent's deque; FIFO: in release order)
             sel = np.where(recent & (S <= t), live, -1).max(axis=0)
             # Every recent one newer than t: the oldest of them (Inbox.at_or_before)
             oldest = np.where(sent & (c == np.minimum(RECENT, held)), live, -1).max(axis=0)
-            sent_all = ring.sent[cols]
-            fall = (sel < 0) & (sent_all > 0)
-            if np.any(fall & (held < RECENT) & (sent_all > held)):
+            fall = (sel < 0) & (held > 0)
+            if np.any(fall & (held < RECENT) & (ring.gone[cols] > 0)):
                 raise ValueError(f"agent {i}'s step at {t:g} s is behind every message of agent {j} the batched engine keeps ({ring.cap} ticks)")
             sel = np.where(fall, oldest, sel)
             out[j] = Read(ring, sel, t, self.max_age, self.drop, cols)  # type: ignore[arg-type]
+        return out
+
+    def link_counters(self, m: int, t_end: float) -> dict[str, dict[str, Any]]:
+        """Draw ``m``'s summary ``links`` entries of the agent→agent links, as the receivers
+        count them (LinkCounter, FIFO: in sequence order) over the messages released by ``t_end``."""
+        if self._counts is None:
+            self._counts = {}
+            for k, log in self.log.items():
+                R = np.array([x[0] for x in log]).reshape(len(log), self.M)
+                Q = np.array([x[1] for x in log]).reshape(len(log), self.M)
+                T = np.array([x[2] for x in log])
+                D = R <= t_end  # NaN (not sent, lost) compares False
+                n = D.sum(axis=0)
+                first = np.where(D, Q, np.iinfo(np.int64).max).min(axis=0, initial=np.iinfo(np.int64).max)
+                last = np.where(D, Q, -1).max(axis=0, initial=-1)
+                self._counts[k] = {"n": n, "dropped": np.where(n > 0, last - first + 1 - n, 0), "R": R, "T": T, "D": D}
+        out = {}
+        for (j, i), c in self._counts.items():
+            d: dict[str, Any] = {"delivered": int(c["n"][m]), "dropped": int(c["dropped"][m]), "reordered": 0}
+            if c["n"][m]:
+                got = np.flatnonzero(c["D"][:, m])[-LATENCIES:]
+                q = np.percentile(c["R"][got, m] - c["T"][got], [50, 99])
+                d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
+            d["sent"] = int(self.rings[(j, i)].sent[m])
+            out[f"{j}->{i}"] = d
         return out

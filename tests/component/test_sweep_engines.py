@@ -172,6 +172,11 @@ def test_batched_rows_are_sims_with_a_sensor_delay(tmp_path, topology, vary, set
         ("thesis-5.6-velocity-free7-noisy.toml", "links.sensors.jitter_ms=0,4", ["--set", "links.sensors.delay_ms=2", "--set", "links.sensors.ge_p_gb=0.1", "--set", "links.sensors.ge_p_bg=0.3"]),
         # one agent's sensors later than the others' (a neighbour's message newer than a step), exponential jitter
         ("thesis-5.6-hybrid7-noisy.toml", "links.sensors.drop=0,0.2", ["--set", 'links.per_link."world->3".delay_ms=7', "--set", 'links.sensors.jitter="exponential"', "--set", "links.sensors.jitter_ms=3"]),
+        # lossy, late ξ messages beside: each draw's agents send their own messages at their own ticks,
+        # each its own n-th message's loss and delay, read at or before each step among those received
+        ("thesis-5.6-hybrid7.toml", "links.drop=0,0.3", ["--set", "links.sensors.drop=0.1", "--set", "links.sensors.jitter_ms=2", "--set", "links.delay_ms=12", "--set", "links.jitter_ms=5", "--set", "links.ge_p_gb=0.05", "--set", "links.ge_p_bg=0.3"]),
+        # a fixed sensor delay beside lossy messages and commands: the same plan, each draw its own messages
+        ("thesis-5.6-velocity-free7-noisy.toml", "links.drop=0,0.2", ["--set", "links.sensors.delay_ms=5", "--set", "links.delay_ms=3", "--set", "links.jitter_ms=2", "--set", "links.commands.delay_ms=2", "--set", "links.commands.drop=0.1"]),
         # lossy, late commands beside: each draw's agents send their own commands at their own ticks
         ("thesis-5.6-hybrid7.toml", "links.commands.drop=0,0.2", ["--set", "links.sensors.drop=0.15", "--set", "links.sensors.delay_ms=2", "--set", "links.sensors.jitter_ms=2", "--set", "links.commands.delay_ms=3", "--set", "links.commands.jitter_ms=1"]),
     ],
@@ -185,10 +190,13 @@ def test_batched_rows_are_sims_with_lossy_sensor_links(tmp_path, topology, vary,
     repeats of a lossy point differ)."""
     args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "1"]
     sim_rows = _same_rows(tmp_path, topology, args)
+    fixed = "links.sensors.delay_ms=5" in sets  # a fixed sensor delay: no packet lost, every draw steps at the same ticks
     lossy = [r for r in sim_rows if int(r["sensor_dropped"]) > 0]
-    assert len(lossy) >= 2 and len({r["sensor_dropped"] for r in lossy}) >= 2
+    assert len(lossy) >= 2 and len({r["sensor_dropped"] for r in lossy}) >= 2 or fixed
+    if vary.startswith("links.drop"):  # each draw lost messages of its own (the receivers' counters)
+        assert len({r["edge_dropped"] for r in sim_rows}) >= 3 and len({r["edge_latency_p50_ms"] for r in sim_rows}) >= 3
     # idle ticks: each draw sent its own count (a point's repeats have seeds of their own; the
     # points of one repeat share the sensor links' numbers, so only a varied sensor link gives more)
-    assert len({r["edge_sent"] for r in sim_rows}) >= (3 if "sensors" in vary else 2)
+    assert len({r["edge_sent"] for r in sim_rows}) >= (3 if "sensors" in vary else 1 if fixed else 2)
     if "commands.drop" in vary:  # each draw lost commands of its own, of its own count sent
         assert len({r["cmd_dropped"] for r in sim_rows}) >= 3 and len({r["cmd_sent"] for r in sim_rows}) >= 2
