@@ -399,10 +399,12 @@ class _DrawSensorLinks:
         self.period, self.sample_dt = period, sample_dt
         self.k0 = 0  # the sample of rel[0]
         self.rel: list[np.ndarray] = []  # per sample from k0: its release (M,), NaN where lost
+        self.kept: list[np.ndarray] = []  # per sample from k0: in the draw's inbox (M,) (released, and not behind a newer one)
         self.R = np.zeros((0, M))  # rel as one array (K, M), as of the last deliver
-        self.kmax = np.full(M, -1, dtype=np.int64)  # the newest packet delivered (FIFO: all the older ones not lost too)
-        self.kfirst = np.full(M, -1, dtype=np.int64)
-        self.delivered = np.zeros(M, dtype=np.int64)
+        self.got = np.zeros((0, M), dtype=bool)  # kept as one array
+        self.t_last = -math.inf  # the last deliver's tick
+        self.kmax = np.full(M, -1, dtype=np.int64)  # the newest packet in the inbox (LinkCounter.max_seq)
+        self.n_dropped = np.zeros(M, dtype=np.int64)  # LinkCounter.dropped: the gaps, less the packets that came late into one
         self.started = np.zeros(M, dtype=bool)
         self.t_step = np.zeros(M)  # the last step's end
         self.kstep = np.full(M, -1, dtype=np.int64)  # the newest packet at or before it
@@ -410,31 +412,51 @@ class _DrawSensorLinks:
     def offer(self, k: int, t: float) -> None:
         """Sample ``k``, sent at ``t`` (sim's bus delivers it at once: it arrives at ``t``)."""
         self.rel.append(self.stack.admit(t))
+        self.kept.append(np.zeros(self.M, dtype=bool))
 
     def deliver(self, t_tick: float) -> None:
-        """Each draw's inbox at the tick: FIFO releases do not decrease, so the packets delivered
-        by then are every packet not lost up to the newest one due."""
+        """Each draw's inbox at the tick: the packets released since the last tick, taken in
+        release order (Inbox._release's heap: ties in arrival order) through the receiver's
+        LinkCounter: a packet newer than the newest kept goes in (the gap before it counted
+        lost), an older one is late (reordering links) and stays out (a lost one it filled less)."""
         R = self.R = np.array(self.rel)
-        due = R <= t_tick  # NaN (lost) compares False
-        ks = self.k0 + np.arange(len(R))[:, None]
-        newest = np.where(due, ks, -1).max(axis=0)
-        self.delivered += (due & (ks > self.kmax)).sum(axis=0)
-        first = (self.kfirst < 0) & (newest >= 0)
-        self.kfirst = np.where(first, self.k0 + np.argmax(due, axis=0), self.kfirst)
-        self.kmax = np.maximum(self.kmax, newest)
+        new = (R <= t_tick) & ~(R <= self.t_last)  # NaN (lost) compares False
+        self.t_last = t_tick
+        got = self.got = np.array(self.kept)
+        if new.any():
+            order = np.argsort(np.where(new, R, np.inf), axis=0, kind="stable")  # per draw, in release order, ties by sample
+            cols = np.arange(self.M)
+            for r in range(int(new.sum(axis=0).max())):
+                e = order[r]
+                come = new[e, cols]
+                k = self.k0 + e
+                first = come & (self.kmax < 0)
+                newer = come & (k > self.kmax)
+                self.n_dropped += np.where(newer & ~first, k - self.kmax - 1, 0)
+                late = come & (k < self.kmax)
+                self.n_dropped = np.where(late, np.maximum(0, self.n_dropped - 1), self.n_dropped)
+                self.kmax = np.where(newer, k, self.kmax)
+                got[e[newer], cols[newer]] = True
+            for q in np.flatnonzero(new.any(axis=1)):
+                self.kept[q] = got[q]
 
     def dropped(self) -> np.ndarray:
-        """LinkCounter's lost count per draw: the gaps between the first and newest delivered."""
-        return np.where(self.kfirst >= 0, self.kmax - self.kfirst + 1 - self.delivered, 0)
+        """LinkCounter's lost count per draw."""
+        return self.n_dropped
 
     def oldest_needed(self) -> int:
-        """The oldest sample a later tick may read (a step's packet at or before its start)."""
+        """The oldest sample a later tick may read (a step's packet at or before its start) or
+        count (a reordered packet still in flight: it comes late, and the counter sees it)."""
         waiting = int(self.kmax.min()) + 1
+        flying = np.flatnonzero((self.R > self.t_last).any(axis=1))  # NaN (lost) compares False
+        if flying.size:
+            waiting = min(waiting, self.k0 + int(flying[0]))
         return min(waiting, int(self.kstep[self.started].min())) if self.started.any() else waiting
 
     def trim(self, lo: int) -> None:
         if lo > self.k0:
             del self.rel[: lo - self.k0]
+            del self.kept[: lo - self.k0]
             self.k0 = lo
 
     def plan(self, t_tick: float) -> list[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]]:
@@ -454,7 +476,7 @@ class _DrawSensorLinks:
             top = int(self.kmax[idx].max())
             if top > self.MAX_GAP:
                 raise Unsupported(f"a first sensor packet {top} samples into the run (the batched engine plans up to {self.MAX_GAP})")
-            got = ~np.isnan(self.R[: top + 1, idx]) & (np.arange(top + 1)[:, None] <= self.kmax[idx])
+            got = self.got[: top + 1, idx]  # (k0 = 0: nothing trimmed before a first step)
             bits = (got.astype(np.int64) << np.arange(top + 1)[:, None]).sum(axis=0)
             groups, inv = np.unique(np.stack([self.kmax[idx], bits], axis=1), axis=0, return_inverse=True)
             inv = inv.reshape(-1)
@@ -468,7 +490,7 @@ class _DrawSensorLinks:
             W = self.kmax[idx] - self.kstep[idx]
             if int(W.max()) > self.MAX_GAP:
                 raise Unsupported(f"a draw {int(W.max())} sensor samples behind its newest packet (the batched engine plans up to {self.MAX_GAP})")
-            lost = np.isnan(self.R[:, idx])  # (K, len(idx))
+            lost = ~self.got[:, idx]  # (K, len(idx)): lost, or came late behind a newer one
             bits = np.zeros(idx.size, dtype=np.int64)
             for w in range(1, int(W.max()) + 1):
                 row = np.clip(self.kstep[idx] + w - self.k0, 0, len(self.rel) - 1)
@@ -884,8 +906,8 @@ def run(
     sensor_spec = sc.link_spec(f"world->{ids[0]}")
     # Jitter or loss (or a delay beside emulated agent→agent links): each draw's agents step at packets of their own
     per_draw = batched_links.per_draw_sensors(sc) or (sensor_spec.active and edge_links is not None)
-    if per_draw and any(d.link_spec(k).reorder for d in draws for k in [f"world->{i}" for i in ids] + [f"{j}->{i}" for i in ids for j in sc.agent(i).neighbors]):
-        raise Unsupported("reordering sensor or agent→agent links in a batch whose agents step at packets of their own (the batched engine runs them FIFO there)")
+    if per_draw and any(d.link_spec(f"{j}->{i}").reorder for d in draws for i in ids for j in sc.agent(i).neighbors):
+        raise Unsupported("reordering agent→agent links in a batch whose agents step at packets of their own (the batched engine runs them FIFO there)")
     sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active and not per_draw else None
     store: dict[int, dict[int, dict[str, Any]]] = {i: {} for i in ids}  # sample -> packet, while some tick may read it
     draw_links: dict[int, _DrawSensorLinks] = {}

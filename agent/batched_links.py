@@ -37,8 +37,10 @@ def problem(sc: Scenario) -> str | None:
     draw receives the same packets at the same ticks: agent/batched.py ``_SensorLinks``); any
     other model (jitter, loss, bursts, a delay of its own per agent) on the rigid-body laws,
     each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
-    ``_DrawSensorLinks``), with any command links and FIFO agent→agent links beside them
-    (``DrawInbox``); any sensor delay beside emulated agent→agent links is run that way too."""
+    ``_DrawSensorLinks``; reordering or not: a packet behind a newer one stays out of the
+    inbox, as the runtime's LinkCounter keeps it out), with any command links and FIFO
+    agent→agent links beside them (``DrawInbox``); any sensor delay beside emulated
+    agent→agent links is run that way too."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
     if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
         return "cuts of sensor links"
@@ -49,10 +51,8 @@ def problem(sc: Scenario) -> str | None:
     if not per_draw_sensors(sc) and not emulated:
         return None
     # Each draw's agents step at packets of their own (agent/batched.py _DrawSensorLinks)
-    if any(s.reorder for s in sensor):
-        return "reordering sensor links (the batched engine runs FIFO sensor links)"
     if sc.plant == "prescribed":
-        return "sensor links with jitter, loss or delays of their own, or a sensor delay beside emulated agent→agent links, on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
+        return "sensor links with jitter, loss, reordering or delays of their own, or a sensor delay beside emulated agent→agent links, on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
     if any(s.reorder for s in agent_links):
         return "reordering agent→agent links beside sensor links with jitter, loss or a delay (the batched engine runs them FIFO there)"
     return None

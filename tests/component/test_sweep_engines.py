@@ -172,6 +172,9 @@ def test_batched_rows_are_sims_with_a_sensor_delay(tmp_path, topology, vary, set
         ("thesis-5.6-velocity-free7-noisy.toml", "links.sensors.jitter_ms=0,4", ["--set", "links.sensors.delay_ms=2", "--set", "links.sensors.ge_p_gb=0.1", "--set", "links.sensors.ge_p_bg=0.3"]),
         # one agent's sensors later than the others' (a neighbour's message newer than a step), exponential jitter
         ("thesis-5.6-hybrid7-noisy.toml", "links.sensors.drop=0,0.2", ["--set", 'links.per_link."world->3".delay_ms=7', "--set", 'links.sensors.jitter="exponential"', "--set", "links.sensors.jitter_ms=3"]),
+        # reordering sensor links: a packet behind a newer one stays out of the inbox (LinkCounter), lost
+        # counts less the late ones; exponential jitter larger than the sample period
+        ("thesis-5.6-hybrid7.toml", "links.sensors.reorder=false,true", ["--set", "links.sensors.delay_ms=2", "--set", "links.sensors.jitter_ms=6", "--set", 'links.sensors.jitter="exponential"', "--set", "links.sensors.drop=0.05"]),
         # lossy, late ξ messages beside: each draw's agents send their own messages at their own ticks,
         # each its own n-th message's loss and delay, read at or before each step among those received
         ("thesis-5.6-hybrid7.toml", "links.drop=0,0.3", ["--set", "links.sensors.drop=0.1", "--set", "links.sensors.jitter_ms=2", "--set", "links.delay_ms=12", "--set", "links.jitter_ms=5", "--set", "links.ge_p_gb=0.05", "--set", "links.ge_p_bg=0.3"]),
