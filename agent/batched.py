@@ -173,6 +173,9 @@ class BatchedView(timing.HistoryReads):
         # The per-draw sensor links' history of a step, built when a law reads it (_tick_draws):
         # None, or a function that returns it (or raises HistorySplit).
         self.history: Callable[[], deque[dict[str, Any]]] | None = None
+        # A step of draws that hold different histories: each one's samples (as sample numbers),
+        # the packet of a sample, and the group's packets of some samples (:meth:`series`)
+        self.mixed: tuple[list[tuple[int, ...]], Callable[[int], dict[str, Any]], Callable[[Sequence[int]], list[dict[str, Any]]]] | None = None
         self._cache: dict[Any, Any] = {}
         # Emulated agent→agent links: what each in-neighbour's link holds per draw, and the draws
         # of the group being stepped (_step_groups); None: lockstep's perfect links (the inbox).
@@ -233,6 +236,18 @@ class BatchedView(timing.HistoryReads):
         if packets is None:
             raise Unsupported(f"{what} need the shared truth (prescribed motion)")
         return packets
+
+    def series(self, name: str, t0: float, t1: float) -> list[tuple[float, np.ndarray]]:
+        """View.series; in a step of draws that hold different histories, the same for all
+        when their samples in the window are the same (the velocity-free law reads its
+        attitudes over each step), else HistorySplit."""
+        if self.mixed is None:
+            return super().series(name, t0, t1)
+        sets, packet, build = self.mixed
+        wins = {tuple(int(k) for _, k in timing.window([(packet(k)["t"], k) for k in h if name in packet(k)], t0, t1)) for h in sets}  # type: ignore[misc]
+        if len(wins) > 1:
+            raise HistorySplit
+        return [(p["t"], p[name]) for p in build(wins.pop())]
 
     def _packets_now(self) -> deque[dict[str, Any]] | None:
         if self.history is not None:
@@ -1248,6 +1263,8 @@ def _round_step(
 
     v.begin(t_e, store[k_e] if whole else _take(store[k_e], rows, M), first=mode == "first")
     v._packets, v.history = None, history
+    if mixed:
+        v.mixed = ([tuple(p[4]) for p in plans], store.__getitem__, lambda ks: [store[k] if whole else _take(store[k], rows, M) for k in ks])
     out = None
     try:
         if mode == "first":
@@ -1267,7 +1284,7 @@ def _round_step(
             if part is not None:
                 out = _step_groups(part, sub, i, v, g_sub, t_e - prev, sub_jumps, sub_agent, inbox.read(i, t_e, rows), stale)
     finally:
-        v._packets = v.history = None
+        v._packets = v.history = v.mixed = None
     jumps[idx] += sub_jumps[:n]
     agent_jumps[idx] += sub_agent[:n]
     inbox.stale_terms[i][idx] += stale[:n]
