@@ -1196,7 +1196,6 @@ def _tick_draws(
     whose law reads the sensor history is stepped apart for each history the draws hold."""
     links.deliver(t_tick)
     plans = links.plan(t_tick)
-    done: list[tuple[np.ndarray, Any, int]] = []  # this tick's outputs: (draws, their sub-stack's, its rows)
     merged: dict[tuple[Any, ...], list[int]] = {}
     for n_p, (mode, _G, t_step, ends, held) in enumerate(plans):
         prev = t_step
@@ -1207,52 +1206,53 @@ def _tick_draws(
             prev = t_e
     # In the order of their ends: a draw's steps end later and later, so each step comes after
     # the draw's step before it, whichever of its tick's steps it is.
+    c = _AgentTick(i, a, t_tick, n_tick, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands)
     for (mode, prev, t_e, k_e, last, _), members in sorted(merged.items(), key=lambda kv: (kv[0][2], kv[0][1])):
         histories = {tuple(plans[n_p][4]) for n_p in members}
         try:
-            _round_step(i, a, t_tick, n_tick, [plans[n_p] for n_p in members], mode, prev, t_e, k_e, last, len(histories) > 1, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands, done)
+            _round_step(c, [plans[n_p] for n_p in members], mode, prev, t_e, k_e, last, len(histories) > 1)
         except HistorySplit:
             for h in histories:
-                _round_step(i, a, t_tick, n_tick, [plans[n_p] for n_p in members if tuple(plans[n_p][4]) == h], mode, prev, t_e, k_e, last, False, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands, done)
+                _round_step(c, [plans[n_p] for n_p in members if tuple(plans[n_p][4]) == h], mode, prev, t_e, k_e, last, False)
 
 
-def _round_step(
-    i: int,
-    a: int,
-    t_tick: float,
-    n_tick: int,
-    plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]],
-    mode: str,
-    prev: float,
-    t_e: float,
-    k_e: int,
-    last: bool,
-    mixed: bool,
-    store: Mapping[int, dict[str, Any]],
-    v: BatchedView,
-    mod: ModuleType,
-    g: Any,
-    part: Any,
-    states: dict[int, Any],
-    hybrid: bool,
-    jumps: np.ndarray,
-    agent_jumps: np.ndarray,
-    inbox: batched_links.DrawInbox,
-    u: np.ndarray | batched_links.Commands,
-    sent_edges: np.ndarray,
-    sent_commands: np.ndarray,
-    done: list[tuple[np.ndarray, Any, int]],
-) -> None:
+@dataclass(slots=True)
+class _AgentTick:
+    """What agent i's steps of one tick read and write (_tick_draws' arguments), and ``done``:
+    this tick's outputs so far, (draws, their sub-stack's outputs, its rows)."""
+
+    i: int
+    a: int
+    t_tick: float
+    n_tick: int
+    store: Mapping[int, dict[str, Any]]
+    v: BatchedView
+    mod: ModuleType
+    g: Any
+    part: Any
+    states: dict[int, Any]
+    hybrid: bool
+    jumps: np.ndarray
+    agent_jumps: np.ndarray
+    inbox: batched_links.DrawInbox
+    u: np.ndarray | batched_links.Commands
+    sent_edges: np.ndarray
+    sent_commands: np.ndarray
+    done: list[tuple[np.ndarray, Any, int]] = dataclasses.field(default_factory=list)
+
+
+def _round_step(c: _AgentTick, plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]], mode: str, prev: float, t_e: float, k_e: int, last: bool, mixed: bool) -> None:
     """One step, from ``prev`` to the packet ``k_e`` at ``t_e``, of the draws of ``plans``
     (_tick_draws); ``last``: their tick's last, after which they publish.  ``mixed``: the draws
     hold different histories (reading it raises HistorySplit)."""
-    M = len(jumps)
+    i, store, v, states, inbox, part = c.i, c.store, c.v, c.states, c.inbox, c.part
+    M = len(c.jumps)
     idx = np.flatnonzero(np.logical_or.reduce([p[1] for p in plans]))
     whole = len(idx) == M
     rows = idx if whole else _sub_rows(idx)
     m, n = len(rows), len(idx)
     sub = {i: states[i] if whole else _take(states[i], rows, M)}
-    g_sub = g if whole else _take_gains(g, rows, M)
+    g_sub = c.g if whole else _take_gains(c.g, rows, M)
     sub_jumps, sub_agent, stale = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
 
     def history() -> deque[dict[str, Any]]:
@@ -1268,10 +1268,10 @@ def _round_step(
     out = None
     try:
         if mode == "first":
-            v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period  # AgentNode._begin
+            v.command_lead = max(0.0, c.t_tick - t_e) + 0.5 * v.period  # AgentNode._begin
             if part is not None:
                 reads = inbox.read(i, t_e, rows)  # heard_all: what has come (neighbor() reads nothing at the first step)
-                if hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
+                if c.hybrid:  # the jump sets on the initial state; the outputs are not sent (AgentNode._advance)
                     v.dt = 0.0
                     _step_groups(part, sub, i, v, g_sub, 0.0, sub_jumps, sub_agent, reads, stale)
                 if 0.0 < t_e <= 0.5:
@@ -1279,62 +1279,63 @@ def _round_step(
                     _step_groups(part, sub, i, v, g_sub, t_e, sub_jumps, sub_agent, reads, stale)
         else:
             # only the last step's command is sent (AgentNode._advance): a catch-up step's has no lead
-            v.command_lead = max(0.0, t_tick - t_e) + 0.5 * v.period if last else 0.0
+            v.command_lead = max(0.0, c.t_tick - t_e) + 0.5 * v.period if last else 0.0
             v.dt = t_e - prev
             if part is not None:
                 out = _step_groups(part, sub, i, v, g_sub, t_e - prev, sub_jumps, sub_agent, inbox.read(i, t_e, rows), stale)
     finally:
         v._packets = v.history = v.mixed = None
-    jumps[idx] += sub_jumps[:n]
-    agent_jumps[idx] += sub_agent[:n]
+    c.jumps[idx] += sub_jumps[:n]
+    c.agent_jumps[idx] += sub_agent[:n]
     inbox.stale_terms[i][idx] += stale[:n]
     states[i] = sub[i] if whole else _put(states[i], sub[i], idx, M, m)
     if out is not None:
-        done.append((idx, out, m))
+        c.done.append((idx, out, m))
     if not last:
         return
     if out is None and mode != "first":
         # No outputs at this step: the newest of an earlier step this tick, per draw (else None)
         had = np.zeros(M, dtype=bool)
-        for d, _, _ in done:
+        for d, _, _ in c.done:
             had[d] = True
         if had[idx].any():
             for part_idx in (idx[had[idx]], idx[~had[idx]]):
                 if part_idx.size:
-                    _publish_rows(i, a, t_tick, n_tick, part_idx, states, done if had[part_idx[0]] else [], v, mod, inbox, u, sent_edges, sent_commands, M)
+                    _publish_rows(c, part_idx, c.done if had[part_idx[0]] else [])
             return
-    _send(i, a, n_tick, idx, m, mod.publish(sub[i], out, v), v, inbox, u, sent_edges, sent_commands, t_tick)
+    _send(c, idx, m, c.mod.publish(sub[i], out, v))
 
 
-def _publish_rows(i: int, a: int, t_tick: float, n_tick: int, idx: np.ndarray, states: dict[int, Any], done: list[tuple[np.ndarray, Any, int]], v: BatchedView, mod: ModuleType, inbox: batched_links.DrawInbox, u: np.ndarray | batched_links.Commands, sent_edges: np.ndarray, sent_commands: np.ndarray, M: int) -> None:
+def _publish_rows(c: _AgentTick, idx: np.ndarray, done: list[tuple[np.ndarray, Any, int]]) -> None:
     """Publish for the draws ``idx`` from their state, with their newest outputs of this tick
     (``done``, oldest first; none: None)."""
+    M = len(c.jumps)
     rows = _sub_rows(idx)
     outputs = None
     for d, out, m in done:
         outputs = _spread(out, d, M, m) if outputs is None else _put(outputs, out, d, M, m)
     sub_out = None if outputs is None else _take(outputs, rows, M)
-    _send(i, a, n_tick, idx, len(rows), mod.publish(_take(states[i], rows, M), sub_out, v), v, inbox, u, sent_edges, sent_commands, t_tick)
+    _send(c, idx, len(rows), c.mod.publish(_take(c.states[c.i], rows, M), sub_out, c.v))
 
 
-def _send(i: int, a: int, n_tick: int, idx: np.ndarray, m: int, pub: Any, v: BatchedView, inbox: batched_links.DrawInbox, u: np.ndarray | batched_links.Commands, sent_edges: np.ndarray, sent_commands: np.ndarray, t_tick: float) -> None:
+def _send(c: _AgentTick, idx: np.ndarray, m: int, pub: Any) -> None:
     """What the draws ``idx`` publish (a sub-stack of ``m`` rows): their messages into the
     inbox stamped with the step's time, their torques into the plant's (``u``, (M, n, 3)) or
     onto their command links (each draw its own next command: Commands.send)."""
     if pub is None:
         return
-    t_stamp = v.t_world if pub.t is None else pub.t
-    sent_edges[idx] += len(pub.edges)
+    t_stamp = c.v.t_world if pub.t is None else pub.t
+    c.sent_edges[idx] += len(pub.edges)
     if pub.command is not None:
-        sent_commands[idx] += 1
+        c.sent_commands[idx] += 1
         if "tau" in pub.command:
             tau = np.broadcast_to(np.asarray(pub.command["tau"], dtype=float), (m, 3))[: len(idx)]
-            if isinstance(u, batched_links.Commands):
-                u.send(a, t_tick, t_stamp, tau, idx)  # arrives at the tick, as the world stamps it
+            if isinstance(c.u, batched_links.Commands):
+                c.u.send(c.a, c.t_tick, t_stamp, tau, idx)  # arrives at the tick, as the world stamps it
             else:
-                u[idx, a] = tau
+                c.u[idx, c.a] = tau
     for j, fields in pub.edges.items():
-        inbox.send(i, j, idx, t_stamp, fields, n_tick, m, t_tick)
+        c.inbox.send(c.i, j, idx, t_stamp, fields, c.n_tick, m, c.t_tick)
 
 
 def _take_gains(g: Any, rows: np.ndarray, M: int) -> Any:
