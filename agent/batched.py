@@ -406,8 +406,6 @@ class _DrawSensorLinks:
     same steps form a group (:meth:`plan`); a step between packets (two or more lost) reads the
     group's history there, as the runtime reads its inbox's."""
 
-    MAX_GAP = 62  # samples between a draw's last step and its newest packet (a group key's bits)
-
     def __init__(self, specs: Sequence[LinkSpec], name: str, seeds: Sequence[int], period: float, sample_dt: float) -> None:
         self.stack = batched_links.LinkStack(specs, name, seeds)
         self.M = M = len(seeds)
@@ -489,37 +487,31 @@ class _DrawSensorLinks:
             # at this tick: the draw had none before, so nothing was trimmed, k0 = 0).
             idx = np.flatnonzero(first)
             top = int(self.kmax[idx].max())
-            if top > self.MAX_GAP:
-                raise Unsupported(f"a first sensor packet {top} samples into the run (the batched engine plans up to {self.MAX_GAP})")
             got = self.got[: top + 1, idx]  # (k0 = 0: nothing trimmed before a first step)
-            bits = (got.astype(np.int64) << np.arange(top + 1)[:, None]).sum(axis=0)
-            groups, inv = np.unique(np.stack([self.kmax[idx], bits], axis=1), axis=0, return_inverse=True)
+            groups, inv = np.unique(np.concatenate([self.kmax[idx, None], got.T], axis=1), axis=0, return_inverse=True)
             inv = inv.reshape(-1)
-            for u, (km, b) in enumerate(groups):
+            for u, (km, *held) in enumerate(groups):
                 G = np.zeros(self.M, dtype=bool)
                 G[idx[inv == u]] = True
-                out.append(("first", G, 0.0, [(float(km * dt), int(km))], [k for k in range(int(km) + 1) if (int(b) >> k) & 1]))
+                out.append(("first", G, 0.0, [(float(km * dt), int(km))], [k for k in range(int(km) + 1) if held[k]]))
         steps = self.started & (t_m > self.t_step)
         idx = np.flatnonzero(steps)
         if idx.size:
             W = self.kmax[idx] - self.kstep[idx]
-            if int(W.max()) > self.MAX_GAP:
-                raise Unsupported(f"a draw {int(W.max())} sensor samples behind its newest packet (the batched engine plans up to {self.MAX_GAP})")
-            lost = ~self.got[:, idx]  # (K, len(idx)): lost, or came late behind a newer one
-            bits = np.zeros(idx.size, dtype=np.int64)
-            for w in range(1, int(W.max()) + 1):
-                row = np.clip(self.kstep[idx] + w - self.k0, 0, len(self.rel) - 1)
-                got = (w <= W) & ~lost[row, np.arange(idx.size)]
-                bits |= got.astype(np.int64) << (w - 1)
-            key = np.stack([self.kstep[idx], self.kmax[idx], self.t_step[idx].view(np.int64), bits], axis=1)
+            # Which of the samples after its last step each draw's inbox holds (w = 1 .. W): with
+            # the step and the newest packet, the group key (as many columns as the widest gap)
+            w = np.arange(1, int(W.max()) + 1)[:, None]
+            row = np.clip(self.kstep[idx] + w - self.k0, 0, len(self.rel) - 1)
+            held_w = (w <= W) & self.got[row, idx]  # (W, len(idx))
+            key = np.concatenate([np.stack([self.kstep[idx], self.kmax[idx], self.t_step[idx].view(np.int64)], axis=1), held_w.T], axis=1)
             groups, inv = np.unique(key, axis=0, return_inverse=True)
             inv = inv.reshape(-1)
-            for u, (ks, km, _, b) in enumerate(groups):
+            for u, (ks, km, _, *bits) in enumerate(groups):
                 members = idx[inv == u]
                 G = np.zeros(self.M, dtype=bool)
                 G[members] = True
                 t_step = float(self.t_step[members[0]])
-                held = [int(ks)] + [int(ks) + w for w in range(1, int(km - ks) + 1) if (int(b) >> (w - 1)) & 1]
+                held = [int(ks)] + [int(ks) + w for w in range(1, int(km - ks) + 1) if bits[w - 1]]
                 ends = step_ends([(k * dt, k) for k in held], t_step, float(km * dt), self.period, int(ks))
                 out.append(("steps", G, t_step, ends, held))
                 self.t_step[G] = ends[-1][0]
@@ -862,7 +854,12 @@ def run(
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
     torques = _Torques(M * n)
-    cmd_links = None if shared or not any(d.link_spec(f"{i}->world").active for d in draws for i in ids) else batched_links.Commands(draws, seeds, counters=rows)
+    # The world's command inbox per draw (batched_links.Commands) for emulated command links, and
+    # wherever each draw's agents step at packets of their own and so may skip ticks (sensor links
+    # with loss, jitter or cuts, or a sensor delay beside emulated agent→agent links: an agent that
+    # hears nothing sends nothing, and the world's stale-command policy acts on what it holds)
+    idling = batched_links.per_draw_sensors(sc) or (sc.link_spec(f"world->{ids[0]}").active and any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors))
+    cmd_links = None if shared or not (idling or any(d.link_spec(f"{i}->world").active for d in draws for i in ids)) else batched_links.Commands(draws, seeds, counters=rows)
     edge_links = batched_links.Edges(draws, seeds, rows, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}) if any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors) else None
     published = dict.fromkeys(ids, 0)  # messages each agent sent (its sequence number, as AgentNode.seq)
     period = 1.0 / sc.agent(ids[0]).clock.rate  # AgentClock: tick k at k · period
@@ -919,10 +916,8 @@ def run(
     # A sensor delay (the same on every sensor link: batched_links.problem): the packets' releases
     # and the steps the agents take on them, one plan for every agent and draw.
     sensor_spec = sc.link_spec(f"world->{ids[0]}")
-    # Jitter or loss (or a delay beside emulated agent→agent links): each draw's agents step at packets of their own
-    per_draw = batched_links.per_draw_sensors(sc) or (sensor_spec.active and edge_links is not None)
-    if per_draw and any(d.link_spec(f"{j}->{i}").reorder for d in draws for i in ids for j in sc.agent(i).neighbors):
-        raise Unsupported("reordering agent→agent links in a batch whose agents step at packets of their own (the batched engine runs them FIFO there)")
+    # Jitter, loss or cuts (or a delay beside emulated agent→agent links): each draw's agents step at packets of their own
+    per_draw = idling
     sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active and not per_draw else None
     store: dict[int, dict[int, dict[str, Any]]] = {i: {} for i in ids}  # sample -> packet, while some tick may read it
     draw_links: dict[int, _DrawSensorLinks] = {}

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from agent.runtime import RECENT_EDGE_MESSAGES as RECENT  # edge messages an agent keeps per link
-from zswarm.links import PURPOSES, LinkSpec, block, link_seed, purposes
+from zswarm.links import PURPOSES, LinkCounter, LinkSpec, block, link_seed, purposes
 from zswarm.scenario import Scenario
 
 AHEAD = 512  # numbers read ahead per stream and draw
@@ -35,15 +35,13 @@ def problem(sc: Scenario) -> str | None:
     The agent→agent and command links: every model, each draw its own randomness.  The sensor
     links (world→agent): one fixed delay on all of them on any family (every agent of every
     draw receives the same packets at the same ticks: agent/batched.py ``_SensorLinks``); any
-    other model (jitter, loss, bursts, a delay of its own per agent) on the rigid-body laws,
-    each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
+    other model (jitter, loss, bursts, cuts, a delay of its own per agent) on the rigid-body
+    laws, each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
     ``_DrawSensorLinks``; reordering or not: a packet behind a newer one stays out of the
-    inbox, as the runtime's LinkCounter keeps it out), with any command links and FIFO
-    agent→agent links beside them (``DrawInbox``); any sensor delay beside emulated
+    inbox, as the runtime's LinkCounter keeps it out), with any command links and agent→agent
+    links, FIFO or reordering, beside them (``DrawInbox``); any sensor delay beside emulated
     agent→agent links is run that way too."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
-    if any(f.kind == "cut" and str(f.link).startswith("world->") for f in sc.faults):
-        return "cuts of sensor links"
     if not any(s.active for s in sensor):
         return None
     agent_links = [sc.link_spec(f"{j}->{a.id}") for a in sc.agents for j in a.neighbors]
@@ -52,17 +50,16 @@ def problem(sc: Scenario) -> str | None:
         return None
     # Each draw's agents step at packets of their own (agent/batched.py _DrawSensorLinks)
     if sc.plant == "prescribed":
-        return "sensor links with jitter, loss, reordering or delays of their own, or a sensor delay beside emulated agent→agent links, on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
-    if any(s.reorder for s in agent_links):
-        return "reordering agent→agent links beside sensor links with jitter, loss or a delay (the batched engine runs them FIFO there)"
+        return "sensor links with jitter, loss, cuts, reordering or delays of their own, or a sensor delay beside emulated agent→agent links, on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
     return None
 
 
 def per_draw_sensors(sc: Scenario) -> bool:
-    """The sensor links draw random numbers (jitter, loss, bursts) or differ between agents: each
-    draw's agents then step at packets of their own (not one fixed delay for all)."""
+    """The sensor links draw random numbers (jitter, loss, bursts), lose packets in cuts or differ
+    between agents: each draw's agents then step at packets of their own (not one fixed delay
+    for all)."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
-    return any(s.active for s in sensor) and (any(purposes(s) for s in sensor) or len(set(sensor)) > 1)
+    return any(s.active for s in sensor) and (any(purposes(s) or s.cuts for s in sensor) or len(set(sensor)) > 1)
 
 
 class LinkStack:
@@ -441,8 +438,6 @@ class Edges:
         them (LinkCounter) over the messages released by ``t_end``: on a FIFO link in sequence
         order, so delivered, lost (the sequence's gaps) and the latencies of the last LATENCIES
         come from arrays; with reordering they are replayed, in release order, through a LinkCounter."""
-        from zswarm.links import LinkCounter
-
         if self._arrays is None:
             self._arrays = {k: (np.array([x.release for x in msgs]).reshape(len(msgs), self.M), np.array([x.seq for x in msgs]), np.array([x.t_send for x in msgs])) for k, msgs in self.msgs.items()}
         out = {}
@@ -508,7 +503,9 @@ class DrawInbox:
     before ``t`` (Inbox.at_or_before) among the RECENT newest it has received, held or dropped
     when stale as the runtime does.  With emulated agent→agent links (``draws``), each draw's
     message is admitted to its link when sent (:meth:`LinkStack.admit` with rows: the draw's own
-    n-th message takes its own numbers) and received at its release (FIFO links)."""
+    n-th message takes its own numbers) and received at its release; on a reordering link a
+    message released after a newer one of its draw stays out, as the receiver's LinkCounter
+    keeps it out."""
 
     CAP = 2 * RECENT  # ticks kept per link (more while messages are in flight): a draw's RECENT newest messages are among them unless it idled half of them
 
@@ -523,6 +520,7 @@ class DrawInbox:
         self.links: dict[tuple[int, int], LinkStack] = {}
         if draws is not None and seeds is not None:
             self.links = {k: LinkStack([d.link_spec(f"{k[0]}->{k[1]}") for d in draws], f"{k[0]}->{k[1]}", seeds) for k in self.rings}
+        self.reorders = {k for k, link in self.links.items() if link.reorder.any()}  # links on which some draw reorders
         # With counters: per link, each message's release per draw (NaN: not sent or lost), the
         # draw's sequence number (-1: not sent) and its send time (the receivers' LinkCounter).
         self.counters = counters
@@ -578,7 +576,14 @@ class DrawInbox:
                 continue
             live = np.arange(max(0, ring.n - ring.cap), ring.n)[:, None]
             S = ring.stamp[live[:, 0] % ring.cap][:, cols]  # (L, len(cols)), NaN: not sent
-            sent = ring.release[live[:, 0] % ring.cap][:, cols] <= self.now  # received (NaN: not sent or lost)
+            R = ring.release[live[:, 0] % ring.cap][:, cols]
+            sent = R <= self.now  # received (NaN: not sent or lost)
+            if (j, i) in self.reorders:
+                # A message released after a newer one of its draw is late: the receiver's
+                # LinkCounter keeps it out (Inbox._deliver; ties in send order, as the heap's).
+                # On a FIFO link releases never go back, so this keeps every one.
+                after = np.minimum.accumulate(np.where(np.isnan(R), np.inf, R)[::-1], axis=0)[::-1]
+                sent &= R <= np.vstack([after[1:], np.full((1, len(cols)), np.inf)])
             held = sent.sum(axis=0)
             c = np.cumsum(sent[::-1], axis=0)[::-1]  # per entry: the draw's messages from it on
             recent = sent & (c <= RECENT)  # the draw's RECENT newest (Inbox.recent's deque; FIFO: in release order)
@@ -594,7 +599,8 @@ class DrawInbox:
 
     def link_counters(self, m: int, t_end: float) -> dict[str, dict[str, Any]]:
         """Draw ``m``'s summary ``links`` entries of the agent→agent links, as the receivers
-        count them (LinkCounter, FIFO: in sequence order) over the messages released by ``t_end``."""
+        count them (LinkCounter) over the messages released by ``t_end``: on a FIFO link in
+        sequence order, from arrays; on a reordering one replayed in release order."""
         if self._counts is None:
             self._counts = {}
             for k, log in self.log.items():
@@ -609,7 +615,14 @@ class DrawInbox:
         out = {}
         for (j, i), c in self._counts.items():
             d: dict[str, Any] = {"delivered": int(c["n"][m]), "dropped": int(c["dropped"][m]), "reordered": 0}
-            if c["n"][m]:
+            if self.links[(j, i)].specs[m].reorder:  # replayed in release order (ties in send order) through a LinkCounter
+                counter = LinkCounter()
+                got = np.flatnonzero(c["D"][:, m])
+                log = self.log[(j, i)]
+                for e in got[np.argsort(c["R"][got, m], kind="stable")]:
+                    counter.see(int(log[e][1][m]), 0, float(c["R"][e, m] - c["T"][e]))
+                d = counter.as_dict() if got.size else d
+            elif c["n"][m]:
                 got = np.flatnonzero(c["D"][:, m])[-LATENCIES:]
                 q = np.percentile(c["R"][got, m] - c["T"][got], [50, 99])
                 d["latency_p50_ms"], d["latency_p99_ms"] = 1e3 * float(q[0]), 1e3 * float(q[1])
