@@ -48,7 +48,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from agent import batched_links
+from agent import batched_links, batched_stamps
+from agent.batched_stamps import mean_rows as _mean_rows
+from agent.batched_stamps import nanmean_of as _nanmean_of
 from agent.runtime import RECENT_EDGE_MESSAGES, setup, since, step_ends
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
@@ -73,6 +75,8 @@ PER_DRAW_SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # ... on a truth 
 # "leader_follower" (§3 observers): the prescribed motion, shared, measured by each follower's
 # own errors |R̃_i|_I and ||p̃_i|| (zswarm.report.recording.errors).
 MEASURES = {"sync": "rigid_body", "tree": "prescribed", "leader_follower": "prescribed"}
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
 
 
@@ -116,9 +120,6 @@ def problem(sc: Scenario) -> str | None:
     ratio = sc.sensor_rate / c.rate
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         return f"agent ticks off the sensor grid ({c.rate:g} Hz against {sc.sensor_rate:g} Hz)"
-    why = batched_links.problem(sc)
-    if why is not None:
-        return why
     if any(f.kind != "cut" for f in sc.faults):
         return "faults (other than link cuts)"
     if sc.part_rate_scale != 1.0:
@@ -165,7 +166,6 @@ class BatchedView(timing.HistoryReads):
         self.first = False
         self.sense: Mapping[str, Any] = {}
         self.sense_t = self.sense_t_world = 0.0
-        self.align = np.eye(3)  # steps end at the packet: nothing to turn
         self.stale_read: set[int] = set()
         self._inbox = inbox
         self._history = history
@@ -176,11 +176,25 @@ class BatchedView(timing.HistoryReads):
         # A step of draws that hold different histories: each one's samples (as sample numbers),
         # the packet of a sample, and the group's packets of some samples (:meth:`series`)
         self.mixed: tuple[list[tuple[int, ...]], Callable[[int], dict[str, Any]], Callable[[Sequence[int]], list[dict[str, Any]]]] | None = None
+        # On a shared truth with per-draw sensor links: each draw's inbox history (_Deep), read by parts
+        self.deep: _Deep | None = None
         self._cache: dict[Any, Any] = {}
         # Emulated agent→agent links: what each in-neighbour's link holds per draw, and the draws
         # of the group being stepped (_step_groups); None: lockstep's perfect links (the inbox).
         self.group: tuple[Mapping[int, batched_links.Read], np.ndarray] | None = None
         self.read_js: set[int] = set()  # in-neighbours this step read (their stale reads are counted)
+
+    @property
+    def align(self) -> np.ndarray:
+        """Body frame at the packet's time -> at the step's end (TickView.align): the identity
+        where the step ends at its packet, else the gyro history's rotation between (a step
+        between packets: sensor links that lost the packets there)."""
+        if "align" not in self._cache:
+            if self.t == self.sense_t or "gyro" not in self.sense:
+                self._cache["align"] = _EYE3
+            else:
+                self._cache["align"] = np.swapaxes(self.rotation(self.sense_t, self.t), -1, -2)
+        return self._cache["align"]  # type: ignore[no-any-return]
 
     def begin(self, t: float, sense: Mapping[str, Any], first: bool) -> None:
         self.t = self.t_world = t
@@ -241,6 +255,14 @@ class BatchedView(timing.HistoryReads):
         """View.series; in a step of draws that hold different histories, the same for all
         when their samples in the window are the same (the velocity-free law reads its
         attitudes over each step), else HistorySplit."""
+        if self.deep is not None:
+            parts = self.deep.parts(t0, t1)
+            if parts is not None:
+                wins = {tuple(int(round(t / self.deep.dt)) for t, _ in timing.window([(p["t"], p) for p in packets], t0, t1)) for _, packets in parts}
+                if len(wins) > 1:
+                    raise Unsupported(f"draws whose sensor histories differ in View.series({name!r}) over ({t0:g}, {t1:g}] (a shared truth's laws read them by parts)")
+                return [(p["t"], p[name]) for p in self.deep.take(sorted(wins.pop()))]
+            return super().series(name, t0, t1)
         if self.mixed is None:
             return super().series(name, t0, t1)
         sets, packet, build = self.mixed
@@ -249,17 +271,57 @@ class BatchedView(timing.HistoryReads):
             raise HistorySplit
         return [(p["t"], p[name]) for p in build(wins.pop())]
 
+    def _by_parts(self, key: Any, t0: float, t1: float, read: Callable[[], Any]) -> Any:
+        """A history read over ``[t0, t1]`` in draws that hold histories of their own (_Deep):
+        once per set of draws that hold the same samples around it, each on those samples
+        (the reads are local: _Deep.parts), the draws' values put together."""
+        if key in self._cache:
+            return self._cache[key]
+        parts = None if self.deep is None else self.deep.parts(t0, t1)
+        if parts is None:
+            value = read()
+        else:
+            outer, saved = self._cache, (self._packets, self.history)
+            got = []
+            try:
+                for rows, packets in parts:
+                    self._cache, self._packets, self.history = {}, deque(packets), None
+                    got.append((rows, read()))
+            finally:
+                self._cache, (self._packets, self.history) = outer, saved
+            if all(v is None for _, v in got):
+                value = None
+            elif any(v is None for _, v in got):
+                raise Unsupported(f"a history read at {t1:g} s that some draws have samples for and others not")
+            else:
+                first = np.asarray(got[0][1])
+                value = np.empty((self.deep.m, *first.shape[1:]))  # type: ignore[union-attr]
+                for rows, v in got:
+                    value[rows] = v
+        self._cache[key] = value
+        return value
+
+    def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
+        return self._by_parts(("mr", name, t0, t1), t0, t1, lambda: super(BatchedView, self).mean_rate(name, t0, t1))  # type: ignore[no-any-return]
+
+    def body_rate(self, t0: float, t1: float) -> np.ndarray:
+        return self._by_parts(("br", t0, t1), t0, t1, lambda: super(BatchedView, self).body_rate(t0, t1))  # type: ignore[no-any-return]
+
+    def rotation(self, t0: float, t1: float) -> np.ndarray:
+        lo, hi = min(t0, t1), max(t0, t1)
+        return self._by_parts(("rt", t0, t1), lo, hi, lambda: super(BatchedView, self).rotation(t0, t1))  # type: ignore[no-any-return]
+
     def _packets_now(self) -> deque[dict[str, Any]] | None:
         if self.history is not None:
             self._packets, self.history = self.history(), None
         return self._packets
 
     def relative_attitude(self, j: int, t_world: float) -> np.ndarray | None:
-        key = ("R", j, t_world)
-        if key not in self._cache:
+        def read() -> np.ndarray | None:
             hist = [(p["t"], p["rel_att"][j]) for p in self._shared("relative attitudes between samples") if j in p.get("rel_att", ())]
-            self._cache[key] = timing.relative_attitude_at(hist, self._rates("gyro"), t_world)
-        return self._cache[key]  # type: ignore[no-any-return]
+            return timing.relative_attitude_at(hist, self._rates("gyro"), t_world)
+
+        return self._by_parts(("R", j, t_world), t_world, t_world, read)  # type: ignore[no-any-return]
 
     def _rates(self, name: str) -> list[tuple[float, np.ndarray]]:
         """The samples that body_rate, rotation and mean_rate integrate: only a shared truth's."""
@@ -267,15 +329,15 @@ class BatchedView(timing.HistoryReads):
         return self._samples(name)
 
     def body_vector(self, key: int | str, t_world: float, unit: bool = True) -> np.ndarray | None:
-        ck = ("b", key, t_world, unit)
-        if ck not in self._cache:
+        def read() -> np.ndarray | None:
             packets = self._shared("body-frame vectors between samples")
             if isinstance(key, int):  # as the runtime's inbox.vectors
                 hist = [(p["t"], p["bearings"][key], p["gyro"]) for p in packets if key in p.get("bearings", ())]
             else:
                 hist = [(p["t"], p[key], p["gyro"]) for p in packets if key in p]
-            self._cache[ck] = timing.body_vector_at(hist, t_world, unit=unit)
-        return self._cache[ck]  # type: ignore[no-any-return]
+            return timing.body_vector_at(hist, t_world, unit=unit)
+
+        return self._by_parts(("b", key, t_world, unit), t_world, t_world, read)  # type: ignore[no-any-return]
 
 
 def stack(values: Sequence[Any]) -> Any:
@@ -328,11 +390,20 @@ class Result:
     draw_commands: np.ndarray | None = None
     sensor_dropped: np.ndarray | None = None
     stale_terms: np.ndarray | None = None
+    # On a prescribed truth with such links: each draw's basin measure on a grid of its own (t, v)
+    # (the tree family's: from the agents' latest first estimate on, batched_stamps.TreeErrors).
+    draw_grid: list[tuple[np.ndarray, np.ndarray]] | None = None
+
+    def series(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Draw ``n``'s basin measure and the times of its grid."""
+        if self.draw_grid is not None:
+            return self.draw_grid[n]
+        return self.t, self.max_rel[n]
 
 
 class _SensorLinks:
     """The world→agent sensor links of a batch with a sensor delay: one fixed delay on every
-    link (batched_links.problem), so every agent of every draw receives the same packets at the
+    link (batched_links.per_draw_sensors), so every agent of every draw receives the same packets at the
     same ticks, and the steps the runtime takes on them (AgentNode.tick: an idle tick when no
     packet is newer than the last step, catch-up steps after a late one) are one plan for all.
     Replays a LinkModel (the release times) and the Inbox's delivery at the ticks (held packets
@@ -349,7 +420,7 @@ class _SensorLinks:
     def offer(self, k: int, t: float) -> None:
         """Sample ``k``, sent at ``t``: held until its release (it arrives at ``t``: sim's bus)."""
         release = self.model.admit(t)
-        assert release is not None  # no loss (batched_links.problem)
+        assert release is not None  # no loss (batched_links.per_draw_sensors)
         self.held.append((release, k, t))
 
     def deliver(self, t_tick: float) -> list[tuple[float, int]]:
@@ -400,7 +471,7 @@ class _SensorLinks:
 
 class _DrawSensorLinks:
     """One agent's sensor link in M draws, each with its own delays and losses (jitter, Bernoulli
-    and Gilbert–Elliott loss, FIFO; batched_links.problem): the packets each draw's inbox holds
+    and Gilbert–Elliott loss, cuts, FIFO or reordering; batched_links.per_draw_sensors): the packets each draw's inbox holds
     at a tick (the link's LinkStack admits every sample for all draws when it is sent) and the
     steps that draw's AgentNode takes on them (AgentNode.tick, step_ends).  Draws that take the
     same steps form a group (:meth:`plan`); a step between packets (two or more lost) reads the
@@ -421,6 +492,7 @@ class _DrawSensorLinks:
         self.started = np.zeros(M, dtype=bool)
         self.t_step = np.zeros(M)  # the last step's end
         self.kstep = np.full(M, -1, dtype=np.int64)  # the newest packet at or before it
+        self.deep = False  # keep each draw's last HISTORY packets (a shared truth's laws read them: _Deep)
 
     def offer(self, k: int, t: float) -> None:
         """Sample ``k``, sent at ``t`` (sim's bus delivers it at once: it arrives at ``t``)."""
@@ -464,6 +536,12 @@ class _DrawSensorLinks:
         flying = np.flatnonzero((self.R > self.t_last).any(axis=1))  # NaN (lost) compares False
         if flying.size:
             waiting = min(waiting, self.k0 + int(flying[0]))
+        if self.deep and self.got.size:  # each draw's last HISTORY packets, as its inbox keeps them
+            got = self.got
+            left = np.cumsum(got[::-1], axis=0)[::-1]  # the draw's kept packets from each sample on
+            keep = (got & (left <= HISTORY)).any(axis=1)
+            if keep.any():
+                waiting = min(waiting, self.k0 + int(np.argmax(keep)))
         return min(waiting, int(self.kstep[self.started].min())) if self.started.any() else waiting
 
     def trim(self, lo: int) -> None:
@@ -519,6 +597,62 @@ class _DrawSensorLinks:
         self.t_step = np.where(first, t_m, self.t_step)
         self.kstep = np.where(first, self.kmax, self.kstep)
         self.started |= first
+        return out
+
+
+class _Deep:
+    """The sensor histories of a step's draws on a shared truth (rows: each sub-stack row's draw):
+    each draw's inbox holds its own last HISTORY packets (the runtime's Inbox.packets), which
+    differ between draws that lost different packets long before.  A history read is local (the
+    timing functions read the samples around their interval and the newest two), so the draws
+    are read in parts (:meth:`parts`), each the draws that hold the same samples there."""
+
+    def __init__(self, links: _DrawSensorLinks, rows: np.ndarray, store: Mapping[int, dict[str, Any]], M: int) -> None:
+        self.rows, self.store, self.M, self.m = rows, store, M, len(rows)
+        self.k0, self.dt = links.k0, links.sample_dt
+        got = links.got[:, rows] & ((links.k0 + np.arange(len(links.got)))[:, None] <= links.kmax[rows][None, :])
+        got &= np.cumsum(got[::-1], axis=0)[::-1] <= HISTORY  # the last HISTORY (a deque's maxlen)
+        self.got = got
+        self.cum = np.cumsum(got, axis=0)  # (K, m): each row's packets up to each sample
+        self.ts = (links.k0 + np.arange(len(got))) * links.sample_dt  # k · sample_dt, as World.next_time
+        self.uniform = bool(np.all(got == got[:, :1]))
+
+    def take(self, samples: Sequence[int], rows: np.ndarray | None = None) -> list[dict[str, Any]]:
+        draws = self.rows if rows is None else self.rows[rows]
+        return [_take(self.store[k], draws, self.M) for k in samples]
+
+    def history(self) -> deque[dict[str, Any]]:
+        """The whole history, for draws that all hold the same (else HistorySplit)."""
+        if not self.uniform:
+            raise HistorySplit
+        return deque(self.take((self.k0 + np.flatnonzero(self.got[:, 0])).tolist()))
+
+    def parts(self, t0: float, t1: float) -> list[tuple[np.ndarray, list[dict[str, Any]]]] | None:
+        """``(rows, packets)`` per set of rows that hold the same samples around ``[t0, t1]``:
+        from two before the newest at or before t0 to two after the newest at or before t1, and
+        the history's newest two (None: every row holds the same history)."""
+        if self.uniform:
+            return None
+        cum, K = self.cum, len(self.ts)
+        s0, s1 = (int(np.searchsorted(self.ts, t + 1e-12, side="right")) - 1 for t in (t0, t1))
+        c0 = cum[s0] if s0 >= 0 else np.zeros(self.m, dtype=np.int64)
+        c1 = cum[min(s1, K - 1)] if s1 >= 0 else np.zeros(self.m, dtype=np.int64)
+        N = cum[-1]
+        lo = np.maximum(c0 - 3, 0)
+        hi = np.minimum(c1 + 2, N)
+        tail = np.maximum(hi, N - 2)  # the newest two, beyond the window
+        width = int(np.max(hi - lo, initial=0)) + 2
+        key = np.full((self.m, width), -1, dtype=np.int64)
+        for o in range(width):
+            pos = np.where(lo + o < hi, lo + o, tail + (o - (hi - lo)))
+            ok = (lo + o < hi) | ((o - (hi - lo) >= 0) & (pos < N))
+            key[:, o] = np.where(ok, np.argmax(cum >= (pos + 1)[None, :], axis=0), -1)
+        uniq, inv = np.unique(key, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        out = []
+        for u, row in enumerate(uniq):
+            rows = np.flatnonzero(inv == u)
+            out.append((rows, self.take((self.k0 + row[row >= 0]).tolist(), rows)))
         return out
 
 
@@ -699,12 +833,6 @@ class _Ticks:
         return self.basin_series(res)
 
 
-def _mean_rows(x: np.ndarray) -> np.ndarray:
-    """np.mean of each row of (M, K) as of a 1-D array of its K values (the same sum: a
-    contiguous row), the way the report averages one run's values over its last second."""
-    return np.ascontiguousarray(x).mean(axis=1)
-
-
 class _FollowerErrors(_Ticks):
     """The leader–follower family (zswarm.report.base, recording.errors): each follower's
     |R̃_i|_I = sqrt(tr(I − R_i R̂_i^T)/4) and ||p̃_i|| = ||p_i − R_i R̂_i^T p̂_i|| (3.15) at its ticks;
@@ -752,17 +880,6 @@ class _FollowerErrors(_Ticks):
             out.append(np.mean(cols, axis=0))
         res.t_coarse, res.att_coarse, res.pos_coarse = self.coarse_t, out[0], out[1]
         return res
-
-
-def _nanmean_of(values: Sequence[np.ndarray]) -> np.ndarray:
-    """zswarm.report.series.nanmean per draw (the mean of the finite values; NaN where none)."""
-    x = np.array(values).T  # (M, F)
-    fine = np.all(np.isfinite(x), axis=1)
-    out = _mean_rows(x)
-    for m in np.flatnonzero(~fine):
-        v = x[m][np.isfinite(x[m])]
-        out[m] = float(np.mean(v)) if len(v) else np.nan
-    return out
 
 
 class _TreeErrors(_Ticks):
@@ -820,6 +937,23 @@ class _TreeErrors(_Ticks):
 
 
 _SHARED_MEASURES: dict[str, type[_Ticks]] = {"tree": _TreeErrors, "leader_follower": _FollowerErrors}
+# ... when each draw's agents publish at stamps of their own (sensor links with jitter, loss or cuts)
+_DRAW_MEASURES: dict[str, Any] = {"tree": batched_stamps.TreeErrors, "leader_follower": batched_stamps.FollowerErrors}
+
+
+def _with_draws(m: dict[str, Any], M: int, drawn: frozenset[str]) -> dict[str, Any]:
+    """A shared truth's packet for draws that step at packets of their own: the fields measured
+    once for all (not in ``drawn``) as read-only views with a draw axis, so a sub-stack's rows
+    are taken from every field alike (_take) whatever M is."""
+    out: dict[str, Any] = {}
+    for f, v in m.items():
+        if f in drawn or f == "t":
+            out[f] = v
+        elif isinstance(v, dict):
+            out[f] = {j: np.broadcast_to(x, (M, *np.shape(x))) for j, x in v.items()}
+        else:
+            out[f] = np.broadcast_to(v, (M, *np.shape(v)))
+    return out
 
 
 def run(
@@ -913,7 +1047,7 @@ def run(
         states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
         views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], packets[i] if shared else None)
     hybrid = has_jumps(sc.info)
-    # A sensor delay (the same on every sensor link: batched_links.problem): the packets' releases
+    # A sensor delay (the same on every sensor link: batched_links.per_draw_sensors): the packets' releases
     # and the steps the agents take on them, one plan for every agent and draw.
     sensor_spec = sc.link_spec(f"world->{ids[0]}")
     # Jitter, loss or cuts (or a delay beside emulated agent→agent links): each draw's agents step at packets of their own
@@ -924,6 +1058,8 @@ def run(
     draw_inbox: batched_links.DrawInbox | None = None
     if per_draw:
         draw_links = {i: _DrawSensorLinks([d.link_spec(f"world->{i}") for d in draws], f"world->{i}", seeds, period, 1.0 / sc.sensor_rate) for i in ids}
+        for dl in draw_links.values():
+            dl.deep = shared  # a shared truth's laws read the sensor history around their neighbours' stamps too
         ndim = {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}
         draw_inbox = batched_links.DrawInbox(sc, M, ndim, *((draws, seeds) if edge_links is not None else (None, None)), counters=rows)
         edge_links = None  # the draw inbox emulates them
@@ -946,7 +1082,11 @@ def run(
     final_from = grid_all[-1] - FINAL_WINDOW_S if rows and len(grid_all) else math.inf
     final_v: list[np.ndarray] = []
     stamps = None if sensor_links is None else _SensorLinks(sensor_spec, period).stamps(n_samples, tick_every, sample_dt)
-    measure = _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows, stamps) if shared else None
+    measure: Any = None
+    if shared:
+        measure = _DRAW_MEASURES[family](sc, M, duration, sample_dt, rows) if per_draw else _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows, stamps)
+    # The packet fields with a draw axis (each draw's own noise: _measure_draws), on a shared truth
+    drawn = frozenset(f for f, nz in (("gyro", "gyro"), ("bearings", "bearing"), ("rel_att", "rel_att"), ("velocity", "velocity"), ("attitude", "attitude")) if per_draw_noise and not one_noise and std[nz][0] > 0)
     truths: dict[int, Any] = {}  # with a sensor delay on a shared truth: sample -> the truth there (what an estimate stamped then is measured on)
     edge_messages = commands = 0
     jumps = np.zeros(M, dtype=np.int64)
@@ -976,7 +1116,9 @@ def run(
                 measured = sensing.measure(R, plant.p, plant.omega_now(), V)
             for i, m in measured.items():
                 m["t"] = t
-                if sensor_links is None:
+                if per_draw:
+                    store[i][k] = _with_draws(m, M, drawn)
+                elif sensor_links is None:
                     packets[i].append(m)
                 else:
                     store[i][k] = m
@@ -984,6 +1126,10 @@ def run(
             if sensor_links is not None:
                 sensor_links.offer(k, t)
                 truths[k] = SimpleNamespace(R=plant.R.copy(), p=plant.p.copy())
+            if per_draw:
+                truths[k] = (plant.R.copy(), plant.p.copy())
+                for dl in draw_links.values():
+                    dl.offer(k, t)
         else:
             plant.advance_to(t)
             R = plant.R.reshape(M, n, 3, 3)
@@ -1041,13 +1187,21 @@ def run(
         if per_draw:
             assert draw_inbox is not None
             draw_inbox.now = t_tick
+            published: dict[int, batched_stamps.Published] = {}
             for i in ids:
-                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands)
+                if measure is not None:
+                    published[i] = batched_stamps.Published(np.zeros(M, dtype=bool), np.full(M, np.nan), np.zeros((M, 3, 3)), np.zeros((M, 3)))
+                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands, published.get(i))
             n_tick += 1
+            if measure is not None:
+                measure.tick(truths, published)  # each draw's estimates on the truth at their stamps
+            lo_all = k
             for i in ids:  # the samples no later tick reads
                 lo = draw_links[i].oldest_needed()
                 draw_links[i].trim(lo)
                 _drop_before(store[i], lo)
+                lo_all = min(lo_all, lo)
+            _drop_before(truths, lo_all)  # a later estimate is stamped at a packet a later step reads
             if progress is not None and k % int(sc.sensor_rate) == 0:
                 progress(t)
             continue
@@ -1128,12 +1282,14 @@ def run(
         started, last = True, ends[-1][0]
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
-    if measure is not None:
+    if measure is not None and not per_draw:
         return measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
-    assert len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all)
+    assert measure is not None or (len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all))
     res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt)
+    if measure is not None:
+        res = measure.result(res)
     if per_draw:
         assert draw_inbox is not None
         res.draw_edge_messages, res.draw_commands = draw_edges, draw_commands
@@ -1142,7 +1298,7 @@ def run(
         res.stale_terms = np.sum(list(draw_inbox.stale_terms.values()), axis=0)
         if draw_inbox.links:
             res.edge_links = draw_inbox  # the receivers' counters per draw (link_counters)
-    if rows and grid_t:
+    if rows and grid_t and measure is None:
         fin = np.array(final_v)  # (window, M, edges)
         t_fin = grid_all[grid_all >= final_from]
         edge_final = np.array([[final_of_grid(t_fin, fin[:, m, e]) for e in range(fin.shape[2])] for m in range(M)])  # the report's final, edge by edge
@@ -1177,6 +1333,7 @@ def _tick_draws(
     u: np.ndarray | batched_links.Commands,
     sent_edges: np.ndarray,
     sent_commands: np.ndarray,
+    published: batched_stamps.Published | None = None,
 ) -> None:
     """Agent i's tick at ``t_tick`` in M draws whose sensor links lose and delay packets each its
     own way (_DrawSensorLinks): each draw takes its steps (AgentNode.tick and _advance) on its
@@ -1201,7 +1358,7 @@ def _tick_draws(
             prev = t_e
     # In the order of their ends: a draw's steps end later and later, so each step comes after
     # the draw's step before it, whichever of its tick's steps it is.
-    c = _AgentTick(i, a, t_tick, n_tick, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands)
+    c = _AgentTick(i, a, t_tick, n_tick, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands, published, links=links)
     for (mode, prev, t_e, k_e, last, _), members in sorted(merged.items(), key=lambda kv: (kv[0][2], kv[0][1])):
         histories = {tuple(plans[n_p][4]) for n_p in members}
         try:
@@ -1233,6 +1390,8 @@ class _AgentTick:
     u: np.ndarray | batched_links.Commands
     sent_edges: np.ndarray
     sent_commands: np.ndarray
+    published: batched_stamps.Published | None  # on a shared truth: the estimates the draws publish, for its measure
+    links: _DrawSensorLinks | None = None  # the agent's sensor link (its draws' inboxes: _Deep)
     done: list[tuple[np.ndarray, Any, int]] = dataclasses.field(default_factory=list)
 
 
@@ -1249,17 +1408,7 @@ def _round_step(c: _AgentTick, plans: Sequence[tuple[str, np.ndarray, float, lis
     sub = {i: states[i] if whole else _take(states[i], rows, M)}
     g_sub = c.g if whole else _take_gains(c.g, rows, M)
     sub_jumps, sub_agent, stale = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
-
-    def history() -> deque[dict[str, Any]]:
-        # The draws' inbox history (the packets from the one at or before their tick's first step on)
-        if mixed:
-            raise HistorySplit
-        return deque(store[k] if whole else _take(store[k], rows, M) for k in plans[0][4])
-
-    v.begin(t_e, store[k_e] if whole else _take(store[k_e], rows, M), first=mode == "first")
-    v._packets, v.history = None, history
-    if mixed:
-        v.mixed = ([tuple(p[4]) for p in plans], store.__getitem__, lambda ks: [store[k] if whole else _take(store[k], rows, M) for k in ks])
+    _point_view(c, [tuple(p[4]) for p in plans], t_e, k_e, mode == "first", None if whole else rows, mixed)
     out = None
     try:
         if mode == "first":
@@ -1278,38 +1427,73 @@ def _round_step(c: _AgentTick, plans: Sequence[tuple[str, np.ndarray, float, lis
             v.dt = t_e - prev
             if part is not None:
                 out = _step_groups(part, sub, i, v, g_sub, t_e - prev, sub_jumps, sub_agent, inbox.read(i, t_e, rows), stale)
-    finally:
-        v._packets = v.history = v.mixed = None
-    c.jumps[idx] += sub_jumps[:n]
-    c.agent_jumps[idx] += sub_agent[:n]
-    inbox.stale_terms[i][idx] += stale[:n]
-    states[i] = sub[i] if whole else _put(states[i], sub[i], idx, M, m)
-    if out is not None:
-        c.done.append((idx, out, m))
-    if not last:
-        return
-    if out is None and mode != "first":
-        # No outputs at this step: the newest of an earlier step this tick, per draw (else None)
-        had = np.zeros(M, dtype=bool)
-        for d, _, _ in c.done:
-            had[d] = True
-        if had[idx].any():
-            for part_idx in (idx[had[idx]], idx[~had[idx]]):
-                if part_idx.size:
-                    _publish_rows(c, part_idx, c.done if had[part_idx[0]] else [])
+        c.jumps[idx] += sub_jumps[:n]
+        c.agent_jumps[idx] += sub_agent[:n]
+        inbox.stale_terms[i][idx] += stale[:n]
+        states[i] = sub[i] if whole else _put(states[i], sub[i], idx, M, m)
+        if out is not None:
+            c.done.append((idx, out, m))
+        if not last:
             return
-    _send(c, idx, m, c.mod.publish(sub[i], out, v))
+        if out is None and mode != "first":
+            # No outputs at this step: the newest of an earlier step this tick, per draw (else None)
+            had = np.zeros(M, dtype=bool)
+            for d, _, _ in c.done:
+                had[d] = True
+            if had[idx].any():
+                for part_idx in (idx[had[idx]], idx[~had[idx]]):
+                    if part_idx.size:
+                        _publish_rows(c, part_idx, c.done if had[part_idx[0]] else [], plans, t_e, k_e, mixed)
+                return
+        try:
+            pub = c.mod.publish(sub[i], out, v)  # publish reads the view too (a bearing at a stamp)
+        except HistorySplit:  # ... in a history the draws do not share: published apart, per history
+            for h in {tuple(p[4]) for p in plans}:
+                mine = [p for p in plans if tuple(p[4]) == h]
+                _publish_rows(c, np.flatnonzero(np.logical_or.reduce([p[1] for p in mine])), c.done if out is not None else [], mine, t_e, k_e, False)
+            return
+        _send(c, idx, m, pub)
+    finally:
+        v._packets = v.history = v.mixed = v.deep = None
 
 
-def _publish_rows(c: _AgentTick, idx: np.ndarray, done: list[tuple[np.ndarray, Any, int]]) -> None:
-    """Publish for the draws ``idx`` from their state, with their newest outputs of this tick
-    (``done``, oldest first; none: None)."""
+def _point_view(c: _AgentTick, held: list[tuple[int, ...]], t_e: float, k_e: int, first: bool, rows: np.ndarray | None, mixed: bool) -> None:
+    """Point the view at a step ending at ``t_e`` on the packet ``k_e`` for the draws ``rows``
+    (a sub-stack's; None: all), their sensor history the samples ``held`` (each plan's; more
+    than one: ``mixed``, read as one where they agree)."""
+    store, M = c.store, len(c.jumps)
+
+    def take(k: int) -> dict[str, Any]:
+        return store[k] if rows is None else _take(store[k], rows, M)
+
+    def history() -> deque[dict[str, Any]]:
+        # The draws' inbox history (the packets from the one at or before their tick's first step on)
+        if mixed:
+            raise HistorySplit
+        return deque(take(k) for k in held[0])
+
+    c.v.begin(t_e, take(k_e), first=first)
+    c.v._packets, c.v.history = None, history
+    if c.links is not None and c.links.deep:  # each draw its own last HISTORY packets (_Deep)
+        deep = _Deep(c.links, np.arange(M) if rows is None else rows, store, M)
+        c.v.deep = deep
+        c.v.history = deep.history
+    elif mixed:
+        c.v.mixed = (held, store.__getitem__, lambda ks: [take(k) for k in ks])
+
+
+def _publish_rows(c: _AgentTick, idx: np.ndarray, done: list[tuple[np.ndarray, Any, int]], plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]], t_e: float, k_e: int, mixed: bool) -> None:
+    """Publish for the draws ``idx`` (of the step of ``plans`` ending at ``t_e``) from their
+    state, with their newest outputs of this tick (``done``, oldest first; none: None), the
+    view pointed at their rows."""
     M = len(c.jumps)
     rows = _sub_rows(idx)
     outputs = None
     for d, out, m in done:
         outputs = _spread(out, d, M, m) if outputs is None else _put(outputs, out, d, M, m)
     sub_out = None if outputs is None else _take(outputs, rows, M)
+    mine = [p for p in plans if p[1][idx].any()]
+    _point_view(c, [tuple(p[4]) for p in mine], t_e, k_e, False, rows, mixed and len({tuple(p[4]) for p in mine}) > 1)
     _send(c, idx, len(rows), c.mod.publish(_take(c.states[c.i], rows, M), sub_out, c.v))
 
 
@@ -1331,6 +1515,13 @@ def _send(c: _AgentTick, idx: np.ndarray, m: int, pub: Any) -> None:
                 c.u[idx, c.a] = tau
     for j, fields in pub.edges.items():
         c.inbox.send(c.i, j, idx, t_stamp, fields, c.n_tick, m, c.t_tick)
+    P = c.published
+    if P is not None and pub.estimate is not None and "R_hat" in pub.estimate:
+        n = len(idx)
+        P.mask[idx], P.stamp[idx] = True, t_stamp
+        P.R_hat[idx] = np.broadcast_to(np.asarray(pub.estimate["R_hat"], dtype=float), (m, 3, 3))[:n]
+        if "p_hat" in pub.estimate:
+            P.p_hat[idx] = np.broadcast_to(np.asarray(pub.estimate["p_hat"], dtype=float), (m, 3))[:n]
 
 
 def _take_gains(g: Any, rows: np.ndarray, M: int) -> Any:

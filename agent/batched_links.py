@@ -29,35 +29,15 @@ AHEAD = 512  # numbers read ahead per stream and draw
 LATENCIES = 2000  # the last latencies a LinkCounter keeps (zswarm/links.py)
 
 
-def problem(sc: Scenario) -> str | None:
-    """Which emulated links the batched engine does not run yet (None: it runs them all).
-
-    The agent→agent and command links: every model, each draw its own randomness.  The sensor
-    links (world→agent): one fixed delay on all of them on any family (every agent of every
-    draw receives the same packets at the same ticks: agent/batched.py ``_SensorLinks``); any
-    other model (jitter, loss, bursts, cuts, a delay of its own per agent) on the rigid-body
-    laws, each draw stepping at its own packets (``per_draw_sensors``: agent/batched.py
-    ``_DrawSensorLinks``; reordering or not: a packet behind a newer one stays out of the
-    inbox, as the runtime's LinkCounter keeps it out), with any command links and agent→agent
-    links, FIFO or reordering, beside them (``DrawInbox``); any sensor delay beside emulated
-    agent→agent links is run that way too."""
-    sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
-    if not any(s.active for s in sensor):
-        return None
-    agent_links = [sc.link_spec(f"{j}->{a.id}") for a in sc.agents for j in a.neighbors]
-    emulated = any(s.active for s in agent_links)
-    if not per_draw_sensors(sc) and not emulated:
-        return None
-    # Each draw's agents step at packets of their own (agent/batched.py _DrawSensorLinks)
-    if sc.plant == "prescribed":
-        return "sensor links with jitter, loss, cuts, reordering or delays of their own, or a sensor delay beside emulated agent→agent links, on a prescribed truth (each draw's estimates are stamped at its own packets; the batched engine measures them on rigid bodies)"
-    return None
-
-
 def per_draw_sensors(sc: Scenario) -> bool:
     """The sensor links draw random numbers (jitter, loss, bursts), lose packets in cuts or differ
     between agents: each draw's agents then step at packets of their own (not one fixed delay
-    for all)."""
+    for all: agent/batched.py ``_DrawSensorLinks``; reordering or not, a packet behind a newer
+    one stays out of the inbox, as the runtime's LinkCounter keeps it out), with any command
+    links and agent→agent links, FIFO or reordering, beside them (``DrawInbox``).  One fixed
+    delay on every sensor link is one plan for all draws (agent/batched.py ``_SensorLinks``)
+    unless emulated agent→agent links run beside it.  Every link model runs batched, on every
+    family the engine runs."""
     sensor = [sc.link_spec(f"world->{i}") for i in sc.ids]
     return any(s.active for s in sensor) and (any(purposes(s) or s.cuts for s in sensor) or len(set(sensor)) > 1)
 
