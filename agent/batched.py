@@ -22,7 +22,9 @@ Lockstep needs what it says: every agent on the same clock with no jitter, drift
 its ticks on the sensor grid, no faults but link cuts (the
 agent→agent and command links are emulated draw by draw: agent/batched_links.py, _step_groups;
 a sensor delay, the same on every sensor link, is stepped as the runtime steps it: _SensorLinks;
-sensor jitter and loss on rigid bodies, each draw at its own packets: _DrawSensorLinks, _tick_draws),
+sensor jitter, loss and cuts, each draw at its own packets: _DrawSensorLinks, _tick_draws; on a
+prescribed truth each draw's estimates are measured at their own stamps, agent/batched_stamps.py,
+and its laws read its own sensor history, _Deep, which ``--engine auto`` leaves to sim: prefer_sim),
 leaders (if any) that only publish,
 sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), the
 plant its report family is measured on here (MEASURES: the rigid-body plant for the §5.6
@@ -127,6 +129,29 @@ def problem(sc: Scenario) -> str | None:
     if sc.stale.max_age < 1.0 / c.rate:
         return "a stale-data max_age shorter than a clock period (lockstep serves every message as fresh)"
     return None
+
+
+def _newest_at(packets: Sequence[dict[str, Any]], t: float) -> dict[str, Any] | None:
+    """The newest packet at or before ``t`` (timing.window's first)."""
+    return next((p for p in reversed(packets) if p["t"] <= t + 1e-12), None)
+
+
+def prefer_sim(sc: Scenario) -> str | None:
+    """Why ``--engine auto`` runs ``sc`` on sim though this engine runs it (None: it does not).
+
+    Sensor links with jitter, loss or cuts on a prescribed truth (the §3 and §4.5 observers):
+    each draw steps at packets of its own and its laws read its own sensor history around their
+    neighbours' stamps, so the draws are stepped in many small groups and read in parts
+    (_Deep).  The rows are sim's, but measured at 0.72 s of CPU a draw for 2 s of §4.5 hybrid
+    (20 % loss, 3 ms jitter, M = 400) against about 0.6 s on sim: no faster."""
+    if sc.plant == "prescribed" and _per_draw(sc):
+        return "sensor links with jitter, loss or cuts on a prescribed truth: the batched engine runs them (--engine batched, the same rows) but no faster than sim"
+    return None
+
+
+def _per_draw(sc: Scenario) -> bool:
+    """Each draw's agents step at packets of their own (run's ``per_draw``)."""
+    return batched_links.per_draw_sensors(sc) or (sc.link_spec(f"world->{sc.ids[0]}").active and any(sc.link_spec(f"{j}->{a.id}").active for a in sc.agents for j in a.neighbors))
 
 
 @dataclass(frozen=True, slots=True)
@@ -258,7 +283,7 @@ class BatchedView(timing.HistoryReads):
         if self.deep is not None:
             parts = self.deep.parts(t0, t1)
             if parts is not None:
-                wins = {tuple(int(round(t / self.deep.dt)) for t, _ in timing.window([(p["t"], p) for p in packets], t0, t1)) for _, packets in parts}
+                wins = {tuple(round(float(p["t"]) / self.deep.dt) for p in packets if t0 + 1e-12 < p["t"] <= t1 + 1e-12 or p is _newest_at(packets, t0)) for _, packets in parts}
                 if len(wins) > 1:
                     raise Unsupported(f"draws whose sensor histories differ in View.series({name!r}) over ({t0:g}, {t1:g}] (a shared truth's laws read them by parts)")
                 return [(p["t"], p[name]) for p in self.deep.take(sorted(wins.pop()))]
@@ -271,13 +296,13 @@ class BatchedView(timing.HistoryReads):
             raise HistorySplit
         return [(p["t"], p[name]) for p in build(wins.pop())]
 
-    def _by_parts(self, key: Any, t0: float, t1: float, read: Callable[[], Any]) -> Any:
+    def _by_parts(self, key: Any, t0: float, t1: float, read: Callable[[], Any], newest: bool = False) -> Any:
         """A history read over ``[t0, t1]`` in draws that hold histories of their own (_Deep):
         once per set of draws that hold the same samples around it, each on those samples
         (the reads are local: _Deep.parts), the draws' values put together."""
         if key in self._cache:
             return self._cache[key]
-        parts = None if self.deep is None else self.deep.parts(t0, t1)
+        parts = None if self.deep is None else self.deep.parts(t0, t1, newest)
         if parts is None:
             value = read()
         else:
@@ -292,22 +317,26 @@ class BatchedView(timing.HistoryReads):
             if all(v is None for _, v in got):
                 value = None
             elif any(v is None for _, v in got):
-                raise Unsupported(f"a history read at {t1:g} s that some draws have samples for and others not")
+                raise HistorySplit  # some draws have samples there and others not: stepped apart
             else:
-                first = np.asarray(got[0][1])
-                value = np.empty((self.deep.m, *first.shape[1:]))  # type: ignore[union-attr]
-                for rows, v in got:
-                    value[rows] = v
+                vals = [(rows, np.asarray(v)) for rows, v in got]
+                nd = max(v.ndim for _, v in vals)  # a part's value without its draw axis (e.g. the identity) has one less
+                inner = next(v.shape[1:] for _, v in vals if v.ndim == nd)
+                value = np.empty((self.deep.m, *inner))  # type: ignore[union-attr]
+                for rows, v in vals:
+                    value[rows] = v if v.ndim == nd else v[None]
         self._cache[key] = value
         return value
 
     def mean_rate(self, name: str, t0: float, t1: float) -> np.ndarray:
-        return self._by_parts(("mr", name, t0, t1), t0, t1, lambda: super(BatchedView, self).mean_rate(name, t0, t1))  # type: ignore[no-any-return]
+        return self._by_parts(("mr", name, t0, t1), t0, t1, lambda: super(BatchedView, self).mean_rate(name, t0, t1), t1 <= t0)  # type: ignore[no-any-return]
 
     def body_rate(self, t0: float, t1: float) -> np.ndarray:
-        return self._by_parts(("br", t0, t1), t0, t1, lambda: super(BatchedView, self).body_rate(t0, t1))  # type: ignore[no-any-return]
+        return self._by_parts(("br", t0, t1), t0, t1, lambda: super(BatchedView, self).body_rate(t0, t1), t1 <= t0)  # type: ignore[no-any-return]
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
+        if t0 == t1:
+            return _EYE3  # rotation_over's identity, in every draw
         lo, hi = min(t0, t1), max(t0, t1)
         return self._by_parts(("rt", t0, t1), lo, hi, lambda: super(BatchedView, self).rotation(t0, t1))  # type: ignore[no-any-return]
 
@@ -627,27 +656,31 @@ class _Deep:
             raise HistorySplit
         return deque(self.take((self.k0 + np.flatnonzero(self.got[:, 0])).tolist()))
 
-    def parts(self, t0: float, t1: float) -> list[tuple[np.ndarray, list[dict[str, Any]]]] | None:
-        """``(rows, packets)`` per set of rows that hold the same samples around ``[t0, t1]``:
-        from two before the newest at or before t0 to two after the newest at or before t1, and
-        the history's newest two (None: every row holds the same history)."""
+    def parts(self, t0: float, t1: float, newest: bool = False) -> list[tuple[np.ndarray, list[dict[str, Any]]]] | None:
+        """``(rows, packets)`` per set of rows that hold the same samples a read over ``[t0, t1]``
+        reads (None: every row holds the same history).  The timing functions read the newest
+        sample at or before t0, those up to the first after t1, and when none is after t1 the
+        history's newest two (body_vector_at, relative_attitude_at, _integrate); ``newest``: the
+        newest sample only (a rate over an empty interval is the newest sample's)."""
         if self.uniform:
             return None
-        cum, K = self.cum, len(self.ts)
-        s0, s1 = (int(np.searchsorted(self.ts, t + 1e-12, side="right")) - 1 for t in (t0, t1))
-        c0 = cum[s0] if s0 >= 0 else np.zeros(self.m, dtype=np.int64)
-        c1 = cum[min(s1, K - 1)] if s1 >= 0 else np.zeros(self.m, dtype=np.int64)
-        N = cum[-1]
-        lo = np.maximum(c0 - 3, 0)
-        hi = np.minimum(c1 + 2, N)
-        tail = np.maximum(hi, N - 2)  # the newest two, beyond the window
-        width = int(np.max(hi - lo, initial=0)) + 2
+        cum, K, N = self.cum, len(self.ts), self.cum[-1]
+        if newest:
+            lo, hi = np.maximum(N - 1, 0), N
+        else:
+            s0, s1 = (int(np.searchsorted(self.ts, t + 1e-12, side="right")) - 1 for t in (t0, t1))
+            c0 = cum[s0] if s0 >= 0 else np.zeros(self.m, dtype=np.int64)  # packets at or before t0: the newest is c0 − 1
+            c1 = cum[min(s1, K - 1)] if s1 >= 0 else np.zeros(self.m, dtype=np.int64)  # ... t1: the first after is c1
+            hi = np.minimum(c1 + 1, N)
+            lo = np.maximum(np.where(hi >= N, np.minimum(c0 - 1, N - 2), c0 - 1), 0)
+        width = int(np.max(hi - lo, initial=0))
         key = np.full((self.m, width), -1, dtype=np.int64)
         for o in range(width):
-            pos = np.where(lo + o < hi, lo + o, tail + (o - (hi - lo)))
-            ok = (lo + o < hi) | ((o - (hi - lo) >= 0) & (pos < N))
-            key[:, o] = np.where(ok, np.argmax(cum >= (pos + 1)[None, :], axis=0), -1)
+            pos = lo + o
+            key[:, o] = np.where(pos < hi, np.argmax(cum >= (pos + 1)[None, :], axis=0), -1)
         uniq, inv = np.unique(key, axis=0, return_inverse=True)
+        if len(uniq) == 1:
+            return [(np.arange(self.m), self.take((self.k0 + uniq[0][uniq[0] >= 0]).tolist()))]
         inv = inv.reshape(-1)
         out = []
         for u, row in enumerate(uniq):
@@ -992,7 +1025,7 @@ def run(
     # wherever each draw's agents step at packets of their own and so may skip ticks (sensor links
     # with loss, jitter or cuts, or a sensor delay beside emulated agent→agent links: an agent that
     # hears nothing sends nothing, and the world's stale-command policy acts on what it holds)
-    idling = batched_links.per_draw_sensors(sc) or (sc.link_spec(f"world->{ids[0]}").active and any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors))
+    idling = _per_draw(sc) or (sc.link_spec(f"world->{ids[0]}").active and any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors))
     cmd_links = None if shared or not (idling or any(d.link_spec(f"{i}->world").active for d in draws for i in ids)) else batched_links.Commands(draws, seeds, counters=rows)
     edge_links = batched_links.Edges(draws, seeds, rows, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}) if any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors) else None
     published = dict.fromkeys(ids, 0)  # messages each agent sent (its sequence number, as AgentNode.seq)
@@ -1082,7 +1115,7 @@ def run(
     final_from = grid_all[-1] - FINAL_WINDOW_S if rows and len(grid_all) else math.inf
     final_v: list[np.ndarray] = []
     stamps = None if sensor_links is None else _SensorLinks(sensor_spec, period).stamps(n_samples, tick_every, sample_dt)
-    measure: Any = None
+    measure: Any = None  # _Ticks, or batched_stamps' FollowerErrors / TreeErrors
     if shared:
         measure = _DRAW_MEASURES[family](sc, M, duration, sample_dt, rows) if per_draw else _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows, stamps)
     # The packet fields with a draw axis (each draw's own noise: _measure_draws), on a shared truth
@@ -1187,14 +1220,14 @@ def run(
         if per_draw:
             assert draw_inbox is not None
             draw_inbox.now = t_tick
-            published: dict[int, batched_stamps.Published] = {}
+            estimated: dict[int, batched_stamps.Published] = {}
             for i in ids:
                 if measure is not None:
-                    published[i] = batched_stamps.Published(np.zeros(M, dtype=bool), np.full(M, np.nan), np.zeros((M, 3, 3)), np.zeros((M, 3)))
-                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands, published.get(i))
+                    estimated[i] = batched_stamps.Published(np.zeros(M, dtype=bool), np.full(M, np.nan), np.zeros((M, 3, 3)), np.zeros((M, 3)))
+                _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands, estimated.get(i))
             n_tick += 1
             if measure is not None:
-                measure.tick(truths, published)  # each draw's estimates on the truth at their stamps
+                measure.tick(truths, estimated)  # each draw's estimates on the truth at their stamps
             lo_all = k
             for i in ids:  # the samples no later tick reads
                 lo = draw_links[i].oldest_needed()
@@ -1283,7 +1316,8 @@ def run(
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
     if measure is not None and not per_draw:
-        return measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
+        return measure.result(  # type: ignore[no-any-return]
+            Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
     # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
     t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
     assert measure is not None or (len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all))
@@ -1360,12 +1394,26 @@ def _tick_draws(
     # the draw's step before it, whichever of its tick's steps it is.
     c = _AgentTick(i, a, t_tick, n_tick, store, v, mod, g, part, states, hybrid, jumps, agent_jumps, inbox, u, sent_edges, sent_commands, published, links=links)
     for (mode, prev, t_e, k_e, last, _), members in sorted(merged.items(), key=lambda kv: (kv[0][2], kv[0][1])):
-        histories = {tuple(plans[n_p][4]) for n_p in members}
-        try:
-            _round_step(c, [plans[n_p] for n_p in members], mode, prev, t_e, k_e, last, len(histories) > 1)
-        except HistorySplit:
+        _round_apart(c, [plans[n_p] for n_p in members], mode, prev, t_e, k_e, last)
+
+
+def _round_apart(c: _AgentTick, plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]], mode: str, prev: float, t_e: float, k_e: int, last: bool) -> None:
+    """_round_step on the draws of ``plans``; where a read of the sensor history needs them
+    apart (HistorySplit, raised before the step changes anything), per history, and where
+    the draws of one plan still differ (a shared truth's deeper histories, _Deep), draw by draw."""
+    histories = {tuple(p[4]) for p in plans}
+    try:
+        _round_step(c, plans, mode, prev, t_e, k_e, last, len(histories) > 1)
+    except HistorySplit:
+        if len(histories) > 1:
             for h in histories:
-                _round_step(c, [plans[n_p] for n_p in members if tuple(plans[n_p][4]) == h], mode, prev, t_e, k_e, last, False)
+                _round_apart(c, [p for p in plans if tuple(p[4]) == h], mode, prev, t_e, k_e, last)
+        else:
+            for d in np.flatnonzero(np.logical_or.reduce([p[1] for p in plans])):
+                one = np.zeros_like(plans[0][1])
+                one[d] = True
+                src = next(p for p in plans if p[1][d])
+                _round_step(c, [(src[0], one, src[2], src[3], src[4])], mode, prev, t_e, k_e, last, False)
 
 
 @dataclass(slots=True)
@@ -1399,7 +1447,7 @@ def _round_step(c: _AgentTick, plans: Sequence[tuple[str, np.ndarray, float, lis
     """One step, from ``prev`` to the packet ``k_e`` at ``t_e``, of the draws of ``plans``
     (_tick_draws); ``last``: their tick's last, after which they publish.  ``mixed``: the draws
     hold different histories (reading it raises HistorySplit)."""
-    i, store, v, states, inbox, part = c.i, c.store, c.v, c.states, c.inbox, c.part
+    i, v, states, inbox, part = c.i, c.v, c.states, c.inbox, c.part
     M = len(c.jumps)
     idx = np.flatnonzero(np.logical_or.reduce([p[1] for p in plans]))
     whole = len(idx) == M
@@ -1443,14 +1491,12 @@ def _round_step(c: _AgentTick, plans: Sequence[tuple[str, np.ndarray, float, lis
             if had[idx].any():
                 for part_idx in (idx[had[idx]], idx[~had[idx]]):
                     if part_idx.size:
-                        _publish_rows(c, part_idx, c.done if had[part_idx[0]] else [], plans, t_e, k_e, mixed)
+                        _publish_apart(c, part_idx, c.done if had[part_idx[0]] else [], plans, t_e, k_e)
                 return
         try:
             pub = c.mod.publish(sub[i], out, v)  # publish reads the view too (a bearing at a stamp)
         except HistorySplit:  # ... in a history the draws do not share: published apart, per history
-            for h in {tuple(p[4]) for p in plans}:
-                mine = [p for p in plans if tuple(p[4]) == h]
-                _publish_rows(c, np.flatnonzero(np.logical_or.reduce([p[1] for p in mine])), c.done if out is not None else [], mine, t_e, k_e, False)
+            _publish_apart(c, idx, c.done if out is not None else [], plans, t_e, k_e)
             return
         _send(c, idx, m, pub)
     finally:
@@ -1480,6 +1526,24 @@ def _point_view(c: _AgentTick, held: list[tuple[int, ...]], t_e: float, k_e: int
         c.v.history = deep.history
     elif mixed:
         c.v.mixed = (held, store.__getitem__, lambda ks: [take(k) for k in ks])
+
+
+def _publish_apart(c: _AgentTick, idx: np.ndarray, done: list[tuple[np.ndarray, Any, int]], plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]], t_e: float, k_e: int) -> None:
+    """_publish_rows for the draws ``idx``: together, else (HistorySplit: publish read a history
+    they do not share, before sending anything) per history, else draw by draw."""
+    mine = [p for p in plans if p[1][idx].any()]
+    histories = {tuple(p[4]) for p in mine}
+    try:
+        _publish_rows(c, idx, done, mine, t_e, k_e, len(histories) > 1)
+    except HistorySplit:
+        if len(histories) > 1:
+            for h in histories:
+                group = [p for p in mine if tuple(p[4]) == h]
+                sub = idx[np.logical_or.reduce([p[1] for p in group])[idx]]
+                _publish_apart(c, sub, done, group, t_e, k_e)
+        else:
+            for d in idx:
+                _publish_rows(c, np.array([d]), done, mine, t_e, k_e, False)
 
 
 def _publish_rows(c: _AgentTick, idx: np.ndarray, done: list[tuple[np.ndarray, Any, int]], plans: Sequence[tuple[str, np.ndarray, float, list[tuple[float, int]], list[int]]], t_e: float, k_e: int, mixed: bool) -> None:

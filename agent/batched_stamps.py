@@ -30,7 +30,8 @@ from zswarm.report.series import FINAL_WINDOW_S
 def mean_rows(x: np.ndarray) -> np.ndarray:
     """np.mean of each row of (M, K) as of a 1-D array of its K values (the same sum: a
     contiguous row), the way the report averages one run's values over its last second."""
-    return np.ascontiguousarray(x).mean(axis=1)
+    out: np.ndarray = np.ascontiguousarray(x).mean(axis=1)
+    return out
 
 
 def nanmean_of(values: Sequence[np.ndarray]) -> np.ndarray:
@@ -138,9 +139,9 @@ class FollowerErrors:
             keys = fs[order] * M + ms[order]
             cuts = np.flatnonzero(np.diff(keys)) + 1
             for g in np.split(np.arange(len(order)), cuts):
-                f, m = divmod(int(keys[g[0]]), M)
+                fo, mo = divmod(int(keys[g[0]]), M)
                 for c in (0, 1):
-                    per[c][f][m] = np.mean(vals[c][order[g]])  # series.final: the mean over the window
+                    per[c][fo][mo] = np.mean(vals[c][order[g]])  # series.final: the mean over the window
         res.final_att, res.final_pos = (nanmean_of(per[c]) if F else np.full(M, np.nan) for c in (0, 1))
         res.t_coarse = self.coarse_t
         res.att_coarse, res.pos_coarse = (np.mean(self.coarse[c], axis=0) for c in (0, 1))

@@ -191,14 +191,18 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
 
     res = batched.run(scs, duration, base.seed, fam.basin_grid_s, progress=tell, seeds=[run_seed(base, d) for d in draws])
     wall = round((time.monotonic() - t0) / len(draws), 3)
-    return [_row(d, near, res.t, res.max_rel[n], threshold, int(res.jumps[n]), int(res.agent_jumps[n]), wall) for n, d in enumerate(draws)]
+    return [_row(d, near, *res.series(n), threshold, int(res.jumps[n]), int(res.agent_jumps[n]), wall) for n, d in enumerate(draws)]
 
 
-def engine_problem(sc: Scenario) -> str | None:
-    """Why ``sc``'s draws cannot run on the batched engine (None: they can)."""
+def engine_problem(sc: Scenario, auto: bool = False) -> str | None:
+    """Why ``sc``'s draws cannot run on the batched engine (None: they can); ``auto``: or why
+    ``--engine auto`` runs them on sim though the engine can (it is no faster there)."""
     from zswarm import plugins
 
-    why: str | None = plugins.engine("batched").problem(sc)
+    engine = plugins.engine("batched")
+    why: str | None = engine.problem(sc)
+    if why is None and auto:
+        why = engine.prefer_sim(sc)
     return why
 
 
@@ -607,7 +611,7 @@ def command(args: argparse.Namespace) -> int:
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
     jobs = args.jobs or (os.cpu_count() or 1)
-    why = basin.engine_problem(sc)
+    why = basin.engine_problem(sc, auto=args.engine == "auto")
     if args.engine == "batched" and why is not None:
         procutil.fail_usage(f"{args.topology}: --engine batched: the batched engine cannot run it: {why}")
     batched = args.engine != "sim" and why is None

@@ -160,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("auto", "batched", "sim"),
         default="auto",
         help="batched: the draws stepped together on arrays (the same algorithm modules; draw by draw the same numbers as sim); "
-        "sim: each draw on zswarm sim; auto (default): batched where the scenario allows it (one clock without jitter, drift or offset on the sensor grid; every link model and link cut, each draw its own losses and delays as sim draws them, but sensor jitter, loss, cuts or reordering on a prescribed truth; no faults but link cuts), else sim, saying why",
+        "sim: each draw on zswarm sim; auto (default): batched where the scenario allows it (one clock without jitter, drift or offset on the sensor grid; every link model and link cut, each draw its own losses and delays as sim draws them; no faults but link cuts; sensor jitter, loss or cuts on a prescribed truth go to sim, where they run as fast), else sim, saying why",
     )
     b.add_argument("--chunk", type=procutil.positive_int, default=None, help="draws stepped together per task of the batched engine (default: the draws shared out among the jobs, at most 1000)")
     b.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the draws on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port) instead of local processes")

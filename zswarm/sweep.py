@@ -508,21 +508,25 @@ def run_sweep_cluster(
 BATCHED_FAMILIES = ("sync", "tree", "leader_follower")  # report families whose sweep rows the batched engine computes
 
 
-def batched_problem(sc: Scenario) -> str | None:
-    """Why ``sc``'s runs cannot go on the batched engine (None: they can)."""
+def batched_problem(sc: Scenario, auto: bool = False) -> str | None:
+    """Why ``sc``'s runs cannot go on the batched engine (None: they can); ``auto``: or why
+    ``--engine auto`` runs them on sim though the engine can (it is no faster there)."""
     from zswarm import plugins
 
     if sc.info.report not in BATCHED_FAMILIES:
         return f"the batched engine computes sweep rows for the {', '.join(BATCHED_FAMILIES)} report families, not for {sc.info.report!r}"
-    why: str | None = plugins.engine("batched").problem(sc)
+    engine = plugins.engine("batched")
+    why: str | None = engine.problem(sc)
+    if why is None and auto:
+        why = engine.prefer_sim(sc)
     return why
 
 
-def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: int) -> tuple[list[list[Job]], list[tuple[Job, str]]]:
+def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: int, auto: bool = False) -> tuple[list[list[Job]], list[tuple[Job, str]]]:
     """The jobs that the batched engine can step together, in batches (runs that share their
     scenario but for seeds, noise variances and starts: the engine's ``group``), and the others
-    with the reason.  A batch holds at most ``chunk`` runs (default: each group shared out among
-    ``n_jobs`` tasks, at most 1000)."""
+    with the reason (``auto``: those it runs no faster than sim too).  A batch holds at most
+    ``chunk`` runs (default: each group shared out among ``n_jobs`` tasks, at most 1000)."""
     from zswarm import plugins
 
     group = plugins.engine("batched").group
@@ -533,7 +537,7 @@ def plan_batches(topology: str, jobs: Sequence[Job], chunk: int | None, n_jobs: 
         sc = loaded.get(j.overrides)
         if sc is None:
             sc = loaded[j.overrides] = load(topology, j.overrides)
-        why = batched_problem(sc)
+        why = batched_problem(sc, auto)
         if why is not None:
             rest.append((j, why))
             continue
@@ -955,7 +959,7 @@ def command(args: argparse.Namespace) -> int:
     on_sim = todo
     if args.engine in ("auto", "batched"):
         try:
-            batches, rest = sweep.plan_batches(args.topology, todo, args.chunk, n_jobs)
+            batches, rest = sweep.plan_batches(args.topology, todo, args.chunk, n_jobs, auto=args.engine == "auto")
         except ScenarioError as exc:
             procutil.fail_usage(str(exc))
         if rest and args.engine == "batched":

@@ -93,8 +93,12 @@ def test_the_engine_says_what_it_cannot_run():
     for flags, reason in refused:
         got = why("thesis-5.6-hybrid7", *flags)
         assert reason in got, (flags, got)
-    assert "on a prescribed truth" in why("thesis-3.2-fixed8", "links.sensors.drop=0.1")
-    assert "on a prescribed truth" in why("thesis-3.2-fixed8", "links.sensors.delay_ms=5", "links.drop=0.1")
+    # Sensor loss on a prescribed truth runs (the same rows as sim: test_sweep_engines), but auto prefers sim
+    for flags in (["links.sensors.drop=0.1"], ["links.sensors.delay_ms=5", "links.drop=0.1"]):
+        assert why("thesis-3.2-fixed8", *flags) == ""
+        assert "no faster than sim" in (batched.prefer_sim(load(TOPO / "thesis-3.2-fixed8.toml", [parse_override(f) for f in flags])) or "")
+    assert batched.prefer_sim(load(TOPO / "thesis-3.2-fixed8.toml", [parse_override("links.sensors.delay_ms=5")])) is None  # one plan for all draws: fast
+    assert batched.prefer_sim(load(TOPO / "thesis-5.6-hybrid7.toml", [parse_override("links.sensors.drop=0.1")])) is None
     # Run batched: agent→agent and command links; a fixed sensor delay (on a prescribed truth too);
     # sensor jitter, loss, bursts and a delay of one agent's own on rigid bodies, command and FIFO
     # agent→agent links, FIFO or reordering, beside them (a sensor delay beside emulated agent→agent links too).

@@ -120,19 +120,19 @@ def _sweep_of(topology, *args, timeout=600):
 
 
 def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):
-    """auto: the grid point with perfect sensor links is batched, the one with sensor jitter beside reordering agent→agent links runs on
-    sim and says why; --engine batched refuses that sweep before it starts (exit 2); a resumed sweep runs
-    only what its sweep.csv lacks, whichever engine wrote the rest."""
-    args = ["--vary", "links.sensors.jitter_ms=0,1", "--set", "links.reorder=true", "--set", "links.jitter_ms=2", "--duration", "1", "--jobs", "2"]
+    """auto: the grid point with agents on a perfect clock is batched, the one with clock jitter
+    runs on sim and says why; --engine batched refuses that sweep before it starts (exit 2); a
+    resumed sweep runs only what its sweep.csv lacks, whichever engine wrote the rest."""
+    args = ["--vary", "clock.jitter=0,0.0005", "--set", "links.reorder=true", "--set", "links.jitter_ms=2", "--duration", "1", "--jobs", "2"]
     out = tmp_path / "auto"
     p = _sweep_of("thesis-5.6-hybrid7.toml", *args, "--out", str(out))
     assert p.returncode == 0, p.stderr
-    assert "1 of 2 runs on sim: reordering agent→agent links" in p.stderr and "1 batched in 1 batches, 1 on sim" in p.stderr
+    assert "1 of 2 runs on sim: clock jitter" in p.stderr and "1 batched in 1 batches, 1 on sim" in p.stderr
     rs = rows(out)
     assert len(rs) == 2 and all(r["status"] == "ok" for r in rs)
     assert (out / "runs" / "p001-r0").is_dir() and not (out / "runs" / "p000-r0").exists()
     p = _sweep_of("thesis-5.6-hybrid7.toml", *args, "--engine", "batched", "--out", str(tmp_path / "b"))
-    assert p.returncode == 2 and "--engine batched: run p001-r0: reordering agent→agent links" in p.stderr, p.stderr
+    assert p.returncode == 2 and "--engine batched: run p001-r0: clock jitter" in p.stderr, p.stderr
     assert not (tmp_path / "b" / "sweep.csv").exists()
     lines = (out / "sweep.csv").read_text().splitlines()
     (out / "sweep.csv").write_text("\n".join(line for line in lines if not line.startswith("p000-r0")) + "\n")

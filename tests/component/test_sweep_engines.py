@@ -203,6 +203,11 @@ def test_batched_rows_are_sims_with_a_sensor_delay(tmp_path, topology, vary, set
         ("thesis-5.6-hybrid7.toml", "links.reorder=false,true", ["--set", "links.sensors.drop=0.1", "--set", "links.sensors.jitter_ms=2", "--set", "links.delay_ms=3", "--set", "links.jitter_ms=20", "--set", 'links.jitter="exponential"']),
         # lossy, late commands beside: each draw's agents send their own commands at their own ticks
         ("thesis-5.6-hybrid7.toml", "links.commands.drop=0,0.2", ["--set", "links.sensors.drop=0.15", "--set", "links.sensors.delay_ms=2", "--set", "links.sensors.jitter_ms=2", "--set", "links.commands.delay_ms=3", "--set", "links.commands.jitter_ms=1"]),
+        # a prescribed truth (§3, §4.5): each draw's estimates measured on the truth at their own
+        # stamps, its laws reading its own sensor history around their neighbours' stamps (_Deep)
+        ("thesis-3.2-fixed8-noisy.toml", "links.sensors.drop=0.1,0.3", ["--set", "links.sensors.jitter_ms=2"]),
+        ("thesis-3.3-moving5.toml", "links.sensors.jitter_ms=0,3", ["--set", "links.sensors.delay_ms=2", "--set", "links.sensors.ge_p_gb=0.1", "--set", "links.sensors.ge_p_bg=0.3"]),
+        ("thesis-4.5-hybrid5.toml", "links.sensors.drop=0.1,0.3", ["--set", "links.sensors.jitter_ms=2"]),
     ],
 )
 def test_batched_rows_are_sims_with_lossy_sensor_links(tmp_path, topology, vary, sets):
