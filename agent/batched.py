@@ -143,7 +143,7 @@ def prefer_sim(sc: Scenario) -> str | None:
     each draw steps at packets of its own and its laws read its own sensor history around their
     neighbours' stamps, so the draws are stepped in many small groups and read in parts
     (_Deep).  The rows are sim's, but measured at 0.72 s of CPU a draw for 2 s of §4.5 hybrid
-    (20 % loss, 3 ms jitter, M = 400) against about 0.6 s on sim: no faster."""
+    (20 % loss, 3 ms jitter, M = 400) against 0.75 s on sim (its processes' start included): no faster."""
     if sc.plant == "prescribed" and _per_draw(sc):
         return "sensor links with jitter, loss or cuts on a prescribed truth: the batched engine runs them (--engine batched, the same rows) but no faster than sim"
     return None

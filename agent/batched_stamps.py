@@ -199,7 +199,7 @@ class TreeErrors:
             self.G[m, : len(g)] = g
             if self.rows:
                 self.need[m] = np.maximum(np.searchsorted(rounded(g, "%.3f"), self.coarse_t, side="right") - 1, 0)
-        self._settle(np.nanmin(self.last, axis=0))
+        self._settle(np.min(self.last, axis=0))  # NaN (an agent with no estimate yet) compares False
 
     def _keep(self, q: int, idx: np.ndarray, s: np.ndarray, Rt: np.ndarray) -> None:
         """Agent q's new estimates in the draws ``idx``; the ring grows first when the slot they
@@ -275,7 +275,7 @@ class TreeErrors:
 
     def result(self, res: Any) -> Any:
         M = self.M
-        t1 = np.nanmax(self.last, axis=0)
+        t1 = np.max(np.where(np.isnan(self.last), -np.inf, self.last), axis=0)
         ends = np.array([len(np.arange(self.t0[m], t1[m] + 1e-9, BASIN_GRID_S)) if np.isfinite(self.t0[m]) else 0 for m in range(M)])
         self._settle(np.full(M, np.inf), ends)  # every estimate is in: the rest of each grid
         res.draw_grid = [(self.G[m, : ends[m]], self.V[m, : ends[m]]) for m in range(M)]
