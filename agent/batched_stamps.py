@@ -182,6 +182,7 @@ class TreeErrors:
         self.need = np.zeros((M, len(self.coarse_t)), dtype=np.int64)  # per draw, the grid point each 0.1 s point reads (edges_on_grid)
         self.coarse = np.full((M, len(self.coarse_t)), np.nan)
         self.final: list[tuple[np.ndarray, np.ndarray]] = []  # (draws, |R̃_i R̃_c^T|_I (n, len)) at the points of the last second
+        self.last_rel = np.full((len(self.edges), M), np.nan)  # the edges at each draw's latest final point
 
     def tick(self, truths: Truths, est: Mapping[int, Published]) -> None:
         for i, e in est.items():
@@ -262,6 +263,8 @@ class TreeErrors:
         self.V[D, j] = np.max(rel, axis=0) if rel else 0.0
         if not self.rows:
             return
+        if rel:
+            self.last_rel[:, D] = rel
         hit = self.need[D] == j[:, None]  # (len(D), C): the 0.1 s points that read this one
         if hit.any():
             mean = np.mean([rounded(r, "%.6e") for r in rel], axis=0)
@@ -282,11 +285,9 @@ class TreeErrors:
         res.t, res.max_rel = np.zeros(0), np.zeros((M, 0))
         if not self.rows:
             return res
-        last = np.maximum(ends - 1, 0)
-        for m in range(M):  # edges_on_grid clips to the last point
-            if ends[m]:
-                over = self.need[m] > last[m]
-                self.coarse[m, over] = self.coarse[m, self.need[m] == last[m]][0] if np.any(self.need[m] == last[m]) else self._coarse_at(m, int(last[m]))
+        # edges_on_grid clips to the grid's last point: the 0.1 s points after it hold its edges
+        for m in np.flatnonzero((ends > 0) & np.any(self.need >= ends[:, None], axis=1)):
+            self.coarse[m, self.need[m] >= ends[m]] = np.mean([rounded(self.last_rel[e, m : m + 1], "%.6e")[0] for e in range(len(self.edges))])
         n = len(self.ids)
         per = np.full((n, M), np.nan)
         if self.final:
@@ -300,6 +301,3 @@ class TreeErrors:
         res.final_pos = np.full(M, np.nan)  # tree's positions: the §4.4 pose observer's only
         res.t_coarse, res.att_coarse = self.coarse_t, self.coarse
         return res
-
-    def _coarse_at(self, m: int, j: int) -> float:
-        raise RuntimeError(f"draw {m}: grid point {j} was not kept for the 0.1 s grid")

@@ -147,6 +147,22 @@ def test_batched_rows_are_sims_with_sensor_link_cuts(tmp_path):
     assert len({r["sensor_dropped"] for r in sim_rows if r["links.sensors.drop"] == "0.1"}) == 2
 
 
+def test_batched_rows_are_sims_with_sensor_cuts_on_a_prescribed_truth(tmp_path):
+    """§4.5's five agents hear nothing from 2.3 s to the end of a 3 s run (every sensor link
+    cut): each draw's 100 Hz grid ends at its agents' last estimate (2.3 s), the 0.1 s points
+    after it hold its last point as edges_on_grid clips them, and the finals are its last
+    second's: the same rows as sim, with loss beside or not."""
+    from tests.conftest import TOPO
+
+    topo = tmp_path / "tree-sensor-cut.toml"
+    cuts = "".join(f'\n[[faults]]\nkind = "cut"\nlink = "world->{i}"\nat = 2.3\nduration = 1.0\n' for i in range(1, 6))
+    topo.write_text((TOPO / "thesis-4.5-hybrid5.toml").read_text() + cuts)
+    args = ["--vary", "links.sensors.drop=0,0.1", "--set", "links.sensors.jitter_ms=1", "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "1"]
+    sim_rows = _same_rows(tmp_path, str(topo), args)
+    assert all(int(r["sensor_dropped"]) == 0 or r["links.sensors.drop"] == "0.1" for r in sim_rows)  # a cut to the end is not a gap: nothing after it to count it
+    assert len({r["final_attitude_error"] for r in sim_rows}) == 4
+
+
 @pytest.mark.parametrize(
     ("topology", "vary", "sets"),
     [
