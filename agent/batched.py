@@ -131,11 +131,6 @@ def problem(sc: Scenario) -> str | None:
     return None
 
 
-def _newest_at(packets: Sequence[dict[str, Any]], t: float) -> dict[str, Any] | None:
-    """The newest packet at or before ``t`` (timing.window's first)."""
-    return next((p for p in reversed(packets) if p["t"] <= t + 1e-12), None)
-
-
 def prefer_sim(sc: Scenario) -> str | None:
     """Why ``--engine auto`` runs ``sc`` on sim though this engine runs it (None: it does not).
 
@@ -283,7 +278,7 @@ class BatchedView(timing.HistoryReads):
         if self.deep is not None:
             parts = self.deep.parts(t0, t1)
             if parts is not None:
-                wins = {tuple(round(float(p["t"]) / self.deep.dt) for p in packets if t0 + 1e-12 < p["t"] <= t1 + 1e-12 or p is _newest_at(packets, t0)) for _, packets in parts}
+                wins = {tuple(round(t / self.deep.dt) for t, _ in timing.window([(p["t"], p) for p in packets], t0, t1)) for _, packets in parts}  # type: ignore[misc]
                 if len(wins) > 1:
                     raise Unsupported(f"draws whose sensor histories differ in View.series({name!r}) over ({t0:g}, {t1:g}] (a shared truth's laws read them by parts)")
                 return [(p["t"], p[name]) for p in self.deep.take(sorted(wins.pop()))]
@@ -679,8 +674,6 @@ class _Deep:
             pos = lo + o
             key[:, o] = np.where(pos < hi, np.argmax(cum >= (pos + 1)[None, :], axis=0), -1)
         uniq, inv = np.unique(key, axis=0, return_inverse=True)
-        if len(uniq) == 1:
-            return [(np.arange(self.m), self.take((self.k0 + uniq[0][uniq[0] >= 0]).tolist()))]
         inv = inv.reshape(-1)
         out = []
         for u, row in enumerate(uniq):
@@ -1025,8 +1018,8 @@ def run(
     # wherever each draw's agents step at packets of their own and so may skip ticks (sensor links
     # with loss, jitter or cuts, or a sensor delay beside emulated agent→agent links: an agent that
     # hears nothing sends nothing, and the world's stale-command policy acts on what it holds)
-    idling = _per_draw(sc) or (sc.link_spec(f"world->{ids[0]}").active and any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors))
-    cmd_links = None if shared or not (idling or any(d.link_spec(f"{i}->world").active for d in draws for i in ids)) else batched_links.Commands(draws, seeds, counters=rows)
+    per_draw = any(_per_draw(d) for d in draws)  # (a sweep's draws differ in their agent→agent links)
+    cmd_links = None if shared or not (per_draw or any(d.link_spec(f"{i}->world").active for d in draws for i in ids)) else batched_links.Commands(draws, seeds, counters=rows)
     edge_links = batched_links.Edges(draws, seeds, rows, {i: {f: len(x.shape) for f, x in sc.module_for(sc.agent(i).role).SPEC.edge_in.items()} for i in ids}) if any(d.link_spec(f"{j}->{i}").active for d in draws for i in ids for j in sc.agent(i).neighbors) else None
     published = dict.fromkeys(ids, 0)  # messages each agent sent (its sequence number, as AgentNode.seq)
     period = 1.0 / sc.agent(ids[0]).clock.rate  # AgentClock: tick k at k · period
@@ -1083,8 +1076,6 @@ def run(
     # A sensor delay (the same on every sensor link: batched_links.per_draw_sensors): the packets' releases
     # and the steps the agents take on them, one plan for every agent and draw.
     sensor_spec = sc.link_spec(f"world->{ids[0]}")
-    # Jitter, loss or cuts (or a delay beside emulated agent→agent links): each draw's agents step at packets of their own
-    per_draw = idling
     sensor_links = _SensorLinks(sensor_spec, period) if sensor_spec.active and not per_draw else None
     store: dict[int, dict[int, dict[str, Any]]] = {i: {} for i in ids}  # sample -> packet, while some tick may read it
     draw_links: dict[int, _DrawSensorLinks] = {}

@@ -421,15 +421,11 @@ class Edges:
         if self._arrays is None:
             self._arrays = {k: (np.array([x.release for x in msgs]).reshape(len(msgs), self.M), np.array([x.seq for x in msgs]), np.array([x.t_send for x in msgs])) for k, msgs in self.msgs.items()}
         out = {}
-        for (j, i), msgs in self.msgs.items():
+        for j, i in self.msgs:
             R, seq, t_send = self._arrays[(j, i)]
             d: dict[str, Any]
             if self.links[(j, i)].specs[m].reorder:
-                c = LinkCounter()
-                got = sorted((float(x.release[m]), a, x) for a, x in enumerate(msgs) if x.release[m] <= t_end)
-                for rel, _, x in got:
-                    c.see(x.seq, 0, rel - x.t_send)
-                d = c.as_dict() if got else {"delivered": 0, "dropped": 0, "reordered": 0}
+                d = replayed(R[:, m], seq, t_send, t_end)
             else:
                 idx = np.flatnonzero(R[:, m] <= t_end)  # NaN (lost) compares False
                 if not idx.size:
@@ -441,6 +437,19 @@ class Edges:
             d["sent"] = self.sent[(j, i)]
             out[f"{j}->{i}"] = d
         return out
+
+
+def replayed(release: np.ndarray, seq: np.ndarray, t_send: np.ndarray, t_end: float) -> dict[str, Any]:
+    """A reordering link's counters as its receiver's LinkCounter counts them: the messages
+    released by ``t_end`` (NaN: lost or not sent) taken in release order, ties in send order
+    (the Inbox's heap), each with its sequence number and latency."""
+    got = np.flatnonzero(release <= t_end)  # NaN compares False
+    if not got.size:
+        return {"delivered": 0, "dropped": 0, "reordered": 0}
+    counter = LinkCounter()
+    for e in got[np.argsort(release[got], kind="stable")]:
+        counter.see(int(seq[e]), 0, float(release[e] - t_send[e]))
+    return counter.as_dict()
 
 
 class _DrawRing:
@@ -595,13 +604,8 @@ class DrawInbox:
         out = {}
         for (j, i), c in self._counts.items():
             d: dict[str, Any] = {"delivered": int(c["n"][m]), "dropped": int(c["dropped"][m]), "reordered": 0}
-            if self.links[(j, i)].specs[m].reorder:  # replayed in release order (ties in send order) through a LinkCounter
-                counter = LinkCounter()
-                got = np.flatnonzero(c["D"][:, m])
-                log = self.log[(j, i)]
-                for e in got[np.argsort(c["R"][got, m], kind="stable")]:
-                    counter.see(int(log[e][1][m]), 0, float(c["R"][e, m] - c["T"][e]))
-                d = counter.as_dict() if got.size else d
+            if self.links[(j, i)].specs[m].reorder:
+                d = replayed(c["R"][:, m], np.array([x[1][m] for x in self.log[(j, i)]]), c["T"], t_end)
             elif c["n"][m]:
                 got = np.flatnonzero(c["D"][:, m])[-LATENCIES:]
                 q = np.percentile(c["R"][got, m] - c["T"][got], [50, 99])
