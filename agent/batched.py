@@ -23,13 +23,13 @@ its ticks on the sensor grid, no faults but link cuts (the
 agent→agent and command links are emulated draw by draw: agent/batched_links.py, _step_groups;
 a sensor delay, the same on every sensor link, is stepped as the runtime steps it: _SensorLinks;
 sensor jitter, loss and cuts, each draw at its own packets: _DrawSensorLinks, _tick_draws; on a
-prescribed truth each draw's estimates are measured at their own stamps, agent/batched_stamps.py,
+prescribed truth each draw's estimates are measured at their own stamps by its family's measure,
 and its laws read its own sensor history, _Deep, which ``--engine auto`` leaves to sim: prefer_sim),
 leaders (if any) that only publish,
-sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), the
-plant its report family is measured on here (MEASURES: the rigid-body plant for the §5.6
-laws, a truth per draw; for the §4.5 and §3 observers the prescribed motion, the same in every
-draw, so it is simulated and measured once, by the world's own Sensing, and its measurements
+sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), and
+the plant its experiment family measures it on here (zswarm.family.Batched: rigid bodies, a
+truth per draw; or the prescribed motion, the same in every draw, so it is simulated and
+measured once, by the world's own Sensing, and its measurements
 are shared), and an algorithm whose SPEC says its functions broadcast (``batched=True``).
 The noise is drawn from the world's generators in the world's order, each draw's from its own
 seed and with its own variances (on a shared truth the noisy measurements then get a draw
@@ -50,9 +50,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from agent import batched_links, batched_stamps
-from agent.batched_stamps import mean_rows as _mean_rows
-from agent.batched_stamps import nanmean_of as _nanmean_of
+from agent import batched_links
 from agent.runtime import RECENT_EDGE_MESSAGES, setup, since, step_ends
 from world.motion import prescribed
 from world.node import PLAN_SAMPLES, Sensing
@@ -62,21 +60,17 @@ from zswarm import timing
 from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.links import LinkModel, LinkSpec
-from zswarm.report.base import grid as coarse_grid
-from zswarm.report.families.tree import nearest_rotations
-from zswarm.report.series import FINAL_WINDOW_S, final_of_grid
+from zswarm import family as zswarm_family
+from zswarm.measure import Context, Published, Result
 from zswarm.scenario import Scenario, ScenarioText
 from zswarm.so3 import exp, mul
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude", "bearings", "position", "velocity"})  # what the batched world measures
 PER_DRAW_SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # ... on a truth per draw (rigid bodies)
-# Report family -> the plant its draws run on here.  "sync" (§5.6): rigid bodies (5.1), a truth
-# per draw, measured by the truth's max_k |R̄_k|_I.  "tree" (§4.5 observers): the prescribed
-# motion, the same truth for every draw (simulated once, its measurements shared by the draws),
-# measured by the estimates' max_k |R̄_k|_I.
-# "leader_follower" (§3 observers): the prescribed motion, shared, measured by each follower's
-# own errors |R̃_i|_I and ||p̃_i|| (zswarm.report.recording.errors).
-MEASURES = {"sync": "rigid_body", "tree": "prescribed", "leader_follower": "prescribed"}
+# The plants the draws run on here (a family's Batched.plant): rigid bodies (5.1), a truth per
+# draw; the prescribed motion, the same truth for every draw (simulated once, its measurements
+# shared by the draws).
+PLANTS = ("rigid_body", "prescribed")
 _EYE3 = np.eye(3)
 _EYE3.flags.writeable = False
 HISTORY = 64  # sensor samples kept per agent for View.series (the runtime's inbox keeps as many)
@@ -102,11 +96,16 @@ def problem(sc: Scenario) -> str | None:
             return f"the leaders' {sc.leader_module}: its functions are not declared to broadcast over draws (SPEC.batched)"
         if lead.parts:
             return f"the leaders' {sc.leader_module} steps (the batched engine runs leaders that only publish)"
-    measure = MEASURES.get(spec.report)
-    if measure is None:
-        return f"the {spec.report!r} report family (the batched engine measures {', '.join(sorted(MEASURES))} runs)"
+    declared = zswarm_family.of(sc).batched
+    if declared is None:
+        return f"its experiment family {spec.report!r} declares no measure on the batched engine (zswarm.family.Batched)"
+    measure = declared.plant
+    if measure not in PLANTS:
+        return f"the {spec.report!r} family's {measure!r} plant (the batched engine runs {', '.join(PLANTS)})"
     if sc.plant != measure:
         return f"the {sc.plant!r} plant with the {spec.report!r} family (the batched engine runs it on the {measure!r} plant)"
+    if (declared.truth if measure == "rigid_body" else declared.stamps if _per_draw(sc) else declared.ticks) is None:
+        return f"the {spec.report!r} family measures no such draws on the batched engine (zswarm.family.Batched: no {'truth' if measure == 'rigid_body' else 'stamps' if _per_draw(sc) else 'ticks'} measure)"
     need = frozenset().union(*(sc.sensors_of(i) for i in sc.ids))
     have = SENSORS if measure == "prescribed" else PER_DRAW_SENSORS
     if need - have:
@@ -384,45 +383,6 @@ def stack(values: Sequence[Any]) -> Any:
             raise Unsupported("draws whose states differ in length")
         return tuple(stack(list(col)) for col in zip(*values, strict=True))
     return np.stack([np.asarray(v, dtype=float) for v in values])
-
-
-@dataclass
-class Result:
-    """What a basin or a sweep reads of M draws: the family's basin measure on its grid (the
-    sync family's max_k |R̄_k|_I of the truth, the tree family's of the estimates, the largest
-    follower attitude error |R̃_i|_I for the leader–follower family) and the jumps."""
-
-    t: np.ndarray  # (T,) world times of the grid
-    max_rel: np.ndarray  # (M, T) the basin measure
-    jumps: np.ndarray  # (M,) ξ_k jumps of every edge
-    agent_jumps: np.ndarray  # (M,) jumps of the agents' own hybrid variables
-    steps: int  # agent steps taken (per draw)
-    # For a sweep's rows (run(rows=True)): what summarize_run reads of a sim run's files.
-    final_att: np.ndarray | None = None  # (M,) summary.json's mean_attitude_error_final (the family's)
-    final_pos: np.ndarray | None = None  # (M,) its mean_position_error_final (NaN: none)
-    t_coarse: np.ndarray | None = None  # the report's 0.1 s grid up to the duration (zswarm.report.base.grid)
-    att_coarse: np.ndarray | None = None  # (M, len(t_coarse)) the family's team attitude measure on it, from its CSV's %.6e values
-    pos_coarse: np.ndarray | None = None  # (M, len(t_coarse)) the same of positions (None: the family has none)
-    edge_messages: int = 0  # agent -> agent messages sent (each delivered: lockstep), per draw
-    commands: int = 0  # commands sent to the world, per draw
-    command_links: batched_links.Commands | None = None  # emulated command links: their counters per draw (None: perfect, none lost, late or expired)
-    edge_links: batched_links.Edges | batched_links.DrawInbox | None = None  # emulated agent→agent links: their counters per draw (link_counters, stale_terms; None: perfect)
-    t_end: float = 0.0  # the last sample's time: what a link released by then was delivered
-    # Sensor links with jitter or loss (_DrawSensorLinks): per draw, what its agents sent (they idle
-    # in some draws and not in others), its lost sensor packets and its stale reads.
-    draw_edge_messages: np.ndarray | None = None
-    draw_commands: np.ndarray | None = None
-    sensor_dropped: np.ndarray | None = None
-    stale_terms: np.ndarray | None = None
-    # On a prescribed truth with such links: each draw's basin measure on a grid of its own (t, v)
-    # (the tree family's: from the agents' latest first estimate on, batched_stamps.TreeErrors).
-    draw_grid: list[tuple[np.ndarray, np.ndarray]] | None = None
-
-    def series(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Draw ``n``'s basin measure and the times of its grid."""
-        if self.draw_grid is not None:
-            return self.draw_grid[n]
-        return self.t, self.max_rel[n]
 
 
 class _SensorLinks:
@@ -820,153 +780,6 @@ def _measure_draws(sensing: Sensing, i: int, noise: Mapping[str, list[Any]], R: 
 NOISES = ("gyro", "bearing", "rel_att", "velocity", "attitude")  # the noise variances the batched world draws with
 
 
-class _Ticks:
-    """A shared truth's measure of the estimates at the agents' ticks (lockstep: every agent
-    ticks at ``k · tick_every`` samples).  The sweep rows read it where the report reads its
-    CSV on the 0.1 s grid and over the last second, so only those ticks are kept."""
-
-    def __init__(self, sc: Scenario, M: int, duration: float, n_samples: int, tick_every: int, sample_dt: float, grid_s: float, rows: bool, stamps: np.ndarray | None = None) -> None:
-        self.sc, self.M, self.duration, self.grid_s, self.rows = sc, M, duration, grid_s, rows
-        # The estimates' stamps: k · sample_dt at every tick, as the loop computes them; with a
-        # sensor delay the packet times the ticks that publish stepped to (_SensorLinks.stamps).
-        self.t_ticks = np.arange(0, n_samples, tick_every) * sample_dt if stamps is None else stamps
-        self.n = 0  # ticks seen
-        self.basin: list[np.ndarray] = []  # the basin measure (M,) at every tick
-        self.kept: dict[int, Any] = {}  # tick index -> what the rows read there
-        self.keep: set[int] = set()
-
-    def tick(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]]) -> None:
-        basin, kept = self.measure(plant, estimates, self.n in self.keep)
-        self.basin.append(basin)
-        if kept is not None:
-            self.kept[self.n] = kept
-        self.n += 1
-
-    def measure(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
-        raise NotImplementedError
-
-    def basin_series(self, res: Result) -> Result:
-        """The basin measure held on the family's grid (the newest tick at or before each point)."""
-        tk = self.t_ticks[: self.n]
-        if not len(tk):
-            res.t, res.max_rel = np.zeros(0), np.zeros((self.M, 0))
-            return res
-        res.t = np.arange(tk[0], tk[-1] + 1e-9, self.grid_s)
-        res.max_rel = np.array(self.basin)[np.searchsorted(tk, res.t, side="right") - 1].T
-        return res
-
-    def result(self, res: Result) -> Result:
-        return self.basin_series(res)
-
-
-class _FollowerErrors(_Ticks):
-    """The leader–follower family (zswarm.report.base, recording.errors): each follower's
-    |R̃_i|_I = sqrt(tr(I − R_i R̂_i^T)/4) and ||p̃_i|| = ||p_i − R_i R̂_i^T p̂_i|| (3.15) at its ticks;
-    the basin measure is the largest follower attitude error."""
-
-    def __init__(self, *args: Any) -> None:
-        super().__init__(*args)
-        self.followers = [(i, a) for a, i in enumerate(self.sc.ids) if self.sc.agent(i).role == "follower"]
-        # errors.csv's times (%.6f) and the newest row at or before each point of the 0.1 s grid (base.series)
-        t_csv = np.array([float(f"{t:.6f}") for t in self.t_ticks])
-        self.coarse_t = coarse_grid(self.duration)
-        self.coarse_at = np.searchsorted(t_csv, self.coarse_t + 1e-9, side="right") - 1
-        self.final_at = np.flatnonzero(self.t_ticks >= self.duration - FINAL_WINDOW_S)  # pipeline.final_mean's window
-        if self.rows:
-            self.keep = set(self.coarse_at[self.coarse_at >= 0].tolist()) | set(self.final_at.tolist())
-
-    def measure(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
-        R, p = plant.R, plant.p
-        att, pos = [], []
-        for i, a in self.followers:
-            R_hat, p_hat = estimates[i]["R_hat"], estimates[i]["p_hat"]
-            tr = np.einsum("ij,mij->m", R[a], R_hat)  # tr(R R̂^T)
-            att.append(np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0)))
-            if keep:
-                pos.append(np.linalg.norm(p[a] - np.einsum("ij,mkj,mk->mi", R[a], R_hat, p_hat), axis=1))
-        basin = np.max(att, axis=0) if att else np.zeros(self.M)
-        return basin, (np.array(att), np.array(pos)) if keep else None  # (F, M) each
-
-    def result(self, res: Result) -> Result:
-        res = self.basin_series(res)
-        if not self.rows:
-            return res
-        F = len(self.followers)
-        # Finals: per follower the mean over the last second of its ticks, then over followers (base.headline's nanmean).
-        fin = np.array([self.kept[n] for n in self.final_at if n < self.n])  # (K, 2, F, M)
-        per = [[_mean_rows(fin[:, c, f, :].T) for f in range(F)] for c in (0, 1)]  # [c][f] -> (M,)
-        res.final_att, res.final_pos = (_nanmean_of(per[c]) for c in (0, 1))
-        # The 0.1 s grid: each follower's newest row at or before the point, as errors.csv holds it; mean over followers.
-        ok = self.coarse_at >= 0
-        out = []
-        for c in (0, 1):
-            cols = np.full((F, self.M, len(self.coarse_t)), np.nan)
-            for g in np.flatnonzero(ok):
-                cols[:, :, g] = np.array(np.char.mod("%.6e", self.kept[int(self.coarse_at[g])][c]), dtype=float)
-            out.append(np.mean(cols, axis=0))
-        res.t_coarse, res.att_coarse, res.pos_coarse = self.coarse_t, out[0], out[1]
-        return res
-
-
-class _TreeErrors(_Ticks):
-    """The tree family (zswarm.report.families.tree.tree_metrics): R̃_i = R_i R̂_i^T and per edge
-    |R̄_k|_I = |R̃_t^T R̃_h|_I at every tick (the basin measure: their max); for the rows, each
-    agent's |R̃_i R̃_c^T|_I up to the chordal mean R̃_c over the last second, and the edges'
-    mean on the 0.1 s grid as edges.csv holds it (%.3f times, %.6e values)."""
-
-    def __init__(self, *args: Any) -> None:
-        super().__init__(*args)
-        self.edges = list(self.sc.oriented)
-        self.col = {i: a for a, i in enumerate(self.sc.ids)}
-        tk = self.t_ticks
-        # tree_metrics' grid (step 0.01 from the first estimate), each point's newest tick ...
-        self.tm_t = np.arange(tk[0], tk[-1] + 1e-9, 0.01) if len(tk) else np.zeros(0)
-        self.tm_at = np.searchsorted(tk, self.tm_t, side="right") - 1
-        # ... and edges_on_grid's 0.1 s points on edges.csv's times
-        t_csv = np.array([float(f"{t:.3f}") for t in self.tm_t])
-        self.coarse_t = coarse_grid(self.duration)
-        self.coarse_at = self.tm_at[np.clip(np.searchsorted(t_csv, self.coarse_t, side="right") - 1, 0, len(t_csv) - 1)] if len(t_csv) else np.zeros(0, dtype=int)
-        self.final_at = self.tm_at[self.tm_t >= self.duration - FINAL_WINDOW_S]  # series.final's window on tm.t
-        if self.rows:
-            self.keep = set(self.coarse_at.tolist()) | set(self.final_at.tolist())
-
-    def measure(self, plant: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
-        R = plant.R
-        Rt = {i: R[a] @ np.swapaxes(estimates[i]["R_hat"], -1, -2) for i, a in self.col.items()}
-        vals = []
-        for h, tl in self.edges:
-            tr = np.einsum("mji,mji->m", Rt[tl], Rt[h])  # tr(R̃_t^T R̃_h), without the product
-            vals.append(np.sqrt(np.clip((3.0 - tr) / 4.0, 0.0, 1.0)))
-        basin = np.max(vals, axis=0) if vals else np.zeros(self.M)
-        return basin, (np.array(vals), Rt) if keep else None
-
-    def result(self, res: Result) -> Result:
-        res = self.basin_series(res)
-        if not self.rows:
-            return res
-        sc = self.sc
-        # The agents' errors up to the chordal mean over the last second (tree.summary), their mean over followers.
-        finals = []
-        for n in self.final_at:
-            Rt = self.kept[int(n)][1]
-            Rc = nearest_rotations(np.mean([Rt[i] for i in sc.ids], axis=0))  # (M, 3, 3)
-            finals.append([np.sqrt(np.clip((3.0 - np.einsum("mij,mij->m", Rt[i], Rc)) / 4.0, 0.0, 1.0)) for i in sc.ids])
-        fin = np.array(finals)  # (K, agents, M)
-        per = [_mean_rows(fin[:, q, :].T) for q, i in enumerate(sc.ids) if sc.agent(i).role == "follower"]
-        res.final_att = _nanmean_of(per)
-        res.final_pos = np.full(self.M, np.nan)  # tree's positions: the §4.4 pose observer's only
-        E = len(self.edges)
-        rounded = np.array([np.array(np.char.mod("%.6e", self.kept[int(n)][0]), dtype=float) for n in self.coarse_at])  # (T, E, M)
-        res.t_coarse = self.coarse_t
-        res.att_coarse = np.mean([rounded[:, e, :].T for e in range(E)], axis=0)  # edges_on_grid(..., np.mean)
-        return res
-
-
-_SHARED_MEASURES: dict[str, type[_Ticks]] = {"tree": _TreeErrors, "leader_follower": _FollowerErrors}
-# ... when each draw's agents publish at stamps of their own (sensor links with jitter, loss or cuts)
-_DRAW_MEASURES: dict[str, Any] = {"tree": batched_stamps.TreeErrors, "leader_follower": batched_stamps.FollowerErrors}
-
-
 def _with_draws(m: dict[str, Any], M: int, drawn: frozenset[str]) -> dict[str, Any]:
     """A shared truth's packet for draws that step at packets of their own: the fields measured
     once for all (not in ``drawn``) as read-only views with a draw axis, so a sub-stack's rows
@@ -1010,7 +823,8 @@ def run(
     common = schedule(sc)
     if any(schedule(d) != common for d in draws[1:]):
         raise Unsupported("draws that differ in more than their agents' starts, noise variances, seeds and per-draw gains (SPEC.draw_gains)")
-    family = sc.info.report
+    declared = zswarm_family.of(sc).batched
+    assert declared is not None  # problem() refused a family without one
     shared = sc.plant == "prescribed"
     col = {i: a for a, i in enumerate(ids)}
     torques = _Torques(M * n)
@@ -1093,22 +907,13 @@ def run(
 
     sample_dt = 1.0 / sc.sensor_rate
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
-    grid_every = max(1, round(grid_s * sc.sensor_rate))
     n_samples = math.floor(duration * sc.sensor_rate + 1e-9) + 1
-    grid_t: list[float] = []
-    grid_v: list[np.ndarray] = []
-    # The report's finals and coarse grid (sweep rows): the grid's times are known ahead.
-    grid_all = np.round(np.arange(0.0, (n_samples - 1) // grid_every * grid_every * sample_dt + 1e-9, grid_s), 9)
-    coarse_t = coarse_grid(duration)
-    coarse_at = np.clip(np.searchsorted(grid_all, coarse_t, side="right") - 1, 0, len(grid_all) - 1) if len(grid_all) else np.zeros(0, dtype=int)
-    coarse_v: dict[int, np.ndarray] = {}
-    coarse_set = set(coarse_at.tolist()) if rows else set()
-    final_from = grid_all[-1] - FINAL_WINDOW_S if rows and len(grid_all) else math.inf
-    final_v: list[np.ndarray] = []
     stamps = None if sensor_links is None else _SensorLinks(sensor_spec, period).stamps(n_samples, tick_every, sample_dt)
-    measure: Any = None  # _Ticks, or batched_stamps' FollowerErrors / TreeErrors
-    if shared:
-        measure = _DRAW_MEASURES[family](sc, M, duration, sample_dt, rows) if per_draw else _SHARED_MEASURES[family](sc, M, duration, n_samples, tick_every, sample_dt, grid_s, rows, stamps)
+    # The family's measure (zswarm.measure): of each draw's truth at every sample, or of the estimates on a
+    # shared truth at the agents' common ticks or at each draw's own stamps.
+    make = declared.truth if not shared else declared.stamps if per_draw else declared.ticks
+    assert make is not None  # problem() refused a family without it
+    measure: Any = make(Context(sc, M, duration, sample_dt, n_samples, tick_every, grid_s, rows, stamps))
     # The packet fields with a draw axis (each draw's own noise: _measure_draws), on a shared truth
     drawn = frozenset(f for f, nz in (("gyro", "gyro"), ("bearings", "bearing"), ("rel_att", "rel_att"), ("velocity", "velocity"), ("attitude", "attitude")) if per_draw_noise and not one_noise and std[nz][0] > 0)
     truths: dict[int, Any] = {}  # with a sensor delay on a shared truth: sample -> the truth there (what an estimate stamped then is measured on)
@@ -1118,9 +923,6 @@ def run(
     started = False
     last = 0.0
     steps = 0
-    edges = list(sc.oriented)
-    h_idx = np.array([col[h] for h, _ in edges], dtype=int)
-    t_idx = np.array([col[t] for _, t in edges], dtype=int)
     for k in range(n_samples):
         t = k * sample_dt  # as World.next_time computes it
         tick = k % tick_every == 0
@@ -1157,18 +959,7 @@ def run(
         else:
             plant.advance_to(t)
             R = plant.R.reshape(M, n, 3, 3)
-            if k % grid_every == 0 and edges:
-                # tr R̄_k = tr(R_t^T R_h) = Σ_ji (R_t)_ji (R_h)_ji, without forming R̄_k (a third of the cost;
-                # the report's trace of the product differs by round-off, ~1e-15)
-                tr = np.einsum("mnji,mnji->mn", R[:, t_idx], R[:, h_idx])
-                rel = np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0))  # (M, edges)
-                g = len(grid_t)
-                grid_t.append(t)
-                grid_v.append(rel.max(axis=1))
-                if grid_all[g] >= final_from:
-                    final_v.append(rel)
-                if g in coarse_set:
-                    coarse_v[g] = np.array(np.char.mod("%.6e", rel), dtype=float).max(axis=1)
+            measure.sample(k, t, R)
             W = plant.omega_now().reshape(M, n, 3)
             RT = np.swapaxes(R, -1, -2)
             # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
@@ -1211,13 +1002,13 @@ def run(
         if per_draw:
             assert draw_inbox is not None
             draw_inbox.now = t_tick
-            estimated: dict[int, batched_stamps.Published] = {}
+            estimated: dict[int, Published] = {}
             for i in ids:
-                if measure is not None:
-                    estimated[i] = batched_stamps.Published(np.zeros(M, dtype=bool), np.full(M, np.nan), np.zeros((M, 3, 3)), np.zeros((M, 3)))
+                if shared:
+                    estimated[i] = Published(M, measure.fields)
                 _tick_draws(i, col[i], t_tick, n_tick, draw_links[i], store[i], views[i], modules[i], gains[i], parts[i], states, hybrid, jumps, agent_jumps, draw_inbox, torques.u.reshape(M, n, 3) if cmd_links is None else cmd_links, draw_edges, draw_commands, estimated.get(i))
             n_tick += 1
-            if measure is not None:
+            if shared:
                 measure.tick(truths, estimated)  # each draw's estimates on the truth at their stamps
             lo_all = k
             for i in ids:  # the samples no later tick reads
@@ -1299,22 +1090,14 @@ def run(
                 else:
                     edge_links.send(i, j, seq, t_stamp, t_tick, dict(fields))
             estimates[i] = pub.estimate
-        if measure is not None:
+        if shared:
             measure.tick(plant if sensor_links is None else truths[ends[-1][1]], estimates)  # the truth at the estimates' stamp
         if started:
             steps += 1
         started, last = True, ends[-1][0]
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
-    if measure is not None and not per_draw:
-        return measure.result(  # type: ignore[no-any-return]
-            Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
-    # The grid as the sync family builds it on a recording (np.round(np.arange(...), 9)).
-    t_grid = np.round(np.arange(0.0, grid_t[-1] + 1e-9, grid_s), 9) if grid_t else np.zeros(0)
-    assert measure is not None or (len(t_grid) == len(grid_t) and np.array_equal(t_grid, grid_all))
-    res = Result(t_grid, np.array(grid_v).T if grid_v else np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt)
-    if measure is not None:
-        res = measure.result(res)
+    res = measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
     if per_draw:
         assert draw_inbox is not None
         res.draw_edge_messages, res.draw_commands = draw_edges, draw_commands
@@ -1323,13 +1106,6 @@ def run(
         res.stale_terms = np.sum(list(draw_inbox.stale_terms.values()), axis=0)
         if draw_inbox.links:
             res.edge_links = draw_inbox  # the receivers' counters per draw (link_counters)
-    if rows and grid_t and measure is None:
-        fin = np.array(final_v)  # (window, M, edges)
-        t_fin = grid_all[grid_all >= final_from]
-        edge_final = np.array([[final_of_grid(t_fin, fin[:, m, e]) for e in range(fin.shape[2])] for m in range(M)])  # the report's final, edge by edge
-        res.final_att = edge_final.mean(axis=1)
-        res.t_coarse = coarse_t
-        res.att_coarse = np.array([coarse_v[g] for g in coarse_at]).T
     return res
 
 
@@ -1358,7 +1134,7 @@ def _tick_draws(
     u: np.ndarray | batched_links.Commands,
     sent_edges: np.ndarray,
     sent_commands: np.ndarray,
-    published: batched_stamps.Published | None = None,
+    published: Published | None = None,
 ) -> None:
     """Agent i's tick at ``t_tick`` in M draws whose sensor links lose and delay packets each its
     own way (_DrawSensorLinks): each draw takes its steps (AgentNode.tick and _advance) on its
@@ -1429,7 +1205,7 @@ class _AgentTick:
     u: np.ndarray | batched_links.Commands
     sent_edges: np.ndarray
     sent_commands: np.ndarray
-    published: batched_stamps.Published | None  # on a shared truth: the estimates the draws publish, for its measure
+    published: Published | None  # on a shared truth: the estimates the draws publish, for its measure
     links: _DrawSensorLinks | None = None  # the agent's sensor link (its draws' inboxes: _Deep)
     done: list[tuple[np.ndarray, Any, int]] = dataclasses.field(default_factory=list)
 
@@ -1570,13 +1346,8 @@ def _send(c: _AgentTick, idx: np.ndarray, m: int, pub: Any) -> None:
                 c.u[idx, c.a] = tau
     for j, fields in pub.edges.items():
         c.inbox.send(c.i, j, idx, t_stamp, fields, c.n_tick, m, c.t_tick)
-    P = c.published
-    if P is not None and pub.estimate is not None and "R_hat" in pub.estimate:
-        n = len(idx)
-        P.mask[idx], P.stamp[idx] = True, t_stamp
-        P.R_hat[idx] = np.broadcast_to(np.asarray(pub.estimate["R_hat"], dtype=float), (m, 3, 3))[:n]
-        if "p_hat" in pub.estimate:
-            P.p_hat[idx] = np.broadcast_to(np.asarray(pub.estimate["p_hat"], dtype=float), (m, 3))[:n]
+    if c.published is not None and pub.estimate is not None:
+        c.published.put(idx, t_stamp, pub.estimate, m)
 
 
 def _take_gains(g: Any, rows: np.ndarray, M: int) -> Any:

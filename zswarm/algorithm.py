@@ -51,8 +51,6 @@ from zswarm.wire import ROT_TOL
 
 ENTRY_POINT_GROUP = "zswarm.algorithms"
 BUILTIN_PACKAGE = "agent.algorithms."  # where zswarm's own algorithms live (registered in pyproject.toml)
-REPORT_FAMILY_GROUP = "zswarm.report_families"
-BUILTIN_FAMILIES = "zswarm.report.families."  # zswarm's own report families (registered in pyproject.toml)
 
 # The sensors the world can fit, each with what it measures: an algorithm declares them by
 # name (SPEC.sensors) and reads each under the same name in its sensor packet (View.sense).
@@ -221,8 +219,8 @@ class AlgorithmSpec:
     # M values as (M, 1) broadcasts as the number does.  The others take one value per batch.
     draw_gains: frozenset[str] = frozenset()
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
-    # The report family that turns a run of this algorithm into figures (zswarm.report.family):
-    # a name registered in the entry-point group REPORT_FAMILY_GROUP ("leader_follower", "tree",
+    # The experiment family of this algorithm (zswarm.family: its report, sweep, basin, batched measure):
+    # a name registered in the entry-point group zswarm.family.GROUP ("leader_follower", "tree",
     # "sync", "formation" are zswarm's) or a module path (mylab.my_family).
     report: str = "leader_follower"
 
@@ -393,13 +391,6 @@ def registered() -> Mapping[str, str]:
     return plugins.registered(ENTRY_POINT_GROUP, BUILTIN_PACKAGE)
 
 
-def family_module(name: str) -> str | None:
-    """The module path of the report family ``name`` (registered, or a module path that can be
-    imported), without importing it; None when there is none."""
-    target = plugins.registered(REPORT_FAMILY_GROUP, BUILTIN_FAMILIES).get(name, name)
-    return target if _find_spec(target) is not None else None
-
-
 def _find_spec(target: str) -> Any:
     """importlib's spec of module ``target``, or None (not found, or not a module name)."""
     try:
@@ -474,9 +465,9 @@ def check(module: ModuleType) -> AlgorithmSpec:
     for key, f in spec.initial.items():
         if not isinstance(f, InitialField) or f.kind not in INITIAL_KINDS or (f.kind == "custom") != (f.parse is not None) or f.table not in ("estimate", "agent"):
             raise AlgorithmError(f"module {name!r}: SPEC.initial[{key!r}] must be a zswarm.algorithm.InitialField of a kind in {INITIAL_KINDS} (parse given for custom only), table 'estimate' or 'agent'")
-    if not isinstance(spec.report, str) or family_module(spec.report) is None:
-        known = ", ".join(plugins.registered(REPORT_FAMILY_GROUP, BUILTIN_FAMILIES))
-        raise AlgorithmError(f"module {name!r}: SPEC.report: no report family {spec.report!r} (registered: {known}; or a module path like mylab.my_family)")
+    if not isinstance(spec.report, str) or plugins.family_module(spec.report) is None:
+        known = ", ".join(plugins.registered(plugins.FAMILY_GROUP, plugins.OWN_FAMILIES))
+        raise AlgorithmError(f"module {name!r}: SPEC.report: no experiment family {spec.report!r} (registered: {known}; or a module path like mylab.my_family)")
     if spec.stale.policy not in STALE_POLICIES:
         raise AlgorithmError(f"module {name!r}: SPEC.stale.policy must be one of {STALE_POLICIES}")
     if not isinstance(spec.draw_gains, frozenset) or not spec.draw_gains <= set(spec.gains):

@@ -22,9 +22,10 @@ Uniform on SO(3): the unit quaternion of four standard normals (Shoemake's
 subgroup algorithm gives the same law), from ``numpy.random.default_rng([seed,
 draw])``, so a draw is the same whatever the number of workers.
 
-A draw *synchronizes* when max_k |R̄_k|_I (truth for the laws, estimates for
-the observers) stays below the threshold (0.01) from some time before the
-horizon on.  Results: ``basin.csv`` (a row per draw, written as they finish;
+A draw *settles* when its family's basin measure (:class:`zswarm.family.Basin`:
+max_k |R̄_k|_I, of the truth for the laws, of the estimates for the observers)
+stays below the threshold (0.01) from some time before the horizon on; the
+family names that verdict ("synchronized") and the measure.  Results: ``basin.csv`` (a row per draw, written as they finish;
 the same command with the same ``--out`` resumes), ``basin.json`` (fractions,
 settle-time quantiles) and ``basin.png`` (the settle times' distribution).
 """
@@ -48,8 +49,8 @@ from typing import Any
 import numpy as np
 
 from zswarm import cluster as zswarm_cluster
-from zswarm import procutil, report
-from zswarm.report import family
+from zswarm import family, procutil, report
+from zswarm.family import Basin
 from zswarm.report.series import leave_time, settle_time
 from zswarm.scenario import Override, Scenario, load, loads, parse_override, with_rotations
 from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
@@ -58,7 +59,20 @@ from zswarm.sweep import _fmt  # the same CSV cells as sweep.csv
 # Past ~1000 the per-call cost of numpy is paid off (agent/batched.py's benchmark).
 MAX_CHUNK = 1000
 PROGRESS_EVERY_S = 30.0  # wall seconds between a running chunk's progress lines
-COLUMNS = ("draw", "kind", "synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
+AFTER_VERDICT = ("left_s", "settle_01_s", "settle_s", "final_max", "initial_max", "jumps", "agent_jumps", "wall_s", "status", "error")
+
+
+def columns(verdict: str) -> tuple[str, ...]:
+    """basin.csv's columns: the draw, its kind, the family's verdict (True/False), the rest."""
+    return ("draw", "kind", verdict, *AFTER_VERDICT)
+
+
+def basin_of(sc: Scenario) -> Basin:
+    """The scenario's family's part of the basin check; ValueError when it has none."""
+    b = family.of(sc).basin
+    if b is None:
+        raise ValueError(f"{sc.name}: the experiment family of {sc.algorithm}, {sc.info.report!r}, declares no basin check (zswarm.family.Basin)")
+    return b
 
 
 def uniform_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -87,12 +101,9 @@ def _rows(R: np.ndarray) -> str:
 
 
 def starts_of(sc: Scenario) -> list[tuple[str, Any]]:
-    """What a draw randomises: the rotations its report family names (``basin_start``: the
-    Chapter 5 laws' R_i(0) and Q_i(0), the §4 observers' R̂_i(0)), with their own values."""
-    fam = family.of(sc)
-    if fam.basin_start is None or fam.basin_series is None:
-        raise ValueError(f"{sc.name}: zswarm basin covers the tree schemes (Chapter 5 laws, §4 observers); {sc.algorithm} is not one")
-    return fam.basin_start(sc)
+    """What a draw randomises: the rotations its family names (Basin.start: e.g. the Chapter 5
+    laws' R_i(0) and Q_i(0), the §4 observers' R̂_i(0)), with their own values."""
+    return basin_of(sc).start(sc)
 
 
 def draw_overrides(sc: Scenario, seed: int, draw: int, near: float | None = None) -> list[Override]:
@@ -144,19 +155,18 @@ def run_draw(topology: Source, seed: int, draw: int, duration: float, threshold:
     sc = with_rotations(base, draw_overrides(base, seed, draw, near))
     msgs = simulate(sc, Path("."), duration, run_seed(base, draw), lean=True, record=False)
     rec = report.load_recording(msgs)
-    fam = family.of(sc)
-    assert fam.basin_series is not None  # draw_overrides refused a family without one
-    t, mx = fam.basin_series(sc, rec)
-    return _row(draw, near, t, mx, threshold, len(rec.jumps), len(rec.agent_jumps), round(time.monotonic() - t0, 2))
+    b = basin_of(sc)
+    t, mx = b.series(sc, rec)
+    return _row(draw, near, t, mx, threshold, len(rec.jumps), len(rec.agent_jumps), round(time.monotonic() - t0, 2), b.verdict)
 
 
-def _row(draw: int, near: float | None, t: np.ndarray, mx: np.ndarray, threshold: float, jumps: int, agent_jumps: int, wall: float) -> dict[str, Any]:
-    """A draw's row of basin.csv from its max_k |R̄_k|_I series, whichever engine ran it."""
+def _row(draw: int, near: float | None, t: np.ndarray, mx: np.ndarray, threshold: float, jumps: int, agent_jumps: int, wall: float, verdict: str) -> dict[str, Any]:
+    """A draw's row of basin.csv from its basin measure's series, whichever engine ran it."""
     settle = settle_time(t, mx, threshold)
     return {
         "draw": draw,
         "kind": _kind(draw, near),
-        "synchronized": settle is not None,
+        verdict: settle is not None,
         "left_s": leave_time(t, mx),
         "settle_01_s": settle_time(t, mx, 0.1),
         "settle_s": settle,
@@ -179,7 +189,7 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
     batched = plugins.engine("batched")
     base = _load(topology)
     scs = [with_rotations(base, draw_overrides(base, seed, d, near)) for d in draws]  # as _load(topology, overrides) loads them
-    fam = family.of(base)
+    b = basin_of(base)
     told = [time.monotonic()]
 
     def tell(t: float) -> None:
@@ -189,9 +199,9 @@ def run_chunk(topology: Source, seed: int, draws: list[int], duration: float, th
             told[0] = time.monotonic()
             print(f"draws {draws[0]}-{draws[-1]}: t = {t:.0f} of {duration:g} s", file=sys.stderr, flush=True)
 
-    res = batched.run(scs, duration, base.seed, fam.basin_grid_s, progress=tell, seeds=[run_seed(base, d) for d in draws])
+    res = batched.run(scs, duration, base.seed, b.grid_s, progress=tell, seeds=[run_seed(base, d) for d in draws])
     wall = round((time.monotonic() - t0) / len(draws), 3)
-    return [_row(d, near, *res.series(n), threshold, int(res.jumps[n]), int(res.agent_jumps[n]), wall) for n, d in enumerate(draws)]
+    return [_row(d, near, *res.series(n), threshold, int(res.jumps[n]), int(res.agent_jumps[n]), wall, b.verdict) for n, d in enumerate(draws)]
 
 
 def engine_problem(sc: Scenario, auto: bool = False) -> str | None:
@@ -208,6 +218,16 @@ def engine_problem(sc: Scenario, auto: bool = False) -> str | None:
 
 def _kind(draw: int, near: float | None) -> str:
     return "scenario" if draw == 0 else "uniform" if near is None else "near"
+
+
+def verdict_in(path: Path, default: str = "settled") -> str:
+    """The verdict column of a basin.csv (its third: the family's word, e.g. "synchronized")."""
+    try:
+        with open(path, newline="") as f:
+            head = next(csv.reader(f), [])
+    except OSError:
+        return default
+    return head[2] if len(head) > 2 else default
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:
@@ -241,18 +261,21 @@ def run_basin(
     rows written as it finishes (a resume reruns the unfinished chunks).  ``cluster``: on the
     Dask cluster whose scheduler is there (zswarm.cluster), as many at a time as it has worker
     threads; the same rows as locally (the draws are seeded by their number).  ``text``: the
-    scenario's TOML to run instead of the file's (the file with ``--set`` overrides applied)."""
+    scenario's TOML to run instead of the file's (the file with ``--set`` overrides applied).
+    basin.csv's third column is the family's verdict (Basin.verdict: its word for a draw that settles)."""
     path = out / "basin.csv"
     done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
     todo = [d for d in range(draws) if d not in done]
     new = not path.exists()
-    columns = COLUMNS
+    verdict = basin_of(_load((text, topology) if text is not None else topology)).verdict
+    cols = columns(verdict)
     if not new:  # resume with the file's own columns (a folder written by an older zswarm)
         with open(path, newline="") as f:
-            columns = tuple(next(csv.reader(f), COLUMNS))
+            cols = tuple(next(csv.reader(f), cols))
+        verdict = cols[2]
     interrupted = False
     with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
         if new:
             w.writeheader()
             f.flush()
@@ -289,15 +312,15 @@ def run_basin(
                     except Exception as exc:  # a failed draw (chunk) is recorded, not fatal
                         rows_ = [{"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]} for d in ds]
                     for row in rows_:
-                        w.writerow({k: _fmt(row.get(k)) for k in columns})
+                        w.writerow({k: _fmt(row.get(k)) for k in cols})
                     f.flush()
                     if len(rows_) == 1:
                         row = rows_[0]
                         progress(f"draw {row['draw']}: {row.get('status')}, settles at {_fmt(row.get('settle_s')) or 'never'} ({row.get('wall_s')} s)")
                     else:
                         ok = [r for r in rows_ if r.get("status") == "ok"]
-                        n_sync = sum(1 for r in ok if r.get("synchronized"))
-                        progress(f"draws {ds[0]}-{ds[-1]}: {len(ok)} ok, {n_sync} synchronized ({_fmt(rows_[0].get('wall_s'))} s a draw)")
+                        n_in = sum(1 for r in ok if r.get(verdict))
+                        progress(f"draws {ds[0]}-{ds[-1]}: {len(ok)} ok, {n_in} {verdict} ({_fmt(rows_[0].get('wall_s'))} s a draw)")
                     submit()
             if interrupted:  # the draws under way are lost (they rerun on resume), not waited for
                 runner.abort()
@@ -311,13 +334,15 @@ def _f(x: str) -> float:
         return math.nan
 
 
-def summarize(rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None) -> dict[str, Any]:
-    """Fractions and settle-time quantiles (of the drawn starts; the scenario's own start apart)."""
+def summarize(rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None, verdict: str = "settled", measure: str = "the basin measure") -> dict[str, Any]:
+    """Fractions and settle-time quantiles (of the drawn starts; the scenario's own start apart).
+    ``verdict``: the rows' column of the draws that settled, and the summary's key of their
+    count; ``measure``: what settled (both the family's, zswarm.family.Basin)."""
     ok = [r for r in rows if r["status"] == "ok"]
     uni = [r for r in ok if r["kind"] != "scenario"]
     own = next((r for r in ok if r["kind"] == "scenario"), None)
-    sync = [r for r in uni if r["synchronized"] == "True"]
-    st = np.array(sorted(_f(r["settle_s"]) for r in sync))
+    settled = [r for r in uni if r[verdict] == "True"]
+    st = np.array(sorted(_f(r["settle_s"]) for r in settled))
     st1 = np.array(sorted(_f(r["settle_01_s"]) for r in uni if math.isfinite(_f(r["settle_01_s"]))))
 
     def q(a: np.ndarray) -> dict[str, float] | None:
@@ -327,7 +352,7 @@ def summarize(rows: list[dict[str, str]], threshold: float, duration: float, nea
         return {"min": float(p[0]), "p10": float(p[1]), "median": float(p[2]), "p90": float(p[3]), "max": float(p[4])}
 
     n = len(uni)
-    frac = len(sync) / n if n else None
+    frac = len(settled) / n if n else None
     # A 95 % Wilson interval on the fraction (so that "100 of 100" reads as ≥ 96.3 %, not 100 %).
     ci = None
     if n:
@@ -341,15 +366,17 @@ def summarize(rows: list[dict[str, str]], threshold: float, duration: float, nea
         "start": "uniform" if near is None else "near",
         "near_rad": near,
         "drawn": n,
-        "synchronized": len(sync),
+        "verdict": verdict,
+        "measure": measure,
+        verdict: len(settled),
         "fraction": frac,
         "fraction_95ci": ci,
         "settle_s": q(st),
         "settle_01_s": q(st1),
-        # when max_k |R̄_k|_I first fell below 0.9: the escape from a start near the undesired set
+        # when the measure first fell below 0.9: the escape from a start near the undesired set
         "left_s": q(np.array(sorted(x for x in (_f(r.get("left_s", "")) for r in uni) if math.isfinite(x)))),
         "jumps": q(np.array([_f(r["jumps"]) for r in uni])),
-        "scenario_start": None if own is None else {k: own.get(k, "") for k in ("synchronized", "left_s", "settle_01_s", "settle_s", "final_max", "jumps")},
+        "scenario_start": None if own is None else {k: own.get(k, "") for k in (verdict, "left_s", "settle_01_s", "settle_s", "final_max", "jumps")},
         "failed": len(rows) - len(ok),
     }
 
@@ -365,7 +392,7 @@ def plot(out: Path, name: str, rows: list[dict[str, str]], summary: dict[str, An
     for col, label in (("settle_01_s", "below 0.1"), ("settle_s", f"below {summary['threshold']:g}")):
         v = np.sort([_f(r[col]) for r in uni if math.isfinite(_f(r[col]))])
         if len(v):
-            a1.step(v, np.arange(1, len(v) + 1) / max(1, len(uni)), where="post", label=f"max_k |R̄_k|_I {label}")
+            a1.step(v, np.arange(1, len(v) + 1) / max(1, len(uni)), where="post", label=f"{summary['measure']} {label}")
     own = summary.get("scenario_start") or {}
     for col, ls in (("settle_01_s", ":"), ("settle_s", "--")):
         x = _f(own.get(col, ""))
@@ -378,11 +405,11 @@ def plot(out: Path, name: str, rows: list[dict[str, str]], summary: dict[str, An
     if a1.get_legend_handles_labels()[1]:
         a1.legend(fontsize=8)
     a1.grid(alpha=0.3)
-    a1.set_title(f"{name}: {summary['synchronized']}/{summary['drawn']} synchronized by {summary['horizon_s']:g} s", fontsize=9)
+    a1.set_title(f"{name}: {summary[summary['verdict']]}/{summary['drawn']} {summary['verdict']} by {summary['horizon_s']:g} s", fontsize=9)
     fm = np.array([_f(r["final_max"]) for r in uni])
     a2.hist(np.log10(np.maximum(fm, 1e-16)), bins=30)
     a2.axvline(math.log10(summary["threshold"]), color="r", lw=0.8)
-    a2.set_xlabel("log10 final max_k |R̄_k|_I")
+    a2.set_xlabel(f"log10 final {summary['measure']}")
     a2.set_ylabel("draws")
     a2.grid(alpha=0.3)
     a2.set_title("dashed/dotted: the scenario's own start", fontsize=9)
@@ -414,19 +441,19 @@ def table(name: str, s: dict[str, Any]) -> str:
     ci = s["fraction_95ci"]
     own = s["scenario_start"] or {}
     lines = [
-        f"{name}: {s['synchronized']} of {s['drawn']} {_what(s)} synchronized (max_k |R̄_k|_I < {s['threshold']:g} from some t ≤ {s['horizon_s']:g} s on)"
+        f"{name}: {s[s['verdict']]} of {s['drawn']} {_what(s)} {s['verdict']} ({s['measure']} < {s['threshold']:g} from some t ≤ {s['horizon_s']:g} s on)"
         + (f", 95 % CI {ci_text(ci)}" if ci else ""),
         f"  settle below {s['threshold']:g}: {qs(s['settle_s'])}",
         f"  settle below 0.1:  {qs(s['settle_01_s'])}",
-        f"  the scenario's own start: synchronized {own.get('synchronized', 'n/a')}, below 0.1 from {own.get('settle_01_s') or 'never'}, below {s['threshold']:g} from {own.get('settle_s') or 'never'}",
+        f"  the scenario's own start: {s['verdict']} {own.get(s['verdict'], 'n/a')}, below 0.1 from {own.get('settle_01_s') or 'never'}, below {s['threshold']:g} from {own.get('settle_s') or 'never'}",
     ]
     if s["failed"]:
         lines.append(f"  {s['failed']} draws FAILED (see basin.csv)")
     return "\n".join(lines)
 
 
-def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None) -> dict[str, Any]:
-    s = {"scenario": name, **summarize(rows, threshold, duration, near)}
+def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None, verdict: str = "settled", measure: str = "the basin measure") -> dict[str, Any]:
+    s = {"scenario": name, **summarize(rows, threshold, duration, near, verdict, measure)}
     (out / "basin.json").write_text(json.dumps(s, indent=2) + "\n")
     plot(out, name, rows, s)
     return s
@@ -457,7 +484,8 @@ def compare(dirs: list[Path]) -> list[dict[str, Any]]:
     out = []
     for d in dirs:
         spec, rows = load_dir(d)
-        s = {"scenario": spec["scenario"], "dir": str(d), **summarize(rows, spec["threshold"], spec["duration_s"], spec.get("near"))}
+        words = (verdict_in(d / "basin.csv"), spec.get("measure", "the basin measure"))
+        s = {"scenario": spec["scenario"], "dir": str(d), **summarize(rows, spec["threshold"], spec["duration_s"], spec.get("near"), *words)}
         s["name"] = " ".join([spec["scenario"], *spec.get("set", [])])  # with its --set overrides: one scenario under several link models
         s["_rows"] = [r for r in rows if r["status"] == "ok" and r["kind"] != "scenario"]
         s["_draws"] = (spec["seed"], spec.get("near"), sc_kind(spec))
@@ -512,8 +540,10 @@ def compare_table(entries: list[dict[str, Any]]) -> str:
         t = _f(own.get("settle_s", ""))
         return f"{t:.2f}" if math.isfinite(t) else "never"
 
+    verdicts = {s["verdict"] for s in entries}
+    word = verdicts.pop() if len(verdicts) == 1 else "settled"
     lines = [
-        "| scenario | start | synchronized | 95 % CI | below threshold, min / median / p90 / max (s) | below 0.1, median (s) | below 0.9, median (s) | jumps, median / max | its own start, below threshold (s) |",
+        f"| scenario | start | {word} | 95 % CI | below threshold, min / median / p90 / max (s) | below 0.1, median (s) | below 0.9, median (s) | jumps, median / max | its own start, below threshold (s) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for s in entries:
@@ -521,7 +551,7 @@ def compare_table(entries: list[dict[str, Any]]) -> str:
         start = "uniform" if s["start"] == "uniform" else f"{s['near_rad']:g} rad from its own"
         own = s["scenario_start"] or {}
         lines.append(
-            f"| {s['name']} | {start} | {s['synchronized']} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
+            f"| {s['name']} | {start} | {s[s['verdict']]} of {s['drawn']} (< {s['threshold']:g} by {s['horizon_s']:g} s) | "
             + (ci_text(ci, "–") if ci else "–")
             + f" | {q(s['settle_s'], 'min', 'median', 'p90', 'max')} | {q(s['settle_01_s'], 'median')} | {q(s.get('left_s'), 'median')} | {q(s['jumps'], 'median', 'max', fmt='g')} | {own_settle(own)} |"
         )
@@ -540,20 +570,21 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
     fig, axes = plt.subplots(1, 2 if near else 1, figsize=(11 if near else 6.5, 4), squeeze=False)
     a1 = axes[0][0]
     for s in entries:
-        v = np.sort([_f(r["settle_s"]) for r in s["_rows"] if r["synchronized"] == "True"])
-        label = f"{s['name']}, " + ("uniform" if s["start"] == "uniform" else f"ε = {s['near_rad']:g}") + f" ({s['synchronized']}/{s['drawn']})"
+        v = np.sort([_f(r["settle_s"]) for r in s["_rows"] if r[s["verdict"]] == "True"])
+        label = f"{s['name']}, " + ("uniform" if s["start"] == "uniform" else f"ε = {s['near_rad']:g}") + f" ({s[s['verdict']]}/{s['drawn']})"
         (ln,) = a1.step(np.r_[0.0, v], np.r_[0.0, np.arange(1, len(v) + 1)] / max(1, s["drawn"]), where="post", label=label)
         own = _f((s["scenario_start"] or {}).get("settle_s", ""))
         if math.isfinite(own):
             a1.axvline(own, color=ln.get_color(), ls=":", lw=1)
     a1.set_xlabel("settle time below the threshold (s); dotted: the scenario's own start")
-    a1.set_ylabel("fraction of the draws synchronized")
+    verdicts = {s["verdict"] for s in entries}
+    a1.set_ylabel(f"fraction of the draws {verdicts.pop() if len(verdicts) == 1 else 'settled'}")
     a1.set_xlim(0, max(s["horizon_s"] for s in entries))
     a1.set_ylim(0, 1.02)
     a1.grid(alpha=0.3)
     a1.legend(fontsize=7)
     if near:
-        # Right: how long each start took to leave the undesired set (max_k |R̄_k|_I < 0.9) against
+        # Right: how long each start took to leave the undesired set (the measure < 0.9) against
         # ε, which is what ε changes (a saddle's escape grows like ln 1/ε); the settle times are left.
         a2 = axes[0][1]
 
@@ -571,7 +602,8 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
                 a2.axhline(own, color=ln.get_color(), ls="-.", lw=1, label=f"{name}: its own start, {own:g} s")
         a2.set_xscale("log")
         a2.set_xlabel("ε: distance of the start from the scenario's own (rad)")
-        a2.set_ylabel("time to leave: max_k |R̄_k|_I < 0.9 (s)")
+        measures = {s["measure"] for s in near}
+        a2.set_ylabel(f"time to leave: {measures.pop() if len(measures) == 1 else 'the measure'} < 0.9 (s)")
         a2.set_ylim(bottom=0)
         a2.grid(alpha=0.3, which="both")
         a2.legend(fontsize=7)
@@ -593,17 +625,18 @@ def command(args: argparse.Namespace) -> int:
 
     sc = procutil.load_args(args)
     try:
+        b = basin.basin_of(sc)
         basin.starts_of(sc)
     except ValueError as exc:
         procutil.fail_usage(f"{args.topology}: {exc}")
     duration = sc.duration if args.duration is None else args.duration
     out = args.out if args.out is not None else results_dir(None, sc.name, base=Path("basins"))
     out.mkdir(parents=True, exist_ok=True)
-    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near, "set": list(args.overrides)}
+    spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near, "set": list(args.overrides), "measure": b.measure}
     spec_path = out / "basin_def.json"
     if spec_path.exists():
         old = json.loads(spec_path.read_text())
-        diff = sorted(k for k in spec if k != "topology" and old.get(k, [] if k == "set" else None) != spec[k])
+        diff = sorted(k for k in spec if k not in ("topology", "measure") and old.get(k, [] if k == "set" else None) != spec[k])
         if diff:
             procutil.fail_usage(f"--out {out}: holds a different basin check (differs in: {', '.join(diff)}); use another --out")
     else:
@@ -629,7 +662,7 @@ def command(args: argparse.Namespace) -> int:
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
         return 130
-    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near)
+    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near, basin.verdict_in(out / "basin.csv", b.verdict), b.measure)
     print(basin.table(sc.name, s))
     print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")
     return 0 if not s["failed"] else 1

@@ -11,7 +11,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from zswarm import keys, procutil
+from zswarm import family, keys, procutil
 from zswarm.text import one_line
 
 
@@ -261,35 +261,26 @@ def build_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser(
         "generate",
-        help="write an N-agent scenario of an algorithm family (graph, positions, motions, initial errors from a seed)",
-        description="Writes a scenario that loads by construction: the family's algorithm, gains and world as in its paper's "
-        "shipped scenario; the graph, positions, motions and initial estimation errors drawn from --seed.",
+        help="write an N-agent scenario of an experiment family's recipe (graph, positions, motions, initial errors from a seed)",
+        description="Writes a scenario that loads by construction: the recipe's algorithm, gains and world as in its paper's "
+        "shipped scenario; the graph, positions, motions and initial estimation errors drawn from --seed.  The recipes "
+        "are the experiment families' (zswarm.family.Recipe), a user's registered families' too.",
     )
-    g.add_argument("family", nargs="?", help="algorithm family (--list shows them)")
+    g.add_argument("family", nargs="?", metavar="RECIPE", help="the recipe (--list shows them)")
     g.add_argument("-n", "--agents", type=int, default=None, help="number of agents")
     g.add_argument("--seed", type=int, default=1, help="seed of the draw, and the scenario's seed (default 1)")
-    g.add_argument("--graph", default=None, help="graph shape (default: the family's first; --list shows them)")
-    g.add_argument("--in-degree", type=int, default=3, help="leader-follower families: in-neighbours per follower (default 3)")
+    g.add_argument("--graph", default=None, help="graph shape (default: the recipe's first; --list shows them)")
+    g.add_argument("--in-degree", type=int, default=3, help="recipes with leaders and followers: in-neighbours per follower (default 3)")
     g.add_argument("--max-angle", type=float, default=0.9, help="largest initial attitude error, a fraction of pi (default 0.9)")
     g.add_argument("--spread", type=float, default=3.0, help="RMS initial position error, m (default 3)")
     g.add_argument("--duration", type=procutil.positive_float, default=None, help="the scenario's duration, s (default: the family's)")
     g.add_argument("--name", default=None, help="scenario name (default gen-<family>-<n>-s<seed>)")
     g.add_argument("-o", "--output", type=Path, default=None, help="file to write (default: standard output)")
-    g.add_argument("--list", action="store_true", help="list the families and their graph shapes")
+    g.add_argument("--list", action="store_true", help="list the recipes and their graph shapes")
 
-    d = sub.add_parser(
-        "design-hybrid",
-        help="Prop. 4.2: u, Δ*, and the bounds on γ and δ for A and Ξ; checks Condition 4.1",
-        description="Thesis Prop. 4.2 (§4.3.2.3): from the eigenvalues of A and the set Ξ, compute u, Δ*, "
-        "the bounds γ < 4Δ*/π² and δ < (4Δ*/π² − γ) ξ_L²/2, and check Condition 4.1 at the undesired critical "
-        "points.  Without --gamma/--delta, both are taken at 95 %% of their bounds (the thesis' choice).",
-    )
-    d.add_argument("--A", required=True, help="eigenvalues of a diagonal A, e.g. 5,8.57,12 (or 9 numbers, row-major)")
-    d.add_argument("--xi", required=True, help="the set Ξ, e.g. 0.08pi or 0.5,0.9pi")
-    d.add_argument("--gamma", default=None, help="γ to check (default: 0.95 of its bound)")
-    d.add_argument("--delta", default=None, help="δ to check (default: 0.95 of its bound)")
-    d.add_argument("--u", default=None, help="u to check against Prop. 4.2's (3 numbers)")
-    d.add_argument("--json", action="store_true", help="print the design as JSON")
+    # The experiment families' own commands (zswarm.family.Command), e.g. the tree family's design-hybrid.
+    for c in family.commands().values():
+        c.arguments(sub.add_parser(c.name, help=c.help, description=c.description))
     return p
 
 
@@ -319,12 +310,12 @@ def main(argv: list[str] | None = None) -> int:
         "replay": _lazy("replay", "command"),
         "view": _lazy("rerun_view", "command"),
         "report": cmd_report,
-        "design-hybrid": _lazy("hybrid", "design_command"),
         "generate": _lazy("generate", "command"),
         "certs": cmd_certs,
     }
+    run = cmds.get(args.cmd) or family.commands()[args.cmd].run
     try:
-        return cmds[args.cmd](args)
+        return run(args)
     except Exception as exc:
         problem = procutil.write_problem(exc)
         if problem is None:

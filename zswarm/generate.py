@@ -1,10 +1,10 @@
-"""``zswarm generate``: N-agent scenarios for each algorithm family, valid by construction.
+"""``zswarm generate``: N-agent scenarios of each family's recipes, valid by construction.
 
-A family fixes the algorithm, its gains and parameters and the world's kind
-(prescribed motion, a rotating formation, rigid bodies, vehicles), exactly as
-the shipped scenario of the paper it comes from does (``topologies/``).  The
-generator draws the rest from a seed: the graph (of the shape the family's
-assumptions require), positions, motions and initial estimation errors.  The
+A recipe (:class:`zswarm.family.Recipe`, declared by its experiment family) fixes the
+algorithm, its gains and parameters and the world's kind (prescribed motion, rigid
+bodies, vehicles), exactly as the shipped scenario of the paper it comes from does
+(``topologies/``).  The generator draws the rest from a seed: the graph (of the shape the
+algorithm's assumptions require), positions, motions and initial estimation errors.  The
 text it writes is loaded by :func:`zswarm.scenario.loads` before it is
 returned, so a bad draw can never reach a user (the draw is retried with the
 next sub-seed; in practice the first one loads: random positions are generic).
@@ -17,128 +17,28 @@ import json
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from zswarm import family as zswarm_family
 from zswarm import procutil
+from zswarm.family import Recipe
 from zswarm.graph import SHAPES
 from zswarm.scenario import Scenario, ScenarioError, loads
 
-HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}
-HYBRID_PARAMS_5 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.3848, "Xi": ["0.9*pi"]}
-WORLD = {"step": 0.001, "sensor_rate": 200.0}
+# The graphs a generator draws for each kind of graph an algorithm asks for (zswarm.graph.SHAPES):
+# with roles, a DAG of followers on lower-numbered in-neighbours; an oriented tree (head the
+# lower id) of one of three shapes; otherwise a directed ring of sensing neighbours, with chords.
+ROLES_GRAPHS = ("dag",)
+TREE_GRAPHS = ("random", "chain", "star")
+RING_GRAPHS = ("ring", "ring-chords")
 
 
-@dataclass(frozen=True)
-class Family:
-    """What a generated scenario of one family shares with the paper's scenario."""
-
-    source: str  # the shipped scenario (topologies/) its algorithm section comes from
-    what: str
-    graph: str  # "leader_follower", "tree" or "sensing" (the loader's checks)
-    algorithm: Mapping[str, Any]
-    world: Mapping[str, Any]
-    rate: float = 100.0  # agents' clock, Hz
-    duration: float = 40.0
-    estimate: tuple[str, ...] = ()  # what each agent's initial estimate sets (besides xi)
-
-
-FAMILIES: dict[str, Family] = {
-    "bearing-fixed": Family(
-        "thesis-3.2-fixed8",
-        "§3.2: bearing-based pose observer (3.3) + (3.14), agents at fixed positions",
-        "leader_follower",
-        {"name": "bearing_pose_fixed", "gains": {"k_R": 1.0, "k_p": 1.0}},
-        WORLD,
-        estimate=("p", "R"),
-    ),
-    "bearing-fixed-filtered": Family(
-        "thesis-3.2-fixed8-filtered",
-        "§3.2: filtered observer (3.8)-(3.9) + (3.14), agents at fixed positions",
-        "leader_follower",
-        {"name": "bearing_pose_fixed_filtered", "gains": {"k_Omega": 1.0, "k_p": 1.0}},
-        WORLD,
-        estimate=("p", "R"),
-    ),
-    "bearing-moving": Family(
-        "thesis-3.3-moving5",
-        "§3.3: observer (3.23) + (3.25) on a rotating formation",
-        "leader_follower",
-        {"name": "bearing_pose_moving", "gains": {"k_R": 3.0, "k_p": 1.0}},
-        WORLD | {"formation": {"axis": [1, 0, 0], "rate": "pi/6"}},
-        duration=30.0,
-        estimate=("p", "R"),
-    ),
-    "relative-attitude": Family(
-        "thesis-4.5-continuous5",
-        "§4: continuous relative-attitude observer (4.3) + (4.8) on a tree, rotating formation",
-        "tree",
-        {"name": "relative_attitude_continuous", "gains": {"k_R": 1.1}, "params": {"A": [5, 8.57, 12]}},
-        WORLD | {"formation": {"axis": [0, 0, 1], "rate": "pi/6"}},
-        duration=30.0,
-        estimate=("R",),
-    ),
-    "relative-attitude-hybrid": Family(
-        "thesis-4.5-hybrid5",
-        "§4: hybrid relative-attitude observer (4.25)-(4.26) on a tree, rotating formation",
-        "tree",
-        {"name": "relative_attitude_hybrid", "gains": {"k_R": 1.1, "k_xi": 3.5}, "params": HYBRID_PARAMS_4},
-        WORLD | {"formation": {"axis": [0, 0, 1], "rate": "pi/6"}},
-        duration=30.0,
-        estimate=("R", "xi"),
-    ),
-    "relative-pose-hybrid": Family(
-        "thesis-4.5-hybrid-pose5",
-        "§4: hybrid pose observer (4.25)-(4.26) + (4.30)-(4.31) on a tree, rotating formation",
-        "tree",
-        {"name": "relative_pose_hybrid", "gains": {"k_R": 1.1, "k_xi": 3.5, "k_p": 1.0}, "params": HYBRID_PARAMS_4},
-        WORLD | {"formation": {"axis": [0, 0, 1], "rate": "pi/6"}},
-        duration=60.0,
-        estimate=("p", "R", "xi"),
-    ),
-    "attitude-sync": Family(
-        "thesis-5.6-continuous7",
-        "§5: continuous attitude synchronization (5.24) of rigid bodies on a tree",
-        "tree",
-        {"name": "attitude_sync_continuous", "gains": {"k_R": 0.4, "k_omega": 0.1}, "params": {"A": [5, 8.57, 12]}},
-        WORLD | {"plant": "rigid_body"},
-        duration=150.0,
-    ),
-    "attitude-sync-hybrid": Family(
-        "thesis-5.6-hybrid7",
-        "§5: hybrid attitude synchronization (5.19), (5.21), (5.7) of rigid bodies on a tree",
-        "tree",
-        {"name": "attitude_sync_hybrid", "gains": {"k_R": 0.4, "k_omega": 0.1, "k_xi": 20}, "params": HYBRID_PARAMS_5},
-        WORLD | {"plant": "rigid_body"},
-        duration=150.0,
-        estimate=("xi",),
-    ),
-    "attitude-sync-velocity-free": Family(
-        "thesis-5.6-velocity-free7",
-        "§5: velocity-free attitude synchronization (5.20)-(5.23), (5.7), (5.12) of rigid bodies on a tree",
-        "tree",
-        {
-            "name": "attitude_sync_velocity_free",
-            "gains": {"k_R": 0.4, "k_xi": 20, "k_Q": 30, "k_Qt": 3, "k_zeta": 20},
-            "params": HYBRID_PARAMS_5 | {"delta_Q": 0.3848, "Pi": ["0.9*pi"]},
-        },
-        WORLD | {"plant": "rigid_body"},
-        duration=150.0,
-        estimate=("xi", "Q", "zeta"),
-    ),
-    "formation": Family(
-        "decarli-8-formation",
-        "De Carli et al.: relative yaw (7)/(8), common-frame yaw (13) and position (21) observers, formation control (30)",
-        "sensing",
-        {"name": "common_frame_formation", "gains": {"k_pe": 20.0, "k_psi": 600.0, "k_z": 40.0, "k_p": 1.0, "k_c": 0.5, "nu_max": 1.0}},
-        WORLD | {"plant": "kinematic"},
-        rate=200.0,
-        duration=40.0,
-    ),
-}
-GRAPHS = {"leader_follower": ("dag",), "tree": ("random", "chain", "star"), "sensing": ("ring", "ring-chords")}
+def graphs_of(shape: str) -> tuple[str, ...]:
+    """The graphs :func:`generate` draws for an algorithm's graph shape ``shape``."""
+    s = SHAPES[shape]
+    return ROLES_GRAPHS if s.roles else TREE_GRAPHS if s.oriented else RING_GRAPHS
 
 
 def _r(x: float) -> float:
@@ -187,8 +87,9 @@ def _tree_edges(rng: np.random.Generator, n: int, shape: str) -> list[list[int]]
     return [[int(rng.integers(1, i)), i] for i in range(2, n + 1)]
 
 
-def _agents(fam: Family, rng: np.random.Generator, n: int, graph: str, in_degree: int, max_angle: float, spread: float) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def _agents(fam: Recipe, rng: np.random.Generator, n: int, graph: str, in_degree: int, max_angle: float, spread: float) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """The ``[[agents]]`` tables, and any top-level section the graph needs (``graph``, params)."""
+    roles = SHAPES[fam.graph].roles
     rigid = fam.world.get("plant") == "rigid_body"
     kinematic = fam.world.get("plant") == "kinematic"
     P = _positions(rng, n, 2.0 if not kinematic else 3.0)
@@ -202,7 +103,7 @@ def _agents(fam: Family, rng: np.random.Generator, n: int, graph: str, in_degree
         i = k + 1
         if not rigid:
             a["p"] = [_r(x) for x in P[k]]
-        if SHAPES[fam.graph].roles:
+        if roles:
             a["role"] = "leader" if i <= 2 else "follower"
             if i > 2:
                 a["neighbors"] = sorted(int(j) for j in rng.choice(np.arange(1, i), size=min(in_degree, i - 1), replace=False))
@@ -215,11 +116,11 @@ def _agents(fam: Family, rng: np.random.Generator, n: int, graph: str, in_degree
         else:
             a["omega"] = _omega(rng)
         est: dict[str, Any] = {}
-        follower = fam.graph != "leader_follower" or i > 2
+        follower = not roles or i > 2
         if "p" in fam.estimate and follower:
             est["p"] = [_r(x) for x in P[k] + rng.normal(scale=spread / math.sqrt(3), size=3)]
         if "R" in fam.estimate and follower:
-            est["R"] = _axis_angle(rng, 0.1 if fam.graph == "leader_follower" else 0.0, max_angle)
+            est["R"] = _axis_angle(rng, 0.1 if roles else 0.0, max_angle)
         if "xi" in fam.estimate:
             heads = [m + 1 for m, (h, _) in enumerate(edges) if h == i]
             if heads:
@@ -230,16 +131,13 @@ def _agents(fam: Family, rng: np.random.Generator, n: int, graph: str, in_degree
             est["zeta"] = 0.0
         if est:
             a["estimate"] = est
-    if fam.graph == "sensing":
+    if graph in RING_GRAPHS:
         for k, a in enumerate(agents):
             i = k + 1
             nb = {i % n + 1}
             if graph == "ring-chords" and n > 3 and rng.random() < 0.5:
                 nb.add(int(rng.choice([j for j in range(1, n + 1) if j not in (i, i % n + 1)])))
             a["neighbors"] = sorted(nb)
-        # The formation (30): offsets on a circle, heights alternating, as in §IV's figure.
-        r = 4.0 * max(1.0, n / 8)
-        extra["p_star"] = [[_r(r * math.cos(2 * math.pi * k / n)), _r(r * math.sin(2 * math.pi * k / n)), float(k % 2)] for k in range(n)]
     return agents, extra
 
 
@@ -271,7 +169,8 @@ def dumps(doc: Mapping[str, Any]) -> str:
     out: list[str] = []
 
     def table(name: str, d: Mapping[str, Any]) -> None:
-        leaves = {k: v for k, v in d.items() if not isinstance(v, dict) or k in ("formation",)}
+        # the world's own tables (its prescribed motion) on one line each
+        leaves = {k: v for k, v in d.items() if not isinstance(v, dict) or (name == "world" and not any(isinstance(x, dict) for x in v.values()))}
         out.append(f"[{name}]")
         out.extend(f"{_key(k)} = {_value(v)}" for k, v in leaves.items())
         out.append("")
@@ -319,16 +218,19 @@ def generate(
     ValueError
         For an unknown family or graph, or parameters out of range.
     """
-    fam = FAMILIES.get(family)
-    if fam is None:
-        raise ValueError(f"unknown family {family!r} (one of {', '.join(FAMILIES)})")
-    graph = graph or GRAPHS[fam.graph][0]
-    if graph not in GRAPHS[fam.graph]:
-        raise ValueError(f"graph {graph!r} does not fit family {family} (one of {', '.join(GRAPHS[fam.graph])})")
-    low = 3 if fam.graph == "leader_follower" else 2
+    found = zswarm_family.recipes().get(family)
+    if found is None:
+        raise ValueError(f"unknown family {family!r} (one of {', '.join(zswarm_family.recipes())})")
+    fam = found[1]
+    kinds = graphs_of(fam.graph)
+    graph = graph or kinds[0]
+    if graph not in kinds:
+        raise ValueError(f"graph {graph!r} does not fit family {family} (one of {', '.join(kinds)})")
+    roles = SHAPES[fam.graph].roles
+    low = 3 if roles else 2
     if not low <= n <= 1000:
         raise ValueError(f"n must be in {low}..1000 for family {family} (got {n})")
-    if fam.graph == "leader_follower" and in_degree < 2:
+    if roles and in_degree < 2:
         raise ValueError(f"in_degree must be >= 2 (each follower needs two non-collinear in-neighbours; got {in_degree})")
     if not 0.0 < max_angle <= 1.0:
         raise ValueError(f"max_angle must be in (0, 1] (a fraction of π; got {max_angle})")
@@ -340,8 +242,8 @@ def generate(
         rng = np.random.default_rng([seed, n, attempt])
         agents, extra = _agents(fam, rng, n, graph, in_degree, max_angle, spread)
         algorithm = dict(fam.algorithm)
-        if "p_star" in extra:
-            algorithm["params"] = {"p_star": extra.pop("p_star")}
+        if fam.params is not None:
+            algorithm["params"] = fam.params(n)
         doc: dict[str, Any] = {
             "scenario": {
                 "name": name,
@@ -366,7 +268,7 @@ def generate(
 
 def describe() -> list[tuple[str, str, tuple[str, ...]]]:
     """``(family, what, graph shapes)`` of every family, for ``zswarm generate --list``."""
-    return [(k, f.what, GRAPHS[f.graph]) for k, f in FAMILIES.items()]
+    return [(k, r.what, graphs_of(r.graph)) for k, (_, r) in zswarm_family.recipes().items()]
 
 
 # --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import importlib.metadata
+import importlib.util
 from collections.abc import Mapping
 from types import MappingProxyType, ModuleType
 
@@ -56,3 +57,19 @@ def process_class(name: str) -> type:
     cls = _load(name)
     assert isinstance(cls, type)
     return cls
+
+
+# The experiment families (zswarm.family), found by the name an algorithm's SPEC.report gives.
+FAMILY_GROUP = "zswarm.families"
+OWN_FAMILIES = "zswarm.families."  # zswarm's own (registered in pyproject.toml)
+
+
+def family_module(name: str) -> str | None:
+    """The module path of the experiment family ``name`` (registered, or a module path that can
+    be imported), without importing it; None when there is none."""
+    target = registered(FAMILY_GROUP, OWN_FAMILIES).get(name, name)
+    try:
+        found = importlib.util.find_spec(target)
+    except (ImportError, ValueError):
+        return None
+    return target if found is not None else None

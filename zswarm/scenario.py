@@ -10,7 +10,7 @@ Format (units: seconds, Hz, metres, radians)::
     [algorithm] name (built-in, entry point or module path: zswarm.algorithm.resolve);
                 [algorithm.gains] as the algorithm's SPEC.gains declares;
                 [algorithm.params] read by the algorithm's params type (SPEC.params: the §4/§5
-                schemes' A, u, gamma, delta, Xi, delta_Q, Pi in zswarm.hybrid; De Carli's p_star)
+                schemes' A, u, gamma, delta, Xi, delta_Q, Pi in zswarm.families.synergistic; De Carli's p_star)
     [world]     step (s, <= 0.001), sensor_rate (Hz), plant ("prescribed" motions, or
                 "rigid_body": (5.1) driven by the agents' torques; the default when the
                 algorithm sends a torque), sensors (the sensors fitted; default: what the
@@ -574,7 +574,7 @@ def loads(text: str, path: str = "<string>", overrides: Sequence[Override] = ())
 
 def _params(c: _Ctx, d: Any, info: AlgorithmSpec) -> Any:
     """``[algorithm.params]``, read by the algorithm's params type (SPEC.params, e.g. the set P of
-    Prop. 4.2 in zswarm.hybrid); None for an algorithm that takes none."""
+    Prop. 4.2 in zswarm.families.synergistic); None for an algorithm that takes none."""
     f = "algorithm.params"
     if info.params is None:
         if d is not None:

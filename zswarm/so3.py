@@ -363,3 +363,15 @@ def quaternion(R: Mat3) -> tuple[float, float, float, float]:
     n = math.sqrt(w * w + x * x + y * y + z * z)
     sign = 1.0 if w >= 0 else -1.0
     return (sign * float(x) / n, sign * float(y) / n, sign * float(z) / n, sign * float(w) / n)
+
+
+def nearest_rotations(A: np.ndarray) -> np.ndarray:
+    """The rotation nearest to each matrix of a stack (T, 3, 3): U diag(1, 1, ±1) V^T of its SVD
+    (the chordal mean of rotations: the nearest rotation to their average)."""
+    U, _, Vt = np.linalg.svd(A)
+    d = np.sign(np.linalg.det(U @ Vt))
+    d[d == 0] = 1.0
+    D = np.zeros_like(A)
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    return U @ D @ Vt  # type: ignore[no-any-return]

@@ -20,8 +20,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
-from zswarm import report
-from zswarm.report import family
+from zswarm import family, report
 from zswarm.scenario import Scenario
 
 

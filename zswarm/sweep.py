@@ -11,7 +11,8 @@ the sweep's definition; a restart with a different one is refused.
 Per run: the varied values, the seed, final mean errors, convergence times
 (first time after which the mean error stays below a threshold, judged on a
 0.1 s grid: :func:`zswarm.report.convergence_time`), message counts of the
-agent→agent edges and of the sensor links.
+agent→agent edges and of the sensor links; then the columns of the scenario's
+experiment family (:class:`zswarm.family.Sweep`).
 """
 
 from __future__ import annotations
@@ -36,9 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import files, procutil, report
-from zswarm.report import family
+from zswarm import family, files, procutil, report
 from zswarm.scenario import Override, Scenario, ScenarioError, load, loads, parse_field, parse_override
+from zswarm.family import DEFAULT_FIGURES
 from zswarm.text import shown
 
 COLUMNS_RESULT = (
@@ -48,7 +49,6 @@ COLUMNS_RESULT = (
     "final_position_error",
     "conv_attitude_s",
     "conv_position_s",
-    "conv_attitude_01_s",
     "edge_sent",
     "edge_delivered",
     "edge_dropped",
@@ -63,17 +63,12 @@ COLUMNS_RESULT = (
     "jumps",
     "stale_terms",
     "missed_deadlines",
-    "rel_late_max_mean",
-    "rel_settle_s",
-    "yaw_late_max_mean",
-    "yaw_settle_s",
-    "pos_late_max_mean",
-    "pos_settle_s",
-    "form_late_max_mean",
-    "form_settle_s",
-    "alpha_drift_rad",
-    "wall_s",
-)
+)  # the generic columns of every row; the family's own follow (zswarm.family.Sweep.columns), then wall_s
+
+
+def columns(sc: Scenario) -> tuple[str, ...]:
+    """The result columns of a sweep of ``sc``: the generic ones, its family's, ``wall_s``."""
+    return (*COLUMNS_RESULT, *family.of(sc).sweep.columns, "wall_s")
 
 
 @dataclass(frozen=True)
@@ -197,7 +192,6 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
     c_sent = sum(int(v.get("sent", 0)) for v in cmds.values())
     # Commands lost on the way: what the link model dropped plus what never arrived (sequence gaps).
     c_lost = sum(int(v.get("dropped", 0)) for v in cmds.values())
-    sync = "synchronization" in s
     return {
         "final_attitude_error": s.get("mean_attitude_error_final"),
         "final_position_error": s.get("mean_position_error_final"),
@@ -208,7 +202,6 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
         "edge_dropped": dropped,
         "edge_drop_ratio": dropped / sent if sent else None,
         "edge_latency_p50_ms": _median([float(v["latency_p50_ms"]) for v in edges.values() if "latency_p50_ms" in v]),
-        "conv_attitude_01_s": report.convergence_time(t, att, 0.1) if sync else None,
         "sensor_dropped": sum(int(v.get("dropped", 0)) for v in sensors.values()),
         "cmd_sent": c_sent if cmds else None,
         "cmd_dropped": c_lost if cmds else None,
@@ -218,36 +211,13 @@ def summarize_run(folder: Path, sc: Scenario, duration: float, thresholds: tuple
         "jumps": s.get("jumps_total"),
         "stale_terms": sum(int(a.get("stale_terms", 0)) for a in s["agents"].values()),
         "missed_deadlines": sum(int(a.get("missed_deadlines", 0)) for a in s["agents"].values()),
-    } | _formation_columns(folder, s)
+    } | _family_columns(folder, s, sc, t, att)
 
 
-FORMATION_PARTS = (("rel", "relative_yaw", "rel_yaw_"), ("yaw", "yaw", "yaw_"), ("pos", "position", "position_"), ("form", "formation", "formation_"))
-
-
-def _formation_columns(folder: Path, s: dict[str, Any]) -> dict[str, Any]:
-    """De Carli runs (summary.json "formation"): per stage — relative yaw (7)/(8), common-frame
-    yaw (13), position (21), formation (30) — the max over edges/robots averaged over the last
-    quarter of the run (a floor, less noisy than the last sample), its settle time, and the
-    drift of the common rotation α."""
-    f = s.get("formation")
-    if f is None:
-        return {}
-    with open(folder / "formation.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    t = np.array([float(r["t"]) for r in rows])
-    late = t >= 0.75 * t[-1]
-    out: dict[str, Any] = {}
-    for short, key, prefix in FORMATION_PARTS:
-        cols = [c for c in rows[0] if c.startswith(prefix)]
-        m = np.array([[float(r[c]) for c in cols] for r in rows])
-        m = np.where(np.isfinite(m), m, -np.inf)  # an edge not measured yet has no error
-        mx = m.max(axis=1) if cols else np.full(len(t), -np.inf)
-        mx[~np.isfinite(mx)] = np.nan
-        tail = mx[late & np.isfinite(mx)]
-        out[f"{short}_late_max_mean"] = float(tail.mean()) if tail.size else None
-        out[f"{short}_settle_s"] = f["settle_s"].get(f"{key}_max")
-    out["alpha_drift_rad"] = f.get("common_rotation_alpha_drift_rad")
-    return out
+def _family_columns(folder: Path, s: dict[str, Any], sc: Scenario, t: np.ndarray, att: np.ndarray) -> dict[str, Any]:
+    """The family's columns of a finished run (zswarm.family.Sweep.from_run)."""
+    sw = family.of(sc).sweep
+    return {} if sw.from_run is None else sw.from_run(folder, s, sc, t, att)
 
 
 def _series(folder: Path, sc: Scenario, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -326,7 +296,7 @@ def run_sweep(
     stop: Callable[[], bool] = lambda: False,
 ) -> tuple[int, int, bool]:
     """Run what is not in sweep.csv yet; return (ok, failed, interrupted)."""
-    f, w, todo, prog = _open(out, jobs, varies)
+    f, w, todo, prog = _open(out, jobs, varies, columns(sc))
     running: dict[str, tuple[Job, subprocess.Popen[bytes], float, Path]] = {}
     ok = failed = 0
     queue = list(todo)
@@ -391,13 +361,13 @@ def run_sweep(
     return ok, failed, interrupted
 
 
-def _open(out: Path, jobs: list[Job], varies: Sequence[Vary]) -> tuple[Any, csv.DictWriter[str], list[Job], Progress]:
-    """sweep.csv opened to append (its header written when new, its own kept when resumed),
-    the jobs not in it yet, and the progress line."""
+def _open(out: Path, jobs: list[Job], varies: Sequence[Vary], result: Sequence[str]) -> tuple[Any, csv.DictWriter[str], list[Job], Progress]:
+    """sweep.csv opened to append (its header written when new: the run's, the varied fields
+    and ``result``; its own kept when resumed), the jobs not in it yet, and the progress line."""
     csv_path = out / "sweep.csv"
     done = read_done(csv_path)
     todo = [j for j in jobs if j.run_id not in done]
-    header = ["run_id", "point", "repeat", "seed", *(_column(v) for v in varies), *COLUMNS_RESULT]
+    header = ["run_id", "point", "repeat", "seed", *(_column(v) for v in varies), *result]
     new_file = not csv_path.exists() or csv_path.stat().st_size == 0
     if not new_file:
         _repair_tail(csv_path)
@@ -457,7 +427,7 @@ def run_sweep_cluster(
     from zswarm import cluster as zswarm_cluster
 
     text = Path(topology).read_text(encoding="utf-8")
-    f, w, todo, prog = _open(out, jobs, varies)
+    f, w, todo, prog = _open(out, jobs, varies, columns(load(topology, jobs[0].overrides)))
     ok = failed = 0
     interrupted = False
     try:
@@ -505,16 +475,13 @@ def run_sweep_cluster(
 
 # --------------------------------------------------------------------------- the batched engine
 
-BATCHED_FAMILIES = ("sync", "tree", "leader_follower")  # report families whose sweep rows the batched engine computes
-
-
 def batched_problem(sc: Scenario, auto: bool = False) -> str | None:
     """Why ``sc``'s runs cannot go on the batched engine (None: they can); ``auto``: or why
     ``--engine auto`` runs them on sim though the engine can (it is no faster there)."""
     from zswarm import plugins
 
-    if sc.info.report not in BATCHED_FAMILIES:
-        return f"the batched engine computes sweep rows for the {', '.join(BATCHED_FAMILIES)} report families, not for {sc.info.report!r}"
+    if family.of(sc).batched is None:
+        return f"its experiment family {sc.info.report!r} has no measure on the batched engine (zswarm.family.Batched)"
     engine = plugins.engine("batched")
     why: str | None = engine.problem(sc)
     if why is None and auto:
@@ -573,10 +540,10 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
             loaded[j.overrides] = loads(text, path, j.overrides)
         scs.append(loaded[j.overrides])
     sc = scs[0]
-    res = plugins.engine("batched").run(scs, duration, 0, family.of(sc).basin_grid_s, seeds=[j.seed for j in batch], rows=True)
+    fam = family.of(sc)
+    res = plugins.engine("batched").run(scs, duration, 0, fam.basin.grid_s if fam.basin is not None else report.GRID_S, seeds=[j.seed for j in batch], rows=True)
     wall = round((time.monotonic() - t0) / len(batch), 3)
     hybrid = bool(getattr(sc.params, "Xi", ()))  # summary.json's jumps_total: the hybrid schemes' ξ_k
-    sync = sc.info.report == "sync"  # summary.json has "synchronization"
     commanded = res.commands > 0  # the agents command the world: summary.json has their "->world" links
     rows = []
     for n, _job in enumerate(batch):
@@ -613,7 +580,6 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
                 "edge_dropped": e_dropped,
                 "edge_drop_ratio": e_dropped / sent if sent else None,
                 "edge_latency_p50_ms": e_latency,
-                "conv_attitude_01_s": convergence_time(res.t_coarse, att, 0.1) if sync else None,
                 "sensor_dropped": int(res.sensor_dropped[n]) if res.sensor_dropped is not None else 0,
                 "cmd_sent": c_sent if commanded else None,
                 "cmd_dropped": cmd_dropped if commanded else None,
@@ -625,6 +591,7 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
                 "missed_deadlines": 0,
                 "wall_s": wall,
             }
+            | ({} if fam.sweep.from_batch is None else fam.sweep.from_batch(res, n, sc))
         )
     return rows
 
@@ -650,7 +617,7 @@ def run_sweep_batched(
     from zswarm import cluster as zswarm_cluster
 
     source = (Path(topology).read_text(encoding="utf-8"), topology)
-    f, w, _todo, prog = _open(out, jobs, varies)
+    f, w, _todo, prog = _open(out, jobs, varies, columns(load(topology, jobs[0].overrides)))
     ok = failed = 0
     interrupted = False
     try:
@@ -739,40 +706,6 @@ def _fmt(v: Any) -> Any:
 
 # --------------------------------------------------------------------------- plots
 
-METRICS = (
-    ("final_attitude_error", "final attitude error |R̃|_I", True),
-    ("final_position_error", "final position error (m)", True),
-    ("conv_attitude_s", "attitude convergence time (s)", False),
-    ("conv_position_s", "position convergence time (s)", False),
-)
-# Chapter 5 control (summary.json "synchronization"): what the figures plot instead.
-METRICS_SYNC = (
-    ("final_attitude_error", "final mean |R̄_k|_I", True),
-    ("jumps", "jumps of ξ (count)", False),
-    ("conv_attitude_01_s", "max_k |R̄_k|_I below 0.1 from (s)", False),
-    ("conv_attitude_s", "max_k |R̄_k|_I below 0.01 from (s)", False),
-)
-
-
-# De Carli et al. (summary.json "formation"): each stage's floor, so a figure shows which of the
-# three observers and the controller suffers first.
-METRICS_FORMATION = (
-    ("rel_late_max_mean", "relative yaw (7)/(8), max over edges", True),
-    ("yaw_late_max_mean", "common-frame yaw (13), max over robots", True),
-    ("pos_late_max_mean", "common-frame position (21), max (m)", True),
-    ("form_late_max_mean", "formation error (30), max (m)", True),
-)
-
-
-def metrics_for(rows: list[dict[str, str]]) -> tuple[tuple[str, str, bool], ...]:
-    """The four metrics the sweep figures show: the observers' errors and times, for a De
-    Carli run each stage's error over the last quarter of the run, or for a closed loop
-    (rows with command links) its relative attitudes, jumps and settle times."""
-    if any(r.get("form_late_max_mean") not in (None, "") for r in rows):
-        return METRICS_FORMATION
-    return METRICS_SYNC if any(r.get("cmd_sent") not in (None, "") for r in rows) else METRICS
-
-
 def _float(x: str) -> float:
     try:
         return float(x)
@@ -790,7 +723,7 @@ def load_rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], duration: float) -> list[Path]:
+def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], duration: float, metrics: Sequence[tuple[str, str, bool]] = DEFAULT_FIGURES) -> list[Path]:
     """``sweep_<field>.png`` per varied field (each metric against it, mean ± min/max over
     repeats, one line per value of the other field when there are two) and, for two
     fields, ``sweep_heatmap.png``.  A run that never converged counts as ``duration``
@@ -804,7 +737,7 @@ def plot_sweep(out: Path, rows: list[dict[str, str]], fields: Sequence[str], dur
     written: list[Path] = []
     if not ok:
         return written
-    metrics = metrics_for(ok)
+    metrics = (list(metrics) + [m for m in DEFAULT_FIGURES if m not in metrics])[:4]  # a family's four (fewer: the team's own fill in)
 
     def val(r: dict[str, str], m: str) -> float:
         v = _float(r[m])
@@ -1010,7 +943,7 @@ def command(args: argparse.Namespace) -> int:
     if interrupted:
         print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
         return 130
-    plots = sweep.plot_sweep(out, rows, [v.field for v in varies], duration)
+    plots = sweep.plot_sweep(out, rows, [v.field for v in varies], duration, family.of(sc).sweep.figures)
     n_failed = sum(1 for r in rows if r["status"] == "failed")
     print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")
     return 0 if n_failed == 0 else 1

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, continuous_coupling, measured_edges, predict
-from zswarm import hybrid
+from zswarm.families import synergistic
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
 
@@ -95,7 +95,7 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="tree",
     report="sync",
-    params=hybrid.ContinuousParams,
+    params=synergistic.ContinuousParams,
     stale=StalePolicy(0.2, "hold"),
     batched=True,
     draw_gains=frozenset({"k_R", "k_omega"}),  # τ = −k_ω ω + k_R σ only

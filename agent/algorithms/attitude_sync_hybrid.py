@@ -46,7 +46,7 @@ from agent.algorithms.attitude_sync_terms import (
     published_xi,
     tail_xi,
 )
-from zswarm import hybrid
+from zswarm.families import synergistic
 from zswarm.algorithm import POSE_ESTIMATE, AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3
 
@@ -170,8 +170,8 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="tree",
     report="sync",
-    params=hybrid.HybridParams,
-    initial={**POSE_ESTIMATE, "xi": hybrid.XI_INITIAL},
+    params=synergistic.HybridParams,
+    initial={**POSE_ESTIMATE, "xi": synergistic.XI_INITIAL},
     # Hold: ξ_k changes slowly between jumps, and a tail without its head's ξ_k
     # would otherwise drop the edge from its torque.
     stale=StalePolicy(0.2, "hold"),

@@ -43,7 +43,8 @@ import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
-from zswarm import hybrid, kernels
+from zswarm import kernels
+from zswarm.families import synergistic
 from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Ra, T, Vec3, apply, exp, exp_batch, hat, log, mul, psi
 from zswarm.trig import sincos
@@ -273,10 +274,10 @@ SPEC = AlgorithmSpec(
     command=COMMAND,
     graph="tree",
     report="sync",
-    params=hybrid.VelocityFreeParams,
+    params=synergistic.VelocityFreeParams,
     initial={
         **POSE_ESTIMATE,
-        "xi": hybrid.XI_INITIAL,
+        "xi": synergistic.XI_INITIAL,
         "Q": InitialField("rotation", IDENTITY, "Q_i(0), the auxiliary attitude (5.20)"),
         "zeta": InitialField("number", 0.0, "ζ_i(0) (5.22)"),
     },

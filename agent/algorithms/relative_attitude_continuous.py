@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent.algorithms.relative_attitude_terms import EDGE_FIELDS, EdgeData, continuous_correction, edge_data, edge_messages
-from zswarm import hybrid
+from zswarm.families import synergistic
 from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.so3 import Mat3, Vec3, exp, mul
 
@@ -87,7 +87,7 @@ SPEC = AlgorithmSpec(
     parts=(Part("observer", inputs, step),),
     graph="tree",
     report="tree",
-    params=hybrid.ContinuousParams,
+    params=synergistic.ContinuousParams,
     # Drop: a neighbour's R̂_j is brought to the tick with its last ω_j, an
     # extrapolation whose error grows with the age (½ω̇τ²).
     stale=StalePolicy(0.2, "drop"),

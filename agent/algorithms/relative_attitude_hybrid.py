@@ -41,7 +41,7 @@ import numpy as np
 from agent.algorithms import relative_attitude_continuous
 from agent.algorithms.relative_attitude_continuous import Inputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, hybrid_correction, relative_error
-from zswarm import hybrid
+from zswarm.families import synergistic
 from zswarm.algorithm import POSE_ESTIMATE, Initial, Part, Publish, View
 from zswarm.so3 import Mat3, Vec3, exp, mul
 
@@ -74,7 +74,7 @@ class Outputs:
 
 def gap(R_bar: Mat3, xi: float, g: Gains) -> float:
     """``U(R̄, ξ) − min_{ξ'∈Ξ} U(R̄, ξ')`` of (4.15)–(4.16)."""
-    return hybrid.potential(g.A, g.u, g.gamma, R_bar, xi) - hybrid.best_xi(g.A, g.u, g.gamma, R_bar, g.Xi)[1]
+    return synergistic.potential(g.A, g.u, g.gamma, R_bar, xi) - synergistic.best_xi(g.A, g.u, g.gamma, R_bar, g.Xi)[1]
 
 
 def flow_set(R_bar: Mat3, xi: float, g: Gains) -> bool:
@@ -89,14 +89,14 @@ def jump_set(R_bar: Mat3, xi: float, g: Gains) -> bool:
 
 def jump_map(R_bar: Mat3, xi: float, g: Gains) -> float:
     """``ξ_k⁺ = argmin_{ξ∈Ξ} U(R̄_k, ξ)`` (4.26); the result is in the flow set."""
-    new = hybrid.best_xi(g.A, g.u, g.gamma, R_bar, g.Xi)[0]
+    new = synergistic.best_xi(g.A, g.u, g.gamma, R_bar, g.Xi)[0]
     assert gap(R_bar, new, g) <= 0.0 < g.delta  # δ > 0 is checked when the scenario loads
     return new
 
 
 def flow_xi(R_bar: Mat3, xi: float, g: Gains) -> float:
     """``ξ̇_k = −k_ξ ∇_ξ U(R̄_k, ξ_k)`` (4.13), (4.25)."""
-    return -g.k_xi * hybrid.grad_xi(g.A, g.u, g.gamma, R_bar, xi)
+    return -g.k_xi * synergistic.grad_xi(g.A, g.u, g.gamma, R_bar, xi)
 
 
 def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tuple[State, Outputs, Mat3]:
@@ -110,8 +110,8 @@ def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tupl
             continue
         R_bar = R_bars[e.k]
         if R_bar.ndim > 2:  # M draws (the batched engine): each jumps or flows; NaN where it flows
-            best, u_best = hybrid.best_xi(gains.A, gains.u, gains.gamma, R_bar, gains.Xi)
-            hit = hybrid.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k]) - u_best >= gains.delta
+            best, u_best = synergistic.best_xi(gains.A, gains.u, gains.gamma, R_bar, gains.Xi)
+            hit = synergistic.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k]) - u_best >= gains.delta
             if hit.any():
                 jumps.append((e.k, xi[e.k], np.where(hit, best, np.nan)))
                 xi[e.k] = np.where(hit, best, xi[e.k])
@@ -126,7 +126,7 @@ def attitude_step(state: State, inputs: Inputs, dt: float, gains: Gains) -> tupl
     for e in inputs.edges:
         if e.head:
             R_bar = R_bars[e.k]
-            U += hybrid.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k])
+            U += synergistic.potential(gains.A, gains.u, gains.gamma, R_bar, xi[e.k])
             rate1[e.k] = flow_xi(R_bar, xi[e.k], gains)
     # Heun: the flow's rates again at the Euler end point, then their mean.
     R1 = mul(exp(-dt * gains.k_R * sigma), R_pred)
@@ -169,6 +169,6 @@ SPEC = replace(
     description="thesis §4.3.2: hybrid observer (4.25)-(4.26) from relative attitudes",
     gains={"k_R": None, "k_xi": None},
     parts=(Part("observer", inputs, step),),
-    params=hybrid.HybridParams,
-    initial={**POSE_ESTIMATE, "xi": hybrid.XI_INITIAL},
+    params=synergistic.HybridParams,
+    initial={**POSE_ESTIMATE, "xi": synergistic.XI_INITIAL},
 )

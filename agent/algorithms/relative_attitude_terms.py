@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import hybrid
+from zswarm.families import synergistic
 from zswarm.algorithm import Field, View, number
 from zswarm.so3 import Mat3, T, Vec3, apply, dot, exp, mul, psi
 
@@ -75,7 +75,7 @@ def hybrid_correction(R_bars: Mapping[int, Mat3], edges: tuple[EdgeData, ...], x
     s = np.zeros(3)
     for e in edges:
         R_bar = R_bars[e.k]
-        g = hybrid.grad_R(A, u, R_bar, xi[e.k])
+        g = synergistic.grad_R(A, u, R_bar, xi[e.k])
         s = s - g if e.head else s + apply(R_bar, g)
     return s
 

@@ -6,9 +6,10 @@ adds it to what the default (leader–follower) family reports: per edge j -> i 
 0.1 s grid, its value over the last second, the max over edges, and when that max
 stays below 1 cm; a line of the end-of-run table; ``plots/bearing_fit.png``.
 
-A family is a module with some of the functions of ``zswarm.report.family``; what it
-leaves out (here the headline errors, convergence, series) is the leader–follower
-default of ``zswarm.report.base``.  An algorithm names it in ``SPEC.report``.
+A family is a module that exports ``FAMILY``, a ``zswarm.family.Family``; of its report
+(``zswarm.family.Report``) what it leaves out (here the headline errors, convergence,
+series) is the leader–follower default of ``zswarm.report.base``.  An algorithm names it in
+``SPEC.report``.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from zswarm.family import Family, Report
 from zswarm.report import base, text
 from zswarm.report.series import final, held, max_over, settle_time
 
@@ -87,3 +89,6 @@ def plot(out: Path, sc: Any, errs: dict[int, np.ndarray], m: Fit, rec: Any) -> N
     fig.tight_layout()
     fig.savefig(out / "bearing_fit.png", dpi=100)
     plt.close(fig)
+
+
+FAMILY = Family(report=Report(metrics=metrics, summary=summary, table_lines=table_lines, plot=plot))

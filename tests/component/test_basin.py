@@ -71,7 +71,7 @@ def test_summary_counts_and_wilson_interval():
         {"draw": str(d), "kind": "uniform", "status": "ok", "synchronized": str(d % 5 != 0), "settle_01_s": str(10 + d), "settle_s": "" if d % 5 == 0 else str(20 + d), "final_max": "1e-3", "jumps": "1"}
         for d in range(1, 101)
     ]
-    s = basin.summarize(rows, 0.01, 150.0)
+    s = basin.summarize(rows, 0.01, 150.0, verdict="synchronized")
     assert s["drawn"] == 100 and s["start"] == "uniform" and s["synchronized"] == 80 and s["fraction"] == 0.8
     lo, hi = s["fraction_95ci"]
     assert lo == pytest.approx(0.7112, abs=1e-3) and hi == pytest.approx(0.8666, abs=1e-3)  # Wilson, z = 1.96
@@ -83,7 +83,7 @@ def test_the_interval_of_all_synchronized_is_printed_below_100():
     """10,000 of 10,000: the Wilson interval is 99.9616-100 %, which one decimal would print
     as "100.0-100.0 %"; the lower bound is rounded down, with the decimals it needs."""
     rows = [{"draw": str(d), "kind": "uniform", "status": "ok", "synchronized": "True", "settle_01_s": "1", "settle_s": "2", "final_max": "1e-3", "jumps": "0"} for d in range(1, 10001)]
-    s = basin.summarize(rows, 0.01, 30.0)
+    s = basin.summarize(rows, 0.01, 30.0, verdict="synchronized")
     assert s["fraction_95ci"][0] == pytest.approx(0.999616, abs=1e-6)
     assert "95 % CI 99.96-100.00 %" in basin.table("x", s)
     assert basin.ci_text([0.7112, 0.8666]) == "71.1-86.7 %"  # one decimal where it shows the interval
@@ -112,7 +112,7 @@ def test_basin_end_to_end_resume_and_bad_input(tmp_path):
     p3 = subprocess.run([*cmd[:5], "--duration", "10", "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert p3.returncode == 2 and "holds a different basin check (differs in: duration_s)" in p3.stderr
     p4 = subprocess.run([sys.executable, "-m", "zswarm", "basin", str(TOPO / "thesis-3.2-fixed8.toml"), "--out", str(tmp_path / "c")], cwd=ROOT, capture_output=True, text=True, timeout=60)
-    assert p4.returncode == 2 and "covers the tree schemes" in p4.stderr
+    assert p4.returncode == 2 and "declares no basin check" in p4.stderr
     assert math.isfinite(float(own["final_max"]))
     # Starts 0.2 rad from the scenario's own, then both folders side by side.
     near = tmp_path / "n"

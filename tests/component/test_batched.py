@@ -31,14 +31,19 @@ import pytest
 
 from agent import batched
 from tests.conftest import TOPO
-from zswarm import basin, report
-from zswarm.report import family
+from zswarm import basin, family, report
 from zswarm.scenario import load, parse_override
 from zswarm.sim import simulate
 
 DURATION = 4.0  # s: the hybrid law's jumps at t = 0 and the first flow, 400 agent steps
 DRAWS = (0, 1, 2, 3)  # draw 0: the thesis' start on the undesired set; 1-3 uniform
 TOL = 1e-9
+
+
+def _grid(sc):
+    """The batched engine's basin grid for the scenario's family (its Basin's, else the report's 0.1 s)."""
+    b = family.of(sc).basin
+    return b.grid_s if b is not None else report.GRID_S
 
 
 def _draws(stem):
@@ -55,12 +60,12 @@ NOISY = ["thesis-5.6-hybrid7-noisy", "thesis-5.6-velocity-free7-noisy", "thesis-
 def test_batched_is_sim_draw_by_draw(stem):
     base, scs = _draws(stem)
     fam = family.of(base)
-    res = batched.run(scs, DURATION, base.seed, fam.basin_grid_s)
+    res = batched.run(scs, DURATION, base.seed, fam.basin.grid_s)
     assert res.max_rel.shape == (len(DRAWS), len(res.t))
     for n, sc in enumerate(scs):
         msgs = simulate(sc, Path("."), DURATION, sc.seed, lean=True, record=False)
         rec = report.load_recording(msgs)
-        t, mx = fam.basin_series(sc, rec)
+        t, mx = fam.basin.series(sc, rec)
         assert np.array_equal(t, res.t)
         # On |R̄|_I² = (3 − tr R̄)/4, which carries the trace's round-off as it is (≈ 1e-16 an
         # operation, carried by a contracting loop); |R̄|_I itself divides it by 2|R̄|_I (→ 1e-6
@@ -132,7 +137,7 @@ def test_bearing_observers_are_sim_draw_by_draw(stem):
             ovs.append(parse_override(f"agents[{n}].estimate.R={basin._rows(R)}"))
             ovs.append(parse_override(f"agents[{n}].estimate.p={rng.uniform(-3, 3, 3).tolist()}"))
         scs.append(load(topo, ovs))
-    res = batched.run(scs, DURATION, base.seed, family.of(base).basin_grid_s, rows=True)
+    res = batched.run(scs, DURATION, base.seed, _grid(base), rows=True)
     for n, sc in enumerate(scs):
         rec = report.load_recording(simulate(sc, Path("."), DURATION, sc.seed, lean=True, record=False))
         assert _square_gap(sc, rec, res, n) <= TOL, (stem, n)
@@ -181,7 +186,7 @@ def test_draws_of_their_own_gains_are_sim_draw_by_draw(stem):
     names = GAINS[stem]
     runs = [(1.0, 1), (0.5, 1), (2.0, 2), (1.0, 3)]  # (factor on the scenario's gains, seed)
     scs = [load(topo, [parse_override(f"algorithm.gains.{g}={base.gains[g] * f}") for g in names]) for f, _ in runs]
-    res = batched.run(scs, 2.0, 0, family.of(base).basin_grid_s, seeds=[s for _, s in runs], rows=True)
+    res = batched.run(scs, 2.0, 0, _grid(base), seeds=[s for _, s in runs], rows=True)
     for n, (sc, (_, seed)) in enumerate(zip(scs, runs, strict=True)):
         rec = report.load_recording(simulate(sc, Path("."), 2.0, seed, lean=True, record=False))
         assert _square_gap(sc, rec, res, n) <= TOL, (stem, n)
@@ -201,8 +206,8 @@ def _square_gap(sc, rec, res, n):
     basin measure (the sync and tree families' own; for the leader–follower family the largest
     follower attitude error |R̃_i|_I)."""
     fam = family.of(sc)
-    if fam.basin_series is not None:
-        t, mx = fam.basin_series(sc, rec)
+    if fam.basin is not None:
+        t, mx = fam.basin.series(sc, rec)
         assert np.array_equal(t, res.t)
     else:
         errs = report.errors(rec)
@@ -232,7 +237,7 @@ def test_draws_of_their_own_seeds_and_noise_are_sim_draw_by_draw(stem):
     v0 = getattr(base, field)
     runs = [(v0, 11), (2 * v0, 12), (v0 / 2, 11), (v0, 11), (v0, 13)]  # (variance, seed)
     scs = [load(topo, [parse_override(f"noise.{field}={v}"), parse_override(f"noise.gyro_var={v / v0 * max(base.gyro_var, 0.005)}")]) for v, _ in runs]
-    res = batched.run(scs, 2.0, 0, family.of(base).basin_grid_s, seeds=[s for _, s in runs])
+    res = batched.run(scs, 2.0, 0, _grid(base), seeds=[s for _, s in runs])
     for n, (sc, (_, seed)) in enumerate(zip(scs, runs, strict=True)):
         rec = report.load_recording(simulate(sc, Path("."), 2.0, seed, lean=True, record=False))
         assert _square_gap(sc, rec, res, n) <= TOL, (stem, n)

@@ -9,17 +9,20 @@ import sys
 import numpy as np
 import pytest
 
-from zswarm.generate import FAMILIES, GRAPHS, generate
+from zswarm.family import recipes
+from zswarm.generate import generate, graphs_of
+
+RECIPES = {name: r for name, (_, r) in recipes().items()}
 from zswarm.report import make_report
 from zswarm.scenario import load, loads
 from zswarm.sim import simulate
 
 
-@pytest.mark.parametrize("family", sorted(FAMILIES))
+@pytest.mark.parametrize("family", sorted(RECIPES))
 @pytest.mark.parametrize("n", [3, 7, 30])
 def test_every_family_loads_with_the_graph_it_asks_for(family, n):
-    fam = FAMILIES[family]
-    for graph in GRAPHS[fam.graph]:
+    fam = RECIPES[family]
+    for graph in graphs_of(fam.graph):
         for seed in (1, 2):
             text, sc = generate(family, n, seed, graph=graph)
             assert loads(text, "<again>").ids == sc.ids == tuple(range(1, n + 1))
@@ -80,7 +83,7 @@ def test_cli_writes_a_file_that_loads_and_refuses_bad_input(tmp_path):
     r = subprocess.run([sys.executable, "-m", "zswarm", "generate", "bearing-fixed", "-n", "1"], capture_output=True, text=True)
     assert r.returncode == 2 and "n must be in 3..1000" in r.stderr and "Traceback" not in r.stderr
     r = subprocess.run([sys.executable, "-m", "zswarm", "generate", "--list"], capture_output=True, text=True)
-    assert r.returncode == 0 and all(f in r.stdout for f in FAMILIES)
+    assert r.returncode == 0 and all(f in r.stdout for f in RECIPES)
 
 
 @pytest.mark.parametrize("family, n, duration", [("bearing-fixed", 10, 30.0), ("relative-attitude-hybrid", 8, 15.0)])

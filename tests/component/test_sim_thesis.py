@@ -15,7 +15,7 @@ import pytest
 from tests.conftest import TOPO
 from tests.notes import agrees, interval
 from zswarm.report import load_recording, make_report
-from zswarm.report.families.tree import tree_metrics
+from zswarm.families.tree import tree_metrics
 from zswarm.scenario import load
 from zswarm.sim import simulate
 

@@ -25,7 +25,7 @@ from agent.algorithms import attitude_sync_hybrid as hyb
 from agent.algorithms import attitude_sync_velocity_free as vf
 from agent.algorithms.attitude_sync_terms import Edge, coupling, xi_coefficients
 from world.dynamics import RigidBodies
-from zswarm import hybrid
+from zswarm.families import synergistic as hybrid
 from zswarm.so3 import Ra, exp, psi
 
 A = np.diag([5.0, 8.57, 12.0])

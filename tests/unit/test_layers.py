@@ -21,7 +21,7 @@ PACKAGES = ("zswarm", "agent", "world")
 # zswarm.processes (zswarm.plugins.process_class), as it gets algorithms and report families.
 UP_ARROWS_ALLOWED: set[tuple[str, str]] = set()
 # Modules that must not decide by the algorithm's graph, params or plant what to compute.
-ASK_THE_FAMILY = ("zswarm/basin.py", "zswarm/sweep.py", "zswarm/study.py", "zswarm/sim.py", "zswarm/launch.py", "zswarm/cli.py", "zswarm/report/pipeline.py", "zswarm/report/base.py", "zswarm/report/family.py", "zswarm/report/recording.py", "zswarm/report/faults.py")
+ASK_THE_FAMILY = ("zswarm/basin.py", "zswarm/sweep.py", "zswarm/study.py", "zswarm/sim.py", "zswarm/launch.py", "zswarm/cli.py", "zswarm/report/pipeline.py", "zswarm/report/base.py", "zswarm/family.py", "zswarm/report/recording.py", "zswarm/report/faults.py")
 SNIFFING = re.compile(r"is_sync\(|is_formation\(|info\.graph\b|info\.params\b|\.plant\s*==|report_sync|report_formation")
 
 
@@ -124,8 +124,8 @@ def test_the_report_and_the_commands_ask_the_family():
 
 
 def test_every_builtin_algorithm_names_a_family_that_resolves():
+    from zswarm import family
     from zswarm.algorithm import builtin, resolve
-    from zswarm.report import family
 
     names = {n: family.resolve(resolve(n)[0].SPEC.report).name for n in builtin()}
     assert len(names) == 11

@@ -8,13 +8,11 @@ The package, from the bottom up (each module imports only those above it in this
 * :mod:`~zswarm.report.text` — the text pieces of the end-of-run table;
 * :mod:`~zswarm.report.faults` — what each fault cost, and its marks on the plots;
 * :mod:`~zswarm.report.base` — the leader–follower measures every family defaults to;
-* :mod:`~zswarm.report.families` — ``leader_follower``, ``tree`` (§4 observers), ``sync``
-  (Chapter 5 laws), ``formation`` (De Carli et al.);
-* :mod:`~zswarm.report.family` — the family protocol, and finding a family by name
-  (``SPEC.report``; entry points of ``zswarm.report_families``, or a module path);
 * :mod:`~zswarm.report.pipeline` — summary.json and the files of every run.
 
-Nothing below the pipeline asks which family a run is; the families are found by name.
+The experiment families (:mod:`zswarm.family`, the contract; zswarm's own in
+:mod:`zswarm.families`) build on these modules; the pipeline asks the run's family
+(``SPEC.report``) for its part and never which family a run is.
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ The error the convergence time is judged on is, at each point of a 0.1 s grid,
 the mean over followers of each one's newest estimate error (agents tick on
 their own clocks; NaN until every follower has an estimate); the headline
 finals are the means over followers; the plots are the individual and average
-error norms (thesis Figs. 3.4–3.7).  :mod:`zswarm.report.family` takes each
-function a family module leaves out from here.
+error norms (thesis Figs. 3.4–3.7).  :class:`zswarm.family.Family` takes each
+report function a family leaves out from here.
 """
 
 from __future__ import annotations

@@ -20,9 +20,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from zswarm import files
+from zswarm import family, files
 from zswarm.record import ensure_recording
-from zswarm.report import family, faults, text
+from zswarm.report import faults, text
 from zswarm.report.base import THRESHOLDS
 from zswarm.report.recording import Recording, errors, load_recording, truth_gaps
 from zswarm.report.series import final

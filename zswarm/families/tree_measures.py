@@ -1,155 +1,78 @@
-"""A prescribed truth's measures of the estimates when each draw's agents publish at stamps of
-their own (agent/batched.py: sensor links with jitter, loss or cuts on the §3 and §4.5 observers).
-
-On ``sim`` the report measures every estimate a run's agents published on the truth at the
-estimate's stamp (zswarm.report.recording.estimates_with_truth: a stamp is a sensor packet's
-time, so the truth sample there) and then holds each agent's newest estimate on a grid.  With
-lossy or jittery sensor links the draws of a batch publish at ticks and stamps of their own:
-an agent that heard nothing new at a tick publishes nothing, a late packet stamps an older
-time.  These classes take each tick's estimates per draw (:class:`Published`) and build what
-the report builds of a recording, draw by draw, without keeping every estimate: the
-leader–follower rows (:class:`FollowerErrors`: zswarm.report.base.series and the finals of
-pipeline.final_mean) and the tree family's 100 Hz grid (:class:`TreeErrors`:
-zswarm.report.families.tree.tree_metrics, its basin series, edges.csv's 0.1 s points and the
-agents' errors up to their chordal mean over the last second).
-"""
+"""The tree family's measures on the batched engine (zswarm.measure): the §4.5 observers'
+estimates on the prescribed truth, which the draws share, as tree_metrics measures a
+recording: at the agents' common ticks (:class:`TreeTicks`), or at each draw's own stamps
+when lossy or jittery sensor links make the draws publish apart (:class:`TreeStamps`)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-from zswarm.report.base import grid as coarse_grid
-from zswarm.report.families.tree import BASIN_GRID_S, nearest_rotations
-from zswarm.report.series import FINAL_WINDOW_S
+from zswarm.so3 import nearest_rotations
+from zswarm.measure import FINAL_WINDOW_S, Context, Published, Result, Ticks, Truths, coarse_grid, mean_rows, nanmean_of, rounded, truth_at
+
+BASIN_GRID_S = 0.01  # s: the basin series' grid (tree_metrics' default step)
 
 
-def mean_rows(x: np.ndarray) -> np.ndarray:
-    """np.mean of each row of (M, K) as of a 1-D array of its K values (the same sum: a
-    contiguous row), the way the report averages one run's values over its last second."""
-    out: np.ndarray = np.ascontiguousarray(x).mean(axis=1)
-    return out
+class TreeTicks(Ticks):
+    """The tree family (zswarm.families.tree.tree_metrics) at the common ticks: R̃_i = R_i R̂_i^T and per edge
+    |R̄_k|_I = |R̃_t^T R̃_h|_I at every tick (the basin measure: their max); for the rows, each
+    agent's |R̃_i R̃_c^T|_I up to the chordal mean R̃_c over the last second, and the edges'
+    mean on the 0.1 s grid as edges.csv holds it (%.3f times, %.6e values)."""
 
+    def __init__(self, ctx: Context) -> None:
+        super().__init__(ctx)
+        self.edges = list(self.sc.oriented)
+        self.col = {i: a for a, i in enumerate(self.sc.ids)}
+        tk = self.t_ticks
+        # tree_metrics' grid (step 0.01 from the first estimate), each point's newest tick ...
+        self.tm_t = np.arange(tk[0], tk[-1] + 1e-9, 0.01) if len(tk) else np.zeros(0)
+        self.tm_at = np.searchsorted(tk, self.tm_t, side="right") - 1
+        # ... and edges_on_grid's 0.1 s points on edges.csv's times
+        t_csv = np.array([float(f"{t:.3f}") for t in self.tm_t])
+        self.coarse_t = coarse_grid(self.duration)
+        self.coarse_at = self.tm_at[np.clip(np.searchsorted(t_csv, self.coarse_t, side="right") - 1, 0, len(t_csv) - 1)] if len(t_csv) else np.zeros(0, dtype=int)
+        self.final_at = self.tm_at[self.tm_t >= self.duration - FINAL_WINDOW_S]  # series.final's window on tm.t
+        if self.rows:
+            self.keep = set(self.coarse_at.tolist()) | set(self.final_at.tolist())
 
-def nanmean_of(values: Sequence[np.ndarray]) -> np.ndarray:
-    """zswarm.report.series.nanmean per draw (the mean of the finite values; NaN where none)."""
-    x = np.array(values).T  # (M, F)
-    fine = np.all(np.isfinite(x), axis=1)
-    out = mean_rows(x)
-    for m in np.flatnonzero(~fine):
-        v = x[m][np.isfinite(x[m])]
-        out[m] = float(np.mean(v)) if len(v) else np.nan
-    return out
+    def measure(self, truth: Any, estimates: Mapping[int, Mapping[str, Any]], keep: bool) -> tuple[np.ndarray, Any]:
+        R = truth.R
+        Rt = {i: R[a] @ np.swapaxes(estimates[i]["R_hat"], -1, -2) for i, a in self.col.items()}
+        vals = []
+        for h, tl in self.edges:
+            tr = np.einsum("mji,mji->m", Rt[tl], Rt[h])  # tr(R̃_t^T R̃_h), without the product
+            vals.append(np.sqrt(np.clip((3.0 - tr) / 4.0, 0.0, 1.0)))
+        basin = np.max(vals, axis=0) if vals else np.zeros(self.M)
+        return basin, (np.array(vals), Rt) if keep else None
 
-
-@dataclass(slots=True)
-class Published:
-    """One agent's estimates of one tick, per draw: ``mask`` (M,) the draws that published,
-    ``stamp`` (M,) their stamps (world time of the packet stepped to), ``R_hat`` (M, 3, 3) and
-    ``p_hat`` (M, 3) (valid where ``mask``)."""
-
-    mask: np.ndarray
-    stamp: np.ndarray
-    R_hat: np.ndarray
-    p_hat: np.ndarray
-
-
-Truths = Mapping[int, tuple[np.ndarray, np.ndarray]]  # sample -> the truth's (R (n, 3, 3), p (n, 3)) there
-
-
-def truth_at(truths: Truths, stamps: np.ndarray, sample_dt: float, a: int) -> tuple[np.ndarray, np.ndarray]:
-    """Body ``a``'s truth (R (len, 3, 3), p (len, 3)) at each stamp: a stamp is a sample's time
-    (k · sample_dt, as the world computes it), so the truth sample there, as the report takes
-    it (estimates_with_truth: the sample before moved on by 0 s)."""
-    k = np.rint(stamps / sample_dt).astype(np.int64)
-    uniq, inv = np.unique(k, return_inverse=True)
-    R = np.stack([truths[int(q)][0][a] for q in uniq])[inv.reshape(-1)]
-    p = np.stack([truths[int(q)][1][a] for q in uniq])[inv.reshape(-1)]
-    return R, p
-
-
-def rounded(x: np.ndarray, fmt: str) -> np.ndarray:
-    """The values as a CSV of the report holds them (``fmt``: "%.6e", "%.6f", "%.3f")."""
-    return np.array(np.char.mod(fmt, x), dtype=float)
-
-
-class FollowerErrors:
-    """The leader–follower family's rows (zswarm.report.base): each follower's |R̃_i|_I and
-    ||p̃_i|| (3.15) at each of its estimates, held on the 0.1 s grid at the newest estimate
-    whose errors.csv time (%.6f) is at or before each point (%.6e values; the mean over the
-    followers, NaN until each has one), and the finals: per follower the mean over its
-    estimates stamped in the last second, then over the followers.  Streams: an estimate's
-    values go to the grid points before the next one's time when that one comes."""
-
-    def __init__(self, sc: Any, M: int, duration: float, sample_dt: float, rows: bool) -> None:
-        self.followers = [(i, a) for a, i in enumerate(sc.ids) if sc.agent(i).role == "follower"]
-        F = len(self.followers)
-        self.M, self.duration, self.sample_dt, self.rows = M, duration, sample_dt, rows
-        self.coarse_t = coarse_grid(duration)
-        self.lim = self.coarse_t + 1e-9  # base.series: searchsorted(t, grid + 1e-9, "right") − 1
-        self.coarse = np.full((2, F, M, len(self.coarse_t)), np.nan)
-        self.prev = np.full((2, F, M), np.nan)  # each follower's newest estimate's rounded errors, per draw
-        self.j_prev = np.full((F, M), -1, dtype=np.int64)  # the first grid point it holds (−1: none yet)
-        self.final: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []  # (follower, draws, |R̃|, ||p̃||) stamped in the last second
-
-    def tick(self, truths: Truths, est: Mapping[int, Published]) -> None:
-        for f, (i, a) in enumerate(self.followers):
-            e = est.get(i)
-            if e is None or not e.mask.any():
-                continue
-            idx = np.flatnonzero(e.mask)
-            s = e.stamp[idx]
-            R, p = truth_at(truths, s, self.sample_dt, a)
-            R_hat, p_hat = e.R_hat[idx], e.p_hat[idx]
-            tr = np.einsum("nij,nij->n", R, R_hat)  # recording.errors: tr(R R̂^T)
-            att = np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0))
-            pos = np.linalg.norm(p - np.einsum("nij,nkj,nk->ni", R, R_hat, p_hat), axis=1)
-            late = s >= self.duration - FINAL_WINDOW_S  # pipeline.final_mean's window (t_end: the duration)
-            if late.any():
-                self.final.append((f, idx[late], att[late], pos[late]))
-            if not self.rows:
-                continue
-            # The points before this estimate's time hold the previous one (those from it on, this one until the next)
-            j_new = np.searchsorted(self.lim, rounded(s, "%.6f"), side="left")
-            j_old = self.j_prev[f, idx]
-            for c in range(int(np.max(j_new - np.maximum(j_old, 0), initial=0))):
-                j = j_old + c
-                ok = (j_old >= 0) & (j < j_new)
-                self.coarse[:, f, idx[ok], j[ok]] = self.prev[:, f, idx[ok]]
-            self.j_prev[f, idx] = j_new
-            self.prev[0, f, idx], self.prev[1, f, idx] = rounded(att, "%.6e"), rounded(pos, "%.6e")
-
-    def result(self, res: Any) -> Any:
-        F, M = len(self.followers), self.M
-        res.t, res.max_rel = np.zeros(0), np.zeros((M, 0))  # no basin measure (the family has none)
+    def result(self, res: Result) -> Result:
+        res = self.basin_series(res)
         if not self.rows:
             return res
-        for f in range(F):  # the newest estimate holds to the end of the grid
-            for m in np.flatnonzero(self.j_prev[f] >= 0):
-                self.coarse[:, f, m, self.j_prev[f, m] :] = self.prev[:, f, m, None]
-        per: list[list[np.ndarray]] = [[np.full(M, np.nan) for _ in range(F)] for _ in (0, 1)]
-        if self.final:
-            fs = np.concatenate([np.full(len(d), f) for f, d, _, _ in self.final])
-            ms = np.concatenate([d for _, d, _, _ in self.final])
-            vals = [np.concatenate([x[c + 2] for x in self.final]) for c in (0, 1)]
-            order = np.lexsort((ms, fs))  # stable: each (follower, draw)'s estimates in stamp order
-            keys = fs[order] * M + ms[order]
-            cuts = np.flatnonzero(np.diff(keys)) + 1
-            for g in np.split(np.arange(len(order)), cuts):
-                fo, mo = divmod(int(keys[g[0]]), M)
-                for c in (0, 1):
-                    per[c][fo][mo] = np.mean(vals[c][order[g]])  # series.final: the mean over the window
-        res.final_att, res.final_pos = (nanmean_of(per[c]) if F else np.full(M, np.nan) for c in (0, 1))
+        sc = self.sc
+        # The agents' errors up to the chordal mean over the last second (tree.summary), their mean over followers.
+        finals = []
+        for n in self.final_at:
+            Rt = self.kept[int(n)][1]
+            Rc = nearest_rotations(np.mean([Rt[i] for i in sc.ids], axis=0))  # (M, 3, 3)
+            finals.append([np.sqrt(np.clip((3.0 - np.einsum("mij,mij->m", Rt[i], Rc)) / 4.0, 0.0, 1.0)) for i in sc.ids])
+        fin = np.array(finals)  # (K, agents, M)
+        per = [mean_rows(fin[:, q, :].T) for q, i in enumerate(sc.ids) if sc.agent(i).role == "follower"]
+        res.final_att = nanmean_of(per)
+        res.final_pos = np.full(self.M, np.nan)  # tree's positions: the §4.4 pose observer's only
+        E = len(self.edges)
+        rounded = np.array([rounded(self.kept[int(n)][0], "%.6e") for n in self.coarse_at])  # (T, E, M)
         res.t_coarse = self.coarse_t
-        res.att_coarse, res.pos_coarse = (np.mean(self.coarse[c], axis=0) for c in (0, 1))
+        res.att_coarse = np.mean([rounded[:, e, :].T for e in range(E)], axis=0)  # edges_on_grid(..., np.mean)
         return res
 
 
-class TreeErrors:
-    """The tree family (zswarm.report.families.tree.tree_metrics) per draw: R̃_i = R_i R̂_i^T of
+class TreeStamps:
+    """The tree family (zswarm.families.tree.tree_metrics) per draw when each draw's agents publish at stamps of their own: R̃_i = R_i R̂_i^T of
     each agent's estimates at their stamps, each agent's newest at or before each point of the
     draw's own 100 Hz grid (from the latest first estimate of the agents to the latest
     estimate: np.arange(t0, t1 + 1e-9, 0.01)), per edge |R̄_k|_I = |R̃_t^T R̃_h|_I there.
@@ -161,8 +84,11 @@ class TreeErrors:
     the mean over edges) and each agent's |R̃_i R̃_c^T|_I up to their chordal mean R̃_c at the
     points of the last second (tree.summary's finals, the mean over followers)."""
 
-    def __init__(self, sc: Any, M: int, duration: float, sample_dt: float, rows: bool) -> None:
-        self.sc, self.M, self.duration, self.sample_dt, self.rows = sc, M, duration, sample_dt, rows
+    fields: Mapping[str, tuple[int, ...]] = MappingProxyType({"R_hat": (3, 3)})  # what it reads of the estimates (Published)
+
+    def __init__(self, ctx: Context) -> None:
+        sc, M, duration = ctx.sc, ctx.M, ctx.duration
+        self.sc, self.M, self.duration, self.sample_dt, self.rows = sc, M, duration, ctx.sample_dt, ctx.rows
         self.ids = list(sc.ids)
         self.col = {i: a for a, i in enumerate(self.ids)}
         self.edges = [(self.ids.index(h), self.ids.index(t)) for h, t in sc.oriented]
@@ -192,7 +118,7 @@ class TreeErrors:
             idx = np.flatnonzero(e.mask)
             s = e.stamp[idx]
             R, _ = truth_at(truths, s, self.sample_dt, q)
-            self._keep(q, idx, s, R @ e.R_hat[idx].transpose(0, 2, 1))  # tree_metrics: R̃ = R R̂^T
+            self._keep(q, idx, s, R @ e["R_hat"][idx].transpose(0, 2, 1))  # tree_metrics: R̃ = R R̂^T
         fresh = np.isnan(self.t0) & np.all(np.isfinite(self.first), axis=0)
         for m in np.flatnonzero(fresh):  # every agent has an estimate: the draw's grid begins
             self.t0[m] = t0 = float(np.max(self.first[:, m]))

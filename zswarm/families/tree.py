@@ -24,10 +24,14 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
+from zswarm.families.synergistic import HYBRID_PARAMS_4, design_arguments, design_command
+from zswarm.families.tree_measures import BASIN_GRID_S, TreeStamps, TreeTicks
+from zswarm.family import Basin, Batched, Command, Family, Recipe, Report
 from zswarm.report import base, text
 from zswarm.report.recording import Recording, estimates_with_truth
 from zswarm.report.series import final, settle_time
 from zswarm.scenario import Scenario
+from zswarm.so3 import nearest_rotations
 
 
 @dataclass
@@ -70,18 +74,6 @@ def tree_metrics(sc: Scenario, rec: Recording, step: float = 0.01) -> TreeMetric
         att_common[i] = np.sqrt(np.clip((3.0 - np.trace(E, axis1=1, axis2=2)) / 4.0, 0.0, 1.0))
         pos_common[i] = np.linalg.norm(pg[i] - pc, axis=1)
     return TreeMetrics(grid, rel_att, rel_pos, att_common, pos_common)
-
-
-def nearest_rotations(A: np.ndarray) -> np.ndarray:
-    """The rotation nearest to each matrix of a stack (T, 3, 3): U diag(1, 1, ±1) V^T of its SVD
-    (the batched engine's sweep rows use it too, agent/batched.py)."""
-    U, _, Vt = np.linalg.svd(A)
-    d = np.sign(np.linalg.det(U @ Vt))
-    d[d == 0] = 1.0
-    D = np.zeros_like(A)
-    D[:, 0, 0] = D[:, 1, 1] = 1.0
-    D[:, 2, 2] = d
-    return U @ D @ Vt  # type: ignore[no-any-return]
 
 
 def summary(sc: Scenario, rec: Recording, tm: TreeMetrics | None, agents: dict[str, Any], t_end: float) -> dict[str, Any]:
@@ -253,12 +245,61 @@ def basin_start(sc: Scenario) -> list[tuple[str, Any]]:
     return [(f"agents[{n}].estimate.R", a.estimate["R"]) for n, a in enumerate(sc.agents)]
 
 
-BASIN_GRID_S = 0.01  # s: basin_series' grid (tree_metrics' default step)
-
-
 def basin_series(sc: Scenario, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     """max_k |R̄_k|_I on the 100 Hz grid."""
     tm = tree_metrics(sc, rec, BASIN_GRID_S)
     if tm is None:
         raise RuntimeError("some agent published no estimate")
     return tm.t, np.max(np.array(list(tm.rel_att.values())), axis=0)
+
+
+WORLD = {"step": 0.001, "sensor_rate": 200.0, "formation": {"axis": [0, 0, 1], "rate": "pi/6"}}  # a rotating formation (§4.5)
+
+RECIPES = {
+    "relative-attitude": Recipe(
+        "thesis-4.5-continuous5",
+        "§4: continuous relative-attitude observer (4.3) + (4.8) on a tree, rotating formation",
+        "tree",
+        {"name": "relative_attitude_continuous", "gains": {"k_R": 1.1}, "params": {"A": [5, 8.57, 12]}},
+        WORLD,
+        duration=30.0,
+        estimate=("R",),
+    ),
+    "relative-attitude-hybrid": Recipe(
+        "thesis-4.5-hybrid5",
+        "§4: hybrid relative-attitude observer (4.25)-(4.26) on a tree, rotating formation",
+        "tree",
+        {"name": "relative_attitude_hybrid", "gains": {"k_R": 1.1, "k_xi": 3.5}, "params": HYBRID_PARAMS_4},
+        WORLD,
+        duration=30.0,
+        estimate=("R", "xi"),
+    ),
+    "relative-pose-hybrid": Recipe(
+        "thesis-4.5-hybrid-pose5",
+        "§4: hybrid pose observer (4.25)-(4.26) + (4.30)-(4.31) on a tree, rotating formation",
+        "tree",
+        {"name": "relative_pose_hybrid", "gains": {"k_R": 1.1, "k_xi": 3.5, "k_p": 1.0}, "params": HYBRID_PARAMS_4},
+        WORLD,
+        duration=60.0,
+        estimate=("p", "R", "xi"),
+    ),
+}
+
+# zswarm design-hybrid: Prop. 4.2's design of the synergistic potential (the §4 and §5 hybrid schemes share it).
+DESIGN_COMMAND = Command(
+    "design-hybrid",
+    "Prop. 4.2: u, Δ*, and the bounds on γ and δ for A and Ξ; checks Condition 4.1",
+    "Thesis Prop. 4.2 (§4.3.2.3): from the eigenvalues of A and the set Ξ, compute u, Δ*, "
+    "the bounds γ < 4Δ*/π² and δ < (4Δ*/π² − γ) ξ_L²/2, and check Condition 4.1 at the undesired critical "
+    "points.  Without --gamma/--delta, both are taken at 95 % of their bounds (the thesis' choice).",
+    design_arguments,
+    design_command,
+)
+
+FAMILY = Family(
+    report=Report(metrics=metrics, summary=summary, headline=headline, series=series, finals=finals, convergence=convergence, series_from_files=series_from_files, write=write, plot=plot, table_lines=table_lines),
+    basin=Basin(basin_start, basin_series, verdict="synchronized", measure="max_k |R̄_k|_I", grid_s=BASIN_GRID_S),
+    batched=Batched("prescribed", ticks=TreeTicks, stamps=TreeStamps),
+    recipes=RECIPES,
+    commands=(DESIGN_COMMAND,),
+)

@@ -18,6 +18,7 @@ Symbols -> names: A ``A`` (3×3, symmetric), u ``u``, γ ``gamma``, δ ``delta``
 
 from __future__ import annotations
 
+import argparse
 import functools
 import math
 from collections.abc import Sequence
@@ -30,6 +31,10 @@ from numpy.typing import NDArray
 
 from zswarm.algorithm import InitialField
 from zswarm.so3 import Mat3, Ra, Vec3, psi, trace
+
+# The thesis' parameters of the §4.5 and §5.6 hybrid schemes (zswarm generate's recipes).
+HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}
+HYBRID_PARAMS_5 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.3848, "Xi": ["0.9*pi"]}
 
 # The published designs take γ and δ at 95 % of their Prop. 4.2 bounds:
 # 0.95·4·5/π² = 1.9251 (§4.5, §5.6); 0.95·(4Δ*/π² − γ)ξ_L²/2 = 0.0030 (Ξ = {0.08π})
@@ -389,7 +394,7 @@ class VelocityFreeParams:
 XI_INITIAL = InitialField("edges", MappingProxyType({}), "ξ_k(0) of the edges k this agent heads (Remark 4.4)", symbol="ξ")
 
 
-# --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
+# --------------------------------------------------------------------------- zswarm design-hybrid (a command of the tree family: zswarm.families.tree)
 
 
 def design_command(args: Any) -> int:
@@ -398,7 +403,7 @@ def design_command(args: Any) -> int:
 
     import numpy as np
 
-    from zswarm import hybrid, procutil
+    from zswarm import procutil
 
     vals = [procutil.number_arg(x, "--A") for x in args.A.split(",")]
     if len(vals) == 3:
@@ -415,11 +420,11 @@ def design_command(args: Any) -> int:
             u = [procutil.number_arg(x, "--u") for x in args.u.split(",")]
             if len(u) != 3:
                 procutil.fail_usage(f"--u: give 3 numbers (got {len(u)})")
-            base = hybrid.design(A, Xi, gamma, delta)
-            d = hybrid.check_parameters(A, np.array(u), base.gamma, base.delta, Xi)
+            base = design(A, Xi, gamma, delta)
+            d = check_parameters(A, np.array(u), base.gamma, base.delta, Xi)
         else:
-            d = hybrid.design(A, Xi, gamma, delta)
-    except hybrid.DesignError as exc:
+            d = design(A, Xi, gamma, delta)
+    except DesignError as exc:
         procutil.fail_usage(f"--{exc.field.lower()}: {exc.problem}")
     if args.json:
         print(json.dumps(d.as_dict(), indent=2))
@@ -442,3 +447,12 @@ def design_command(args: Any) -> int:
         "[algorithm.params] delta_Q, Pi are checked against these bounds too"
     )
     return 0 if d.condition_holds else 1
+
+
+def design_arguments(d: argparse.ArgumentParser) -> None:
+    d.add_argument("--A", required=True, help="eigenvalues of a diagonal A, e.g. 5,8.57,12 (or 9 numbers, row-major)")
+    d.add_argument("--xi", required=True, help="the set Ξ, e.g. 0.08pi or 0.5,0.9pi")
+    d.add_argument("--gamma", default=None, help="γ to check (default: 0.95 of its bound)")
+    d.add_argument("--delta", default=None, help="δ to check (default: 0.95 of its bound)")
+    d.add_argument("--u", default=None, help="u to check against Prop. 4.2's (3 numbers)")
+    d.add_argument("--json", action="store_true", help="print the design as JSON")

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
+from zswarm.family import Family, Recipe, Report, Sweep
 from zswarm.report import base, text
 from zswarm.report.recording import Recording
 from zswarm.report.series import final_of_grid as _final
@@ -276,3 +277,72 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
     if parts:
         lines.append("part rates (Hz, min-max over robots): " + ", ".join(f"{n} {min(v):.1f}-{max(v):.1f}" for n, v in parts.items()))
     return lines + [text.mean_line(summary, "followers")]
+
+
+# --------------------------------------------------------------------------- zswarm sweep and generate
+
+SWEEP_PARTS = (("rel", "relative_yaw", "rel_yaw_"), ("yaw", "yaw", "yaw_"), ("pos", "position", "position_"), ("form", "formation", "formation_"))
+
+
+def sweep_columns(folder: Path, s: dict[str, Any], sc: Scenario, t: np.ndarray, att: np.ndarray) -> dict[str, Any]:
+    """Per stage — relative yaw (7)/(8), common-frame yaw (13), position (21), formation (30) —
+    the max over edges/robots averaged over the last quarter of the run (a floor, less noisy
+    than the last sample), its settle time, and the drift of the common rotation α."""
+    f = s.get("formation")
+    if f is None:
+        return {}
+    with open(folder / "formation.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    tt = np.array([float(r["t"]) for r in rows])
+    late = tt >= 0.75 * tt[-1]
+    out: dict[str, Any] = {}
+    for short, key, prefix in SWEEP_PARTS:
+        cols = [c for c in rows[0] if c.startswith(prefix)]
+        m = np.array([[float(r[c]) for c in cols] for r in rows])
+        m = np.where(np.isfinite(m), m, -np.inf)  # an edge not measured yet has no error
+        mx = m.max(axis=1) if cols else np.full(len(tt), -np.inf)
+        mx[~np.isfinite(mx)] = np.nan
+        tail = mx[late & np.isfinite(mx)]
+        out[f"{short}_late_max_mean"] = float(tail.mean()) if tail.size else None
+        out[f"{short}_settle_s"] = f["settle_s"].get(f"{key}_max")
+    out["alpha_drift_rad"] = f.get("common_rotation_alpha_drift_rad")
+    return out
+
+
+SWEEP = Sweep(
+    columns=(*(c for short, _, _ in SWEEP_PARTS for c in (f"{short}_late_max_mean", f"{short}_settle_s")), "alpha_drift_rad"),
+    from_run=sweep_columns,
+    # Each stage's floor, so a figure shows which of the three observers and the controller suffers first.
+    figures=(
+        ("rel_late_max_mean", "relative yaw (7)/(8), max over edges", True),
+        ("yaw_late_max_mean", "common-frame yaw (13), max over robots", True),
+        ("pos_late_max_mean", "common-frame position (21), max (m)", True),
+        ("form_late_max_mean", "formation error (30), max (m)", True),
+    ),
+)
+
+
+def offsets(n: int) -> dict[str, Any]:
+    """The formation (30) of n robots: offsets on a circle, heights alternating, as in §IV's figure."""
+    r = 4.0 * max(1.0, n / 8)
+    return {"p_star": [[round(r * math.cos(2 * math.pi * k / n), 4) + 0.0, round(r * math.sin(2 * math.pi * k / n), 4) + 0.0, float(k % 2)] for k in range(n)]}
+
+
+RECIPES = {
+    "formation": Recipe(
+        "decarli-8-formation",
+        "De Carli et al.: relative yaw (7)/(8), common-frame yaw (13) and position (21) observers, formation control (30)",
+        "sensing",
+        {"name": "common_frame_formation", "gains": {"k_pe": 20.0, "k_psi": 600.0, "k_z": 40.0, "k_p": 1.0, "k_c": 0.5, "nu_max": 1.0}},
+        {"step": 0.001, "sensor_rate": 200.0, "plant": "kinematic"},
+        rate=200.0,
+        duration=40.0,
+        params=offsets,
+    ),
+}
+
+FAMILY = Family(
+    report=Report(metrics=metrics, summary=summary, headline=headline, series=series, finals=finals, convergence=convergence, series_from_files=series_from_files, write=write, plot=plot, table_lines=table_lines),
+    sweep=SWEEP,
+    recipes=RECIPES,
+)

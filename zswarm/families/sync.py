@@ -24,6 +24,9 @@ from typing import Any
 import numpy as np
 
 from zswarm import files
+from zswarm.families.synergistic import HYBRID_PARAMS_5
+from zswarm.family import Basin, Batched, Family, Recipe, Report, Sweep
+from zswarm.measure import FINAL_WINDOW_S, Context, Result, coarse_grid, rounded
 from zswarm.report import base, text
 from zswarm.report.recording import Recording
 from zswarm.report.series import final_of_grid as _final
@@ -291,3 +294,121 @@ def basin_series(sc: Scenario, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
     """max_k |R̄_k|_I of the truth on the 100 Hz grid."""
     m = sync_metrics(sc, rec)
     return m.t, m.max_rel
+
+
+# --------------------------------------------------------------------------- the batched engine and zswarm sweep
+
+
+class TruthEdges:
+    """Each draw's truth measured as :func:`sync_metrics` measures a recording: per edge
+    |R̄_k|_I = sqrt(tr(I − R_t^T R_h)/4) at the samples of the basin grid (their max: the basin
+    measure); for a sweep's rows the edges' final (the mean over the last second, edge by
+    edge, then over the edges) and their max on the 0.1 s grid as edges.csv holds it."""
+
+    def __init__(self, ctx: Context) -> None:
+        sc, M = ctx.sc, ctx.M
+        col = {i: a for a, i in enumerate(sc.ids)}
+        self.M, self.n, self.grid_s, self.rows = M, len(sc.ids), ctx.grid_s, ctx.rows
+        edges = list(sc.oriented)
+        self.h_idx = np.array([col[h] for h, _ in edges], dtype=int)
+        self.t_idx = np.array([col[t] for _, t in edges], dtype=int)
+        self.every = max(1, round(ctx.grid_s * sc.sensor_rate))
+        # The grid as sync_metrics builds it on a recording (np.round(np.arange(...), 9)), known ahead.
+        self.grid_all = np.round(np.arange(0.0, (ctx.n_samples - 1) // self.every * self.every * ctx.sample_dt + 1e-9, ctx.grid_s), 9)
+        self.coarse_t = coarse_grid(ctx.duration)
+        self.coarse_at = np.clip(np.searchsorted(self.grid_all, self.coarse_t, side="right") - 1, 0, len(self.grid_all) - 1) if len(self.grid_all) else np.zeros(0, dtype=int)
+        self.coarse_set = set(self.coarse_at.tolist()) if ctx.rows else set()
+        self.final_from = self.grid_all[-1] - FINAL_WINDOW_S if ctx.rows and len(self.grid_all) else np.inf
+        self.grid_t: list[float] = []
+        self.grid_v: list[np.ndarray] = []
+        self.coarse_v: dict[int, np.ndarray] = {}
+        self.final_v: list[np.ndarray] = []
+
+    def sample(self, k: int, t: float, R: np.ndarray) -> None:
+        if k % self.every or not len(self.h_idx):
+            return
+        # tr R̄_k = tr(R_t^T R_h) = Σ_ji (R_t)_ji (R_h)_ji, without forming R̄_k (a third of the cost;
+        # the report's trace of the product differs by round-off, ~1e-15)
+        tr = np.einsum("mnji,mnji->mn", R[:, self.t_idx], R[:, self.h_idx])
+        rel = np.sqrt(np.clip((3.0 - tr) * 0.25, 0.0, 1.0))  # (M, edges)
+        g = len(self.grid_t)
+        self.grid_t.append(t)
+        self.grid_v.append(rel.max(axis=1))
+        if self.grid_all[g] >= self.final_from:
+            self.final_v.append(rel)
+        if g in self.coarse_set:
+            self.coarse_v[g] = rounded(rel, "%.6e").max(axis=1)
+
+    def result(self, res: Result) -> Result:
+        M = self.M
+        res.t = np.round(np.arange(0.0, self.grid_t[-1] + 1e-9, self.grid_s), 9) if self.grid_t else np.zeros(0)
+        assert len(res.t) == len(self.grid_t) and np.array_equal(res.t, self.grid_all[: len(res.t)])
+        res.max_rel = np.array(self.grid_v).T if self.grid_v else np.zeros((M, 0))
+        if self.rows and self.grid_t:
+            fin = np.array(self.final_v)  # (window, M, edges)
+            t_fin = self.grid_all[self.grid_all >= self.final_from]
+            edge_final = np.array([[_final(t_fin, fin[:, m, e]) for e in range(fin.shape[2])] for m in range(M)])  # the report's final, edge by edge
+            res.final_att = edge_final.mean(axis=1)
+            res.t_coarse = self.coarse_t
+            res.att_coarse = np.array([self.coarse_v[g] for g in self.coarse_at]).T
+        return res
+
+
+def _settle_01(t: np.ndarray, att: np.ndarray) -> float | None:
+    return settle_time(t, att, SYNC_THRESHOLDS[0])
+
+
+SWEEP = Sweep(
+    columns=("conv_attitude_01_s",),  # max_k |R̄_k|_I below 0.1 from (s): the thesis' first threshold
+    from_run=lambda folder, summary, sc, t, att: {"conv_attitude_01_s": _settle_01(t, att)},
+    from_batch=lambda res, n, sc: {"conv_attitude_01_s": _settle_01(res.t_coarse, res.att_coarse[n])},
+    figures=(
+        ("final_attitude_error", "final mean |R̄_k|_I", True),
+        ("jumps", "jumps of ξ (count)", False),
+        ("conv_attitude_01_s", "max_k |R̄_k|_I below 0.1 from (s)", False),
+        ("conv_attitude_s", "max_k |R̄_k|_I below 0.01 from (s)", False),
+    ),
+)
+
+WORLD = {"step": 0.001, "sensor_rate": 200.0, "plant": "rigid_body"}
+
+RECIPES = {
+    "attitude-sync": Recipe(
+        "thesis-5.6-continuous7",
+        "§5: continuous attitude synchronization (5.24) of rigid bodies on a tree",
+        "tree",
+        {"name": "attitude_sync_continuous", "gains": {"k_R": 0.4, "k_omega": 0.1}, "params": {"A": [5, 8.57, 12]}},
+        WORLD,
+        duration=150.0,
+    ),
+    "attitude-sync-hybrid": Recipe(
+        "thesis-5.6-hybrid7",
+        "§5: hybrid attitude synchronization (5.19), (5.21), (5.7) of rigid bodies on a tree",
+        "tree",
+        {"name": "attitude_sync_hybrid", "gains": {"k_R": 0.4, "k_omega": 0.1, "k_xi": 20}, "params": HYBRID_PARAMS_5},
+        WORLD,
+        duration=150.0,
+        estimate=("xi",),
+    ),
+    "attitude-sync-velocity-free": Recipe(
+        "thesis-5.6-velocity-free7",
+        "§5: velocity-free attitude synchronization (5.20)-(5.23), (5.7), (5.12) of rigid bodies on a tree",
+        "tree",
+        {
+            "name": "attitude_sync_velocity_free",
+            "gains": {"k_R": 0.4, "k_xi": 20, "k_Q": 30, "k_Qt": 3, "k_zeta": 20},
+            "params": HYBRID_PARAMS_5 | {"delta_Q": 0.3848, "Pi": ["0.9*pi"]},
+        },
+        WORLD,
+        duration=150.0,
+        estimate=("xi", "Q", "zeta"),
+    ),
+}
+
+FAMILY = Family(
+    report=Report(metrics=metrics, summary=summary, headline=headline, series=series, convergence=convergence, series_from_files=series_from_files, write=write, plot=plot, table_lines=table_lines),
+    sweep=SWEEP,
+    basin=Basin(basin_start, basin_series, verdict="synchronized", measure="max_k |R̄_k|_I", grid_s=BASIN_GRID_S),
+    batched=Batched("rigid_body", truth=TruthEdges),
+    recipes=RECIPES,
+)
