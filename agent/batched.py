@@ -52,7 +52,7 @@ import numpy as np
 
 from agent import batched_links
 from agent.runtime import RECENT_EDGE_MESSAGES, setup, since, step_ends
-from world.motion import prescribed
+from world.motion import prescribed, prescribed_key
 from world.node import PLAN_SAMPLES, Sensing
 from world.plant import RigidBodyPlant
 from world.sensors import projective_bearing
@@ -61,7 +61,7 @@ from zswarm.agent_config import Estimate
 from zswarm.algorithm import jumps as has_jumps
 from zswarm.links import LinkModel, LinkSpec
 from zswarm import family as zswarm_family
-from zswarm.measure import Context, Published, Result
+from zswarm.measure import Context, Published, Result, Truth
 from zswarm.scenario import Scenario, ScenarioText
 from zswarm.so3 import exp, mul
 
@@ -652,13 +652,6 @@ class _Torques:
         return self.u
 
 
-def _truth(sc: Scenario) -> tuple[Any, ...]:
-    """What a prescribed truth is made of (world.motion.prescribed): equal for draws that share it."""
-    f = sc.formation
-    agents = tuple((a.R_matrix.tobytes(), tuple(a.p), repr(a.omega), repr(a.velocity), tuple(a.gyro_bias)) for a in sc.agents)
-    return (sc.step, sc.sensor_rate, None if f is None else (tuple(f.axis), f.rate), agents)
-
-
 _NO_TEXT = ScenarioText("")
 _NO_LINKS: Mapping[str, LinkSpec] = MappingProxyType({})
 
@@ -844,8 +837,8 @@ def run(
     plant: Any
     sensing: Sensing | None = None
     if shared:
-        key = _truth(sc)
-        if any(_truth(d) != key for d in draws[1:]):
+        key = prescribed_key(sc)
+        if any(prescribed_key(d) != key for d in draws[1:]):
             raise Unsupported("draws whose prescribed truths differ (the batched engine simulates it once for all)")
         plant = prescribed(sc)
         sensing = Sensing(sc, seeds[0])  # the world's sensors, its generators (one noise) and draw order
@@ -959,8 +952,8 @@ def run(
         else:
             plant.advance_to(t)
             R = plant.R.reshape(M, n, 3, 3)
-            measure.sample(k, t, R)
             W = plant.omega_now().reshape(M, n, 3)
+            measure.sample(k, t, Truth(R, W))
             RT = np.swapaxes(R, -1, -2)
             # Measured as World.sample does.  Every sample goes into the histories, as an agent's inbox
             # keeps them; the rest is measured at the agents' ticks only (a relative attitude is M
@@ -1097,7 +1090,7 @@ def run(
         started, last = True, ends[-1][0]
         if progress is not None and k % int(sc.sensor_rate) == 0:
             progress(t)
-    res = measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
+    res: Result = measure.result(Result(np.zeros(0), np.zeros((M, 0)), jumps, agent_jumps, steps, edge_messages=edge_messages, commands=commands, command_links=cmd_links, edge_links=edge_links, t_end=(n_samples - 1) * sample_dt))
     if per_draw:
         assert draw_inbox is not None
         res.draw_edge_messages, res.draw_commands = draw_edges, draw_commands

@@ -169,6 +169,13 @@ class PrescribedMotion:
         self.t = t
 
 
+def prescribed_key(sc: Any) -> tuple[Any, ...]:
+    """What :func:`prescribed` makes a truth of: equal for scenarios that share their truth."""
+    f = sc.formation
+    agents = tuple((a.R_matrix.tobytes(), tuple(a.p), repr(a.omega), repr(a.velocity), tuple(a.gyro_bias)) for a in sc.agents)
+    return (sc.step, sc.sensor_rate, None if f is None else (tuple(f.axis), f.rate), agents)
+
+
 def prescribed(sc: Any) -> PrescribedMotion:
     """The truth of a scenario with the prescribed plant (a zswarm.scenario.Scenario): every
     agent's R_i(0), p_i(0), ω_i(t) and v_i(t), and the formation's rotation."""

@@ -125,17 +125,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser(
         "basin",
-        help="Monte-Carlo check of a tree scheme's global claim: N uniform initial attitudes on sim",
-        description="Draws N initial conditions (draw 0: the scenario's own start; then every R_i(0) uniform on SO(3) "
-        "for the Chapter 5 laws, Q_i(0) too for the velocity-free one, every R̂_i(0) for the §4 observers), runs each "
-        "on sim and reports the fraction that synchronizes (max_k |R̄_k|_I below the threshold from some time on) and "
-        "the settle times.  Writes basin.csv, basin.json, basin.png; the same command with the same --out resumes.",
+        help="Monte-Carlo check of a scheme's global claim: N random starts, on the batched engine or sim",
+        description="Draws N initial conditions (draw 0: the scenario's own start; then what its experiment family "
+        "randomises uniformly on SO(3): every R_i(0) for the Chapter 5 laws, Q_i(0) too for the velocity-free one, every "
+        "R̂_i(0) for the §4 observers), runs them on the batched engine (or sim) and reports the fraction whose family "
+        "measure (max_k |R̄_k|_I for those) stays below the threshold from some time on, and the settle times.  Writes "
+        "basin.csv, basin.json, basin.png; the same command with the same --out resumes.",
     )
-    b.add_argument("topology", help="scenario TOML file (a Chapter 5 law or a §4 observer)")
+    b.add_argument("topology", help="scenario TOML file (of an experiment family with a basin check: a Chapter 5 law, a §4 observer)")
     b.add_argument("--draws", type=procutil.positive_int, default=101, help="draws including the scenario's own start (default 101)")
     b.add_argument("--seed", type=int, default=1, help="seed of the draws (default 1)")
     b.add_argument("--duration", type=procutil.positive_float, default=None, help="horizon, world seconds (default: the scenario's)")
-    b.add_argument("--threshold", type=procutil.positive_float, default=0.01, help="max_k |R̄_k|_I that counts as synchronized (default 0.01)")
+    b.add_argument("--threshold", type=procutil.positive_float, default=0.01, help="the family's measure below which a draw has settled (\"synchronized\": max_k |R̄_k|_I; default 0.01)")
     b.add_argument("--jobs", type=procutil.positive_int, default=None, help="draws at a time (default: the number of cores)")
     b.add_argument(
         "--near",
@@ -205,7 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     co.add_argument("topology", help="scenario TOML file")
     co.add_argument("-o", "--output", type=Path, default=None, help="the compose file (default: stdout); relative paths in it are from its folder")
     co.add_argument("--image", default="zswarm:latest", help="image of every service (default zswarm:latest)")
-    co.add_argument("--build-context", type=Path, default=None, help="folder with zswarm's Dockerfile to build the image from (default: this zswarm's source tree, if it has one)")
+    co.add_argument("--build-context", type=Path, default=None, help="folder with zswarm's Dockerfile to build the image from (default: this zswarm's source checkout, if it is one)")
     co.add_argument("--no-build", action="store_true", help="no build section: the image must exist (docker build -t IMAGE .)")
     co.add_argument("--base", default=None, help="base image build argument (the Dockerfile's default: python:3.11-slim)")
     co.add_argument("--network", choices=("flat", "routed"), default="flat", help="flat: one network; routed: agents behind a second router on their own network")
@@ -278,7 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--output", type=Path, default=None, help="file to write (default: standard output)")
     g.add_argument("--list", action="store_true", help="list the recipes and their graph shapes")
 
-    # The experiment families' own commands (zswarm.family.Command), e.g. the tree family's design-hybrid.
+    # The experiment families' own commands (zswarm.family.Command), e.g. design-hybrid.
     for c in family.commands().values():
         c.arguments(sub.add_parser(c.name, help=c.help, description=c.description))
     return p

@@ -138,8 +138,8 @@ class Batched:
 
     ``plant``: the plant its draws run on there (``prescribed``: one truth for every draw;
     ``rigid_body``: a truth per draw).  Each factory takes a :class:`zswarm.measure.Context`
-    and returns a measure: ``truth`` for a truth per draw (``sample(k, t, R)`` at every world
-    sample), ``ticks`` for a shared truth with every draw's agents ticking together
+    and returns a measure: ``truth`` for a truth per draw (``sample(k, t, truth)`` at every world
+    sample, a :class:`zswarm.measure.Truth`), ``ticks`` for a shared truth with every draw's agents ticking together
     (``tick(truth, estimates)``), ``stamps`` for a shared truth whose draws publish at stamps
     of their own (``tick(truths, published)``); each ends with ``result(res) -> res``.  A
     factory left None: the engine refuses such runs, saying so."""

@@ -6,7 +6,8 @@ measure (:class:`zswarm.family.Batched`) watches them and fills a :class:`Result
 a sweep's rows its finals and its team measure on the report's 0.1 s grid.  The engine calls,
 by the plant and the links:
 
-* a truth per draw (rigid bodies): ``sample(k, t, R)`` at every world sample, R (M, n, 3, 3);
+* a truth per draw (rigid bodies): ``sample(k, t, truth)`` at every world sample, a
+  :class:`Truth` (attitudes and angular velocities of every draw's bodies);
 * a shared truth, every draw's agents ticking together: ``tick(truth, estimates)`` after each
   tick's publications (``truth.R`` (n, 3, 3), ``truth.p`` (n, 3); ``estimates[i][field]``
   with a leading draw axis) — :class:`Ticks` keeps what a report reads at those ticks;
@@ -30,7 +31,7 @@ import numpy as np
 from zswarm.report.base import grid as coarse_grid
 from zswarm.report.series import FINAL_WINDOW_S
 
-__all__ = ["FINAL_WINDOW_S", "Context", "Published", "Result", "Ticks", "coarse_grid", "mean_rows", "nanmean_of", "rounded", "truth_at"]
+__all__ = ["FINAL_WINDOW_S", "Context", "Published", "Result", "Ticks", "Truth", "coarse_grid", "mean_rows", "nanmean_of", "rounded", "truth_at"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,15 @@ class Context:
     grid_s: float
     rows: bool
     stamps: np.ndarray | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """Every draw's bodies at a world sample: ``R`` (M, n, 3, 3) attitudes, ``omega`` (M, n, 3)
+    body-frame angular velocities (rad/s), n the scenario's agents in its order."""
+
+    R: np.ndarray
+    omega: np.ndarray
 
 
 @dataclass

@@ -547,7 +547,7 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
     commanded = res.commands > 0  # the agents command the world: summary.json has their "->world" links
     rows = []
     for n, _job in enumerate(batch):
-        att = res.att_coarse[n]
+        att = res.att_coarse[n] if res.att_coarse is not None else None  # (a family's measure may leave the team's errors out)
         pos = res.pos_coarse[n] if res.pos_coarse is not None else None
         final_pos = float(res.final_pos[n]) if res.final_pos is not None and np.isfinite(res.final_pos[n]) else None
         sent, cmds = res.edge_messages, res.commands
@@ -571,9 +571,9 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
             stale = int(res.stale_terms[n])
         rows.append(
             {
-                "final_attitude_error": float(res.final_att[n]) if np.isfinite(res.final_att[n]) else None,
+                "final_attitude_error": float(res.final_att[n]) if res.final_att is not None and np.isfinite(res.final_att[n]) else None,
                 "final_position_error": final_pos,
-                "conv_attitude_s": convergence_time(res.t_coarse, att, thresholds[0]),
+                "conv_attitude_s": convergence_time(res.t_coarse, att, thresholds[0]) if att is not None else None,
                 "conv_position_s": convergence_time(res.t_coarse, pos, thresholds[1]) if pos is not None and np.any(np.isfinite(pos)) else None,
                 "edge_sent": sent,
                 "edge_delivered": e_delivered,

@@ -19,8 +19,7 @@ import pytest
 
 from tests import browser
 from tests.conftest import ROOT, TOPO
-from zswarm import rerun_view
-from zswarm.report import family
+from zswarm import family, rerun_view
 from zswarm.scenario import load
 from zswarm.sim import simulate
 

@@ -201,7 +201,7 @@ def test_hybrid_at_100hz_follows_1khz_agents_over_the_transient(tmp_path):
     of the decay rate, which 5 % here would catch within the first oscillations.
     """
     from zswarm import report
-    from zswarm.report.families import sync as report_sync
+    from zswarm.families import sync as report_sync
     from zswarm.scenario import parse_override
 
     got = {}

@@ -26,7 +26,7 @@ import numpy as np
 from zswarm import files
 from zswarm.families.synergistic import HYBRID_PARAMS_5
 from zswarm.family import Basin, Batched, Family, Recipe, Report, Sweep
-from zswarm.measure import FINAL_WINDOW_S, Context, Result, coarse_grid, rounded
+from zswarm.measure import FINAL_WINDOW_S, Context, Result, Truth, coarse_grid, rounded
 from zswarm.report import base, text
 from zswarm.report.recording import Recording
 from zswarm.report.series import final_of_grid as _final
@@ -324,9 +324,10 @@ class TruthEdges:
         self.coarse_v: dict[int, np.ndarray] = {}
         self.final_v: list[np.ndarray] = []
 
-    def sample(self, k: int, t: float, R: np.ndarray) -> None:
+    def sample(self, k: int, t: float, truth: Truth) -> None:
         if k % self.every or not len(self.h_idx):
             return
+        R = truth.R
         # tr R̄_k = tr(R_t^T R_h) = Σ_ji (R_t)_ji (R_h)_ji, without forming R̄_k (a third of the cost;
         # the report's trace of the product differs by round-off, ~1e-15)
         tr = np.einsum("mnji,mnji->mn", R[:, self.t_idx], R[:, self.h_idx])

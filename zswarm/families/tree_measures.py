@@ -65,9 +65,9 @@ class TreeTicks(Ticks):
         res.final_att = nanmean_of(per)
         res.final_pos = np.full(self.M, np.nan)  # tree's positions: the §4.4 pose observer's only
         E = len(self.edges)
-        rounded = np.array([rounded(self.kept[int(n)][0], "%.6e") for n in self.coarse_at])  # (T, E, M)
+        held = np.array([rounded(self.kept[int(n)][0], "%.6e") for n in self.coarse_at])  # (T, E, M)
         res.t_coarse = self.coarse_t
-        res.att_coarse = np.mean([rounded[:, e, :].T for e in range(E)], axis=0)  # edges_on_grid(..., np.mean)
+        res.att_coarse = np.mean([held[:, e, :].T for e in range(E)], axis=0)  # edges_on_grid(..., np.mean)
         return res
 
 
