@@ -7,7 +7,7 @@ measurement carries a leading draw axis, the world's plant integrates all M·n b
 once (world/plant.py's RigidBodyPlant, the same scheme and step), and each agent's law is
 the **same algorithm module** as on ``sim``: its ``inputs``, ``step`` and ``publish`` are
 called once per agent and tick on arrays of M draws (the laws broadcast over a leading
-axis: agent/algorithms/attitude_sync_terms.py, zswarm/so3.py).
+axis: agent/algorithms/attitude_sync_terms.py, zswarm/math/so3.py).
 
 What ``sim`` does at a tick is reproduced, in its order: at a time where the world samples
 and agents tick, the world first (it integrates up to t under the torques held since the
@@ -27,7 +27,7 @@ prescribed truth each draw's estimates are measured at their own stamps by its f
 and its laws read its own sensor history, _Deep, which ``--engine auto`` leaves to sim: prefer_sim),
 leaders (if any) that only publish,
 sensors of the kinds implemented here (SENSORS; on a truth per draw PER_DRAW_SENSORS), and
-the plant its experiment family measures it on here (zswarm.family.Batched: rigid bodies, a
+the plant its experiment family measures it on here (zswarm.families.contract.Batched: rigid bodies, a
 truth per draw; or the prescribed motion, the same in every draw, so it is simulated and
 measured once, by the world's own Sensing, and its measurements
 are shared), and an algorithm whose SPEC says its functions broadcast (``batched=True``).
@@ -56,14 +56,14 @@ from world.motion import prescribed, prescribed_key
 from world.node import PLAN_SAMPLES, Sensing
 from world.plant import RigidBodyPlant
 from world.sensors import projective_bearing
-from zswarm import timing
-from zswarm.agent_config import Estimate
-from zswarm.algorithm import jumps as has_jumps
-from zswarm.links import LinkModel, LinkSpec
-from zswarm import family as zswarm_family
-from zswarm.measure import Context, Published, Result, Truth
+from zswarm.math import timing
+from zswarm.scenario.agent_config import Estimate
+from zswarm.scenario.algorithm import jumps as has_jumps
+from zswarm.scenario.links import LinkModel, LinkSpec
+from zswarm.families import contract as zswarm_family
+from zswarm.families.measure import Context, Published, Result, Truth
 from zswarm.scenario import Scenario, ScenarioText
-from zswarm.so3 import exp, mul
+from zswarm.math.so3 import exp, mul
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude", "bearings", "position", "velocity"})  # what the batched world measures
 PER_DRAW_SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # ... on a truth per draw (rigid bodies)
@@ -98,14 +98,14 @@ def problem(sc: Scenario) -> str | None:
             return f"the leaders' {sc.leader_module} steps (the batched engine runs leaders that only publish)"
     declared = zswarm_family.of(sc).batched
     if declared is None:
-        return f"its experiment family {spec.report!r} declares no measure on the batched engine (zswarm.family.Batched)"
+        return f"its experiment family {spec.report!r} declares no measure on the batched engine (zswarm.families.contract.Batched)"
     measure = declared.plant
     if measure not in PLANTS:
         return f"the {spec.report!r} family's {measure!r} plant (the batched engine runs {', '.join(PLANTS)})"
     if sc.plant != measure:
         return f"the {sc.plant!r} plant with the {spec.report!r} family (the batched engine runs it on the {measure!r} plant)"
     if (declared.truth if measure == "rigid_body" else declared.stamps if _per_draw(sc) else declared.ticks) is None:
-        return f"the {spec.report!r} family measures no such draws on the batched engine (zswarm.family.Batched: no {'truth' if measure == 'rigid_body' else 'stamps' if _per_draw(sc) else 'ticks'} measure)"
+        return f"the {spec.report!r} family measures no such draws on the batched engine (zswarm.families.contract.Batched: no {'truth' if measure == 'rigid_body' else 'stamps' if _per_draw(sc) else 'ticks'} measure)"
     need = frozenset().union(*(sc.sensors_of(i) for i in sc.ids))
     have = SENSORS if measure == "prescribed" else PER_DRAW_SENSORS
     if need - have:
@@ -150,7 +150,7 @@ def _per_draw(sc: Scenario) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class _Msg:
-    """An in-neighbour's newest message (zswarm.algorithm.NeighborMsg), fields batched."""
+    """An in-neighbour's newest message (zswarm.scenario.algorithm.NeighborMsg), fields batched."""
 
     fields: Mapping[str, Any]
     t: float
@@ -159,7 +159,7 @@ class _Msg:
 
 
 class BatchedView(timing.HistoryReads):
-    """zswarm.algorithm.View for M draws of one agent: every message and state value has a
+    """zswarm.scenario.algorithm.View for M draws of one agent: every message and state value has a
     leading draw axis; the measurements too on a truth per draw (rigid bodies), not on a
     shared one (prescribed motion: the same for every draw, so no draw axis).  Steps end at
     sensor packets (lockstep).  On a shared truth the sensor packets are kept as the runtime's
@@ -902,7 +902,7 @@ def run(
     tick_every = round(sc.sensor_rate / sc.agent(ids[0]).clock.rate)
     n_samples = math.floor(duration * sc.sensor_rate + 1e-9) + 1
     stamps = None if sensor_links is None else _SensorLinks(sensor_spec, period).stamps(n_samples, tick_every, sample_dt)
-    # The family's measure (zswarm.measure): of each draw's truth at every sample, or of the estimates on a
+    # The family's measure (zswarm.families.measure): of each draw's truth at every sample, or of the estimates on a
     # shared truth at the agents' common ticks or at each draw's own stamps.
     make = declared.truth if not shared else declared.stamps if per_draw else declared.ticks
     assert make is not None  # problem() refused a family without it

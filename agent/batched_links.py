@@ -1,7 +1,7 @@
 """Emulated links on the batched engine (agent/batched.py): each draw of a batch its own losses
 and delays, the very numbers its ``sim`` run takes.
 
-A link's randomness is one stream per purpose (zswarm/links.py ``PURPOSES``), message n taking
+A link's randomness is one stream per purpose (zswarm/scenario/links.py ``PURPOSES``), message n taking
 the n-th number of each whatever became of the others, so the numbers of M draws are read ahead
 in blocks, ``(M, AHEAD)`` per stream, and a message is admitted for all the draws at once
 (:meth:`LinkStack.admit`: the operations of ``LinkModel.admit``, element by element).  Messages
@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 
 from agent.runtime import RECENT_EDGE_MESSAGES as RECENT  # edge messages an agent keeps per link
-from zswarm.links import PURPOSES, LinkCounter, LinkSpec, block, link_seed, purposes
+from zswarm.scenario.links import PURPOSES, LinkCounter, LinkSpec, block, link_seed, purposes
 from zswarm.scenario import Scenario
 
 AHEAD = 512  # numbers read ahead per stream and draw
-LATENCIES = 2000  # the last latencies a LinkCounter keeps (zswarm/links.py)
+LATENCIES = 2000  # the last latencies a LinkCounter keeps (zswarm/scenario/links.py)
 
 
 def per_draw_sensors(sc: Scenario) -> bool:
@@ -325,7 +325,7 @@ class Read:
 
 
 class GroupMsg:
-    """An in-neighbour's message for the draws of a group (zswarm.algorithm.NeighborMsg): its fields
+    """An in-neighbour's message for the draws of a group (zswarm.scenario.algorithm.NeighborMsg): its fields
     gathered per draw (M, ...) from each draw's own newest message (draws outside the group get the
     group's first draw's: valid numbers, thrown away); its stamp where the group shares one,
     else reading it raises :class:`Split`."""

@@ -6,7 +6,7 @@ Bus callbacks only decode, validate, count and store the newest message per
 source; all the math happens in :meth:`tick`.
 
 The runtime knows no algorithm: it reads the algorithm's declaration
-(:class:`zswarm.algorithm.AlgorithmSpec`), serves each part's ``inputs`` a
+(:class:`zswarm.scenario.algorithm.AlgorithmSpec`), serves each part's ``inputs`` a
 :class:`TickView` (newest data, their ages, the timing library on this
 agent's histories), steps the parts that are due, and publishes what the
 algorithm's ``publish`` returns.
@@ -27,11 +27,12 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from zswarm import keys, timing, wire
-from zswarm.algorithm import AlgorithmSpec, Initial, Part, Publish, initial_value, jumps, make_gains
-from zswarm.bus import Bus
-from zswarm.clock import AgentClock
-from zswarm.links import LinkCounter, LinkModel
+from zswarm.math import timing
+from zswarm.transport import keys, wire
+from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, initial_value, jumps, make_gains
+from zswarm.transport.bus import Bus
+from zswarm.scenario.clock import AgentClock
+from zswarm.scenario.links import LinkCounter, LinkModel
 from zswarm.scenario import Scenario
 
 log = logging.getLogger("zswarm.agent")
@@ -59,7 +60,7 @@ class Inbox:
         # the bus callbacks (any thread), taken by drain() on the agent's thread.
         self._pending: deque[tuple[Callable[[str, bytes, float], None], str, bytes, float]] = deque()
         self.now = now  # the receiver's own clock, stamps every arrival as "rx"
-        # Link emulation (zswarm/links.py): each arrival is lost or held until its release time.
+        # Link emulation (zswarm/scenario/links.py): each arrival is lost or held until its release time.
         self._link_model = link_model
         self.models: dict[str, LinkModel] = {}
         self._held: list[tuple[float, int, str, str, dict[str, Any]]] = []
@@ -354,7 +355,7 @@ def _edge_sender(link: str) -> int:
 
 
 class _Neighbor:
-    """An in-neighbour's newest message as a :class:`zswarm.algorithm.NeighborMsg`."""
+    """An in-neighbour's newest message as a :class:`zswarm.scenario.algorithm.NeighborMsg`."""
 
     __slots__ = ("fields", "t", "t_world", "age")
 
@@ -366,7 +367,7 @@ class _Neighbor:
 
 
 class TickView(timing.HistoryReads):
-    """What the algorithm sees at a tick (implements :class:`zswarm.algorithm.View`; the reads
+    """What the algorithm sees at a tick (implements :class:`zswarm.scenario.algorithm.View`; the reads
     of the sensor history come from timing.HistoryReads on :meth:`_samples`).
 
     Built once per agent; :meth:`begin` points it at a tick.  Histories and

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from agent import batched
-from zswarm import basin, sweep
+from zswarm.studies import basin, sweep
 from zswarm.report.base import THRESHOLDS
 from zswarm.scenario import load, parse_override
 

@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 RAW_PUB = r"""
 import sys, time, msgpack, zenoh
-from zswarm.bus import zenoh_config
+from zswarm.transport.bus import zenoh_config
 ep, n, size = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 sec = (sys.argv[4], "pub") if len(sys.argv) > 4 else None
 with zenoh.open(zenoh_config("client", connect=[ep], secure=sec)) as s:
@@ -49,7 +49,7 @@ with zenoh.open(zenoh_config("client", connect=[ep], secure=sec)) as s:
 
 RAW_SUB = r"""
 import sys, time, json, threading, msgpack, zenoh
-from zswarm.bus import zenoh_config
+from zswarm.transport.bus import zenoh_config
 ep, n, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 sec = (sys.argv[4], "sub") if len(sys.argv) > 4 else None
 lat = []
@@ -79,10 +79,10 @@ def cpu_seconds(pid: int) -> float | None:
 
 def raw_zenoh(n: int, size: int, secure: bool = False) -> np.ndarray:
     """Latencies of raw pub/sub via a router; ``secure``: mutual TLS, and an access control
-    that lets the publisher put on its key only (as zswarm.secure.acl does per process)."""
-    from zswarm import secure as sec
-    from zswarm.bus import ZenohBus, zenoh_config
-    from zswarm.launch import free_port
+    that lets the publisher put on its key only (as zswarm.transport.secure.acl does per process)."""
+    from zswarm.transport import secure as sec
+    from zswarm.transport.bus import ZenohBus, zenoh_config
+    from zswarm.engines.launch import free_port
 
     ep = f"{'tls' if secure else 'tcp'}/127.0.0.1:{free_port()}"
     with tempfile.TemporaryDirectory() as d:

@@ -6,7 +6,7 @@ recorder; each ``agent`` i ticks at its rate on the wall clock and puts one
 message per out-edge and one estimate; the ``recorder`` takes everything
 from a FIFO channel every 10 ms, as zswarm's does.  Payloads are msgpack maps
 padded to the sizes zswarm's messages have in the same scenario, keys and
-transport settings (``zswarm.bus.zenoh_config``, DROP, REAL_TIME, not
+transport settings (``zswarm.transport.bus.zenoh_config``, DROP, REAL_TIME, not
 express) are zswarm's.  Callbacks unpack and store the newest message per
 key, as zswarm's inbox does, without validation.
 
@@ -28,7 +28,7 @@ import numpy as np
 import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from zswarm.bus import zenoh_config  # noqa: E402
+from zswarm.transport.bus import zenoh_config  # noqa: E402
 
 ROOT = "raw"
 

@@ -237,7 +237,7 @@ def rerun_receiver(out: Path) -> Iterator[str]:
     """The wheel's ``rerun`` program saving what it receives to ``out`` (``rerun --save``) on a
     free localhost port; yields the URL to stream to; stopped (SIGTERM: it ends the file) and
     reaped by PID at the end."""
-    from zswarm.rerun_view import viewer_program
+    from zswarm.recording.rerun_view import viewer_program
 
     port = _free_port()
     log = out.with_suffix(".log")

@@ -23,7 +23,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from zswarm import so3, wire
+from zswarm.math import so3
+from zswarm.transport import wire
 
 _ODD_FLOATS = [0.0, -0.0, 1.0, -1.0, 1e-308, 5e-324, 1e12, -1e12, 1e13, 1e200, -1e300, float("inf"), float("-inf"), float("nan")]
 _ODD_INTS = [0, 1, -1, 2**31, 2**53, 2**63 - 1, 2**64 - 1, -(2**63)]

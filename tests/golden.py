@@ -90,10 +90,10 @@ def numbers(x: Any, path: str = "") -> dict[str, Any]:
 def run(name: str, out: Path, overrides: tuple[str, ...] = ()) -> dict[str, Any]:
     """``zswarm sim`` of a shipped scenario (with ``--set`` overrides) for DURATION s, its report's
     numbers and its CSVs' digests."""
-    from zswarm.overrides import parse_override
-    from zswarm.report import make_report
+    from zswarm.scenario.overrides import parse_override
+    from zswarm.results import make_report
     from zswarm.scenario import load
-    from zswarm.sim import simulate
+    from zswarm.engines.sim import simulate
 
     sc = load(TOPO / f"{name}.toml", [parse_override(o) for o in overrides])
     simulate(sc, out, DURATION, sc.seed)
@@ -122,7 +122,7 @@ def fingerprint() -> dict[str, Any]:
     except ImportError:  # numpy 1.x
         from numpy.core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
 
-    from zswarm import kernels
+    from zswarm.math import kernels
 
     return {
         "machine": platform.machine(),

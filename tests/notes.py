@@ -7,7 +7,7 @@ as 1e-2 too).  Its integration (Lie–Euler at 1 ms) and ours (agents at 100 Hz,
 200 Hz) are first-order discretisations of the same equations, so each number also carries
 the distance of each step to dt → 0: ``step``, per scenario and time, is twice the distance
 measured between our default rates and the same scenario at 10x the rates
-(zswarm.study.refine: agents 1 kHz, sensors 2 kHz), which bounds the notes' own finer step
+(zswarm.studies.step_size.refine: agents 1 kHz, sensors 2 kHz), which bounds the notes' own finer step
 too (measured 2026-12-05, see each use).  At t = 0 nothing has been stepped: ``step`` = 0.
 """
 

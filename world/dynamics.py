@@ -29,8 +29,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm import kernels
-from zswarm.so3 import exp_batch, mul
+from zswarm.math import kernels
+from zswarm.math.so3 import exp_batch, mul
 
 # Fixed-point iteration of the implicit midpoint: the map contracts by ≈ h·|ω|·cond(J)
 # (1e-2 at h = 1 ms, |ω| = 10 rad/s); 1e-15 relative is reached in ≤ 10 sweeps there.
@@ -53,7 +53,7 @@ class RigidBodies:
             raise ValueError("every J must be symmetric positive definite")
         self.J_inv = np.linalg.inv(self.J)
         self.isotropic = bool(np.allclose(self.J, self.J[:, :1, :1] * np.eye(3)))
-        # zswarm/_kernels.c's step needs J⁻¹ exactly diagonal (its products are then exact in any order)
+        # zswarm/math/_kernels.c's step needs J⁻¹ exactly diagonal (its products are then exact in any order)
         self._kernel = self.isotropic and not np.any(self.J_inv * (1.0 - np.eye(3)))
         self.steps = 0
 
@@ -80,7 +80,7 @@ class RigidBodies:
         """Advance every body by ``h`` seconds under the body torques ``tau`` (n, 3), held over the step."""
         tau = np.asarray(tau, dtype=float).reshape(self.w.shape)
         if self._kernel and kernels.rigid_step is not None:
-            # The lines below, compiled (zswarm/_kernels.c): the same numbers, a fifth of the time for 7000 bodies.
+            # The lines below, compiled (zswarm/math/_kernels.c): the same numbers, a fifth of the time for 7000 bodies.
             self.R, self.w = kernels.rigid_step(self.R, self.w, self.J_inv, tau, h)
         else:
             w = self.w

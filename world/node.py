@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 from world import sensors
 from world.motion import PrescribedMotion, prescribed
 from world.plant import CommandInbox, KinematicPlant, RigidBodyPlant
-from zswarm import keys
-from zswarm.bus import Bus
+from zswarm.transport import keys
+from zswarm.transport.bus import Bus
 from zswarm.scenario import PLANT_INPUTS, Scenario
 
 
@@ -38,7 +38,7 @@ class Sensing:
     the same measurements on every engine (the world's processes, sim, the batched engine)."""
 
     def __init__(self, scenario: Scenario, seed: int) -> None:
-        # What each agent's algorithm declares it measures (zswarm.algorithm.SENSORS).
+        # What each agent's algorithm declares it measures (zswarm.scenario.algorithm.SENSORS).
         self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
         want = frozenset().union(*self.sensors.values())
         self.want_bearings = "bearings" in want

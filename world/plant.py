@@ -48,8 +48,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from world.dynamics import RigidBodies
-from zswarm import wire
-from zswarm.links import LinkCounter, LinkModel, LinkSpec
+from zswarm.transport import wire
+from zswarm.scenario.links import LinkCounter, LinkModel, LinkSpec
 from zswarm.scenario import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
 
 __all__ = ["PLANTS", "PLANT_INPUTS", "COMMAND_POLICIES", "CommandPolicy", "CommandInbox", "RigidBodyPlant", "KinematicPlant"]

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm.so3 import apply, exp, mul
+from zswarm.math.so3 import apply, exp, mul
 
 Vec3 = NDArray[np.float64]
 

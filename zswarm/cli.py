@@ -1,5 +1,5 @@
 """The ``zswarm`` command: builds the parser and hands each subcommand to the run function of its
-module (``zswarm.sim.command``, ``zswarm.sweep.command``, ...); run, router, report and certs are
+module (``zswarm.engines.sim.command``, ``zswarm.studies.sweep.command``, ...); run, router, report and certs are
 small enough to stay here."""
 
 from __future__ import annotations
@@ -11,8 +11,9 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from zswarm import family, keys, procutil
-from zswarm.text import one_line
+from zswarm.families import contract as family
+from zswarm.transport import keys, procutil
+from zswarm.util.quoting import one_line
 
 
 def _common_run_args(p: argparse.ArgumentParser) -> None:
@@ -265,7 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="write an N-agent scenario of an experiment family's recipe (graph, positions, motions, initial errors from a seed)",
         description="Writes a scenario that loads by construction: the recipe's algorithm, gains and world as in its paper's "
         "shipped scenario; the graph, positions, motions and initial estimation errors drawn from --seed.  The recipes "
-        "are the experiment families' (zswarm.family.Recipe), a user's registered families' too.",
+        "are the experiment families' (zswarm.families.contract.Recipe), a user's registered families' too.",
     )
     g.add_argument("family", nargs="?", metavar="RECIPE", help="the recipe (--list shows them)")
     g.add_argument("-n", "--agents", type=int, default=None, help="number of agents")
@@ -279,19 +280,19 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--output", type=Path, default=None, help="file to write (default: standard output)")
     g.add_argument("--list", action="store_true", help="list the recipes and their graph shapes")
 
-    # The experiment families' own commands (zswarm.family.Command), e.g. design-hybrid.
+    # The experiment families' own commands (zswarm.families.contract.Command), e.g. design-hybrid.
     for c in family.commands().values():
         c.arguments(sub.add_parser(c.name, help=c.help, description=c.description))
     return p
 
 
 def _lazy(module: str, name: str) -> Any:
-    """The run function ``name`` of ``zswarm.<module>``, imported when its command runs."""
+    """The run function ``name`` of the module ``module``, imported when its command runs."""
 
     def run(args: argparse.Namespace) -> int:
         import importlib
 
-        return int(getattr(importlib.import_module(f"zswarm.{module}"), name)(args))
+        return int(getattr(importlib.import_module(module), name)(args))
 
     return run
 
@@ -301,17 +302,17 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     cmds = {
         "run": cmd_run,
-        "sim": _lazy("sim", "command"),
-        "sweep": _lazy("sweep", "command"),
-        "basin": _lazy("basin", "command"),
-        "basin-compare": _lazy("basin", "compare_command"),
+        "sim": _lazy("zswarm.engines.sim", "command"),
+        "sweep": _lazy("zswarm.studies.sweep", "command"),
+        "basin": _lazy("zswarm.studies.basin", "command"),
+        "basin-compare": _lazy("zswarm.studies.basin", "compare_command"),
         "router": cmd_router,
-        "compose": _lazy("compose", "command"),
-        "record": _lazy("recorder", "command"),
-        "replay": _lazy("replay", "command"),
-        "view": _lazy("rerun_view", "command"),
+        "compose": _lazy("zswarm.engines.compose", "command"),
+        "record": _lazy("zswarm.engines.recorder", "command"),
+        "replay": _lazy("zswarm.engines.replay", "command"),
+        "view": _lazy("zswarm.recording.rerun_view", "command"),
         "report": cmd_report,
-        "generate": _lazy("generate", "command"),
+        "generate": _lazy("zswarm.studies.generate", "command"),
         "certs": cmd_certs,
     }
     run = cmds.get(args.cmd) or family.commands()[args.cmd].run
@@ -326,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from zswarm import launch
+    from zswarm.engines import launch
 
     sc = procutil.load_args(args)
     procutil.warn_notes(sc)
@@ -336,8 +337,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from zswarm import secure as sec
-    from zswarm.bus import ZenohBus
+    from zswarm.transport import secure as sec
+    from zswarm.transport.bus import ZenohBus
 
     if not args.listen and not args.config:
         procutil.fail_usage("router needs --listen ENDPOINT, e.g. --listen tcp/127.0.0.1:7447")
@@ -374,7 +375,7 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 
 def cmd_certs(args: argparse.Namespace) -> int:
-    from zswarm import secure as sec
+    from zswarm.transport import secure as sec
 
     sc = procutil.load_or_exit(args.topology)
     names = sec.certificate_names(sc.ids)
@@ -384,8 +385,9 @@ def cmd_certs(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from zswarm import report, wire
-    from zswarm.record import decode, ensure_recording, read
+    from zswarm import results
+    from zswarm.transport import wire
+    from zswarm.recording.mcap_io import decode, ensure_recording, read
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
     rec_path = ensure_recording(args.results, sc)
@@ -406,8 +408,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     duration = float(prev.get("duration_s", start["duration"] if start else sc.duration))
     scale = float(prev.get("time_scale", start["time_scale"] if start else 1.0))
     seed = int(prev.get("seed", start["seed"] if start else sc.seed))
-    summary = report.make_report(args.results, sc, engine, duration, scale, seed, not_recorded=prev.get("recording", {}).get("not_recorded", ()))
-    print(report.table(summary))
+    summary = results.make_report(args.results, sc, engine, duration, scale, seed, not_recorded=prev.get("recording", {}).get("not_recorded", ()))
+    print(results.table(summary))
     return 0
 
 

@@ -59,10 +59,10 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import kernels
-from zswarm.algorithm import Field, View, number
-from zswarm.so3 import Mat3, T, Vec3, apply, dot, exp_batch, hat, log_batch, mul, psi, trace
-from zswarm.trig import sincos
+from zswarm.math import kernels
+from zswarm.scenario.algorithm import Field, View, number
+from zswarm.math.so3 import Mat3, T, Vec3, apply, dot, exp_batch, hat, log_batch, mul, psi, trace
+from zswarm.math.trig import sincos
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,7 +135,7 @@ class Terms:
         one = R_bar.ndim == 2
         R = R_bar[None] if one else R_bar  # one draw goes the way of a stack of one: the same numbers
         if kernels.terms is not None:
-            o = kernels.terms(A, K, u, R)  # the lines below, compiled (zswarm/_kernels.c)
+            o = kernels.terms(A, K, u, R)  # the lines below, compiled (zswarm/math/_kernels.c)
         else:
             M = mul(A, R)  # so3.mul, so3.dot: the compiled loop's sums, no BLAS on either side
             MK = mul(M, K)
@@ -235,18 +235,18 @@ def flow_xi(c0: tuple[float, float, float], c1: tuple[float, float, float], xi: 
     with (a, b, c) going linearly from ``c0`` (R̄ at the step's start) to ``c1`` (at its
     end; linear in R̄, so this is R̄ on the chord between the two measurements, within
     O(|ΔR̄|²) of the geodesic): Heun's method in sub-steps of at most XI_SUBSTEP_S, sin and cos
-    by zswarm/trig.py (four draws to an instruction when compiled)."""
+    by zswarm/math/trig.py (four draws to an instruction when compiled)."""
     if dt <= 0:
         return xi
     n = max(1, math.ceil(dt / XI_SUBSTEP_S - 1e-9))
-    if kernels.flow_xi is not None:  # the loop below, compiled (zswarm/_kernels.c): the same numbers
+    if kernels.flow_xi is not None:  # the loop below, compiled (zswarm/math/_kernels.c): the same numbers
         return kernels.flow_xi(c0, c1, xi, dt, k_xi, gamma, n)
     h = dt / n
     a0, b0, q0 = c0
     da, db, dq = c1[0] - a0, c1[1] - b0, c1[2] - q0
     two_k = 2.0 * k_xi
     kg = k_xi * gamma
-    s, c = sincos(xi)  # zswarm/trig.py: the compiled loop's sin and cos, bit for bit
+    s, c = sincos(xi)  # zswarm/math/trig.py: the compiled loop's sin and cos, bit for bit
     f = -kg * xi - two_k * (a0 + b0 * s + q0 * (1.0 - c))
     for m in range(n):
         s1 = (m + 1) / n
@@ -285,7 +285,7 @@ def predict(R_prev: Mat3 | None, R_now: Mat3, dt: float, lead: float) -> Mat3:
     """R̄ ``lead`` seconds after its newest measurement, on the geodesic through the last two
     (``dt`` apart): ``R̄ exp((lead/dt) log(R̄_prev^T R̄))`` (first order in the rate).
     Broadcasts over stacks (M, 3, 3); one draw goes the way of a stack of one, compiled
-    (zswarm/_kernels.c) or in numpy: the same numbers."""
+    (zswarm/math/_kernels.c) or in numpy: the same numbers."""
     if R_prev is None or dt <= 0 or lead <= 0:
         return R_now
     one = R_now.ndim == 2

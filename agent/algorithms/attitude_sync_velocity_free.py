@@ -43,11 +43,11 @@ import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
-from zswarm import kernels
+from zswarm.math import kernels
 from zswarm.families import synergistic
-from zswarm.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
-from zswarm.so3 import Mat3, Ra, T, Vec3, apply, exp, exp_batch, hat, log, mul, psi
-from zswarm.trig import sincos
+from zswarm.scenario.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
+from zswarm.math.so3 import Mat3, Ra, T, Vec3, apply, exp, exp_batch, hat, log, mul, psi
+from zswarm.math.trig import sincos
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
 
@@ -131,8 +131,8 @@ class _Rates:
     def __call__(self, Qt: np.ndarray, zeta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(k_Q h_i, ζ̇)`` of M draws, Q̃ (M, 3, 3) and ζ (M,): Q̃̇ = Q̃ [ω_i − k_Q h_i]^x
         (5.14), equivalent to (5.22) for Q_i, and (5.23).  The operations of
-        zswarm/_kernels.c's flow_aux, in its order."""
-        sn, cs = sincos(zeta)  # zswarm/trig.py, as the compiled loop's
+        zswarm/math/_kernels.c's flow_aux, in its order."""
+        sn, cs = sincos(zeta)  # zswarm/math/trig.py, as the compiled loop's
         Z = _EYE + sn[:, None, None] * self.K + (1.0 - cs)[:, None, None] * self.K2
         p = psi(mul(mul(self.A, Qt), Z))  # so3.mul: the compiled loop's sums (no BLAS)
         return self.k_Q * _mv(Z, p), -self.k_zeta * (self.gamma * zeta + _dot(p, self.u2))
@@ -188,7 +188,7 @@ def flow_aux(Q: Mat3, zeta: Any, samples: tuple[tuple[float, Mat3], ...], dt: fl
     samples (taken at each sub-step's middle); then ``Q_i = R_i Q̃_i^T`` at the newest sample.
     The same flow as (5.22) for Q_i, without interpolating R_i at every sub-step.  One draw
     (Q (3, 3), ζ a float) or M (stacks): one draw goes the stacked way with M = 1, so that
-    sim and the batched engine do the same arithmetic, compiled (zswarm/_kernels.c) or not."""
+    sim and the batched engine do the same arithmetic, compiled (zswarm/math/_kernels.c) or not."""
     n = max(1, math.ceil(dt / SUBSTEP_S - 1e-9))
     h = dt / n
     path = attitude_path(samples)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from agent.algorithms.bearing_terms import EDGE_FIELDS
-from zswarm.algorithm import AlgorithmSpec, Initial, Publish, StalePolicy, View
+from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Publish, StalePolicy, View
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,8 +6,8 @@ adds it to what the default (leader–follower) family reports: per edge j -> i 
 0.1 s grid, its value over the last second, the max over edges, and when that max
 stays below 1 cm; a line of the end-of-run table; ``plots/bearing_fit.png``.
 
-A family is a module that exports ``FAMILY``, a ``zswarm.family.Family``; of its report
-(``zswarm.family.Report``) what it leaves out (here the headline errors, convergence,
+A family is a module that exports ``FAMILY``, a ``zswarm.families.contract.Family``; of its report
+(``zswarm.families.contract.Report``) what it leaves out (here the headline errors, convergence,
 series) is the leader–follower default of ``zswarm.report.base``.  An algorithm names it in
 ``SPEC.report``.
 """
@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.family import Family, Report
-from zswarm.report import base, text
+from zswarm.families.contract import Family, Report
+from zswarm.report import base, table as text
 from zswarm.report.series import final, held, max_over, settle_time
 
 GRID_S = 0.1  # s

@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from zswarm.algorithm import AlgorithmSpec, Field, Initial, Part, Publish, Reader, StalePolicy, View
+from zswarm.scenario.algorithm import AlgorithmSpec, Field, Initial, Part, Publish, Reader, StalePolicy, View
 
 
 @dataclass(frozen=True, slots=True)

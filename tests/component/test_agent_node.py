@@ -6,9 +6,10 @@ import pytest
 
 from agent.runtime import AgentNode
 from tests.conftest import TOPO
-from zswarm import keys, so3, wire
-from zswarm.bus import MemoryBus
-from zswarm.clock import ManualClock
+from zswarm.math import so3
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import MemoryBus
+from zswarm.scenario.clock import ManualClock
 from zswarm.scenario import load
 
 
@@ -191,7 +192,7 @@ def test_a_step_reads_the_newest_neighbour_message_at_or_before_its_time():
 
 def test_emulated_links_stay_fifo_when_a_message_is_released_on_arrival():
     """A message whose drawn delay is 0 must not overtake one still held on the same link."""
-    from zswarm.links import LinkModel
+    from zswarm.scenario.links import LinkModel
 
     class Scripted(LinkModel):
         releases = iter([0.004, 0.005])  # first held 4 ms, second released on arrival at 5 ms

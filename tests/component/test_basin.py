@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, TOPO, interrupt_when
-from zswarm import basin
+from zswarm.studies import basin
 from zswarm.scenario import ScenarioError, load, parse_override, with_rotations
 
 

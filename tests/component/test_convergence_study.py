@@ -1,9 +1,9 @@
 """Convergence study: each shipped noise-free scenario on ``sim`` at its default
 rates (agents 100 Hz, sensors 200 Hz) against the same scenario at 5× those
-rates (agents 500 Hz, sensors 1 kHz; zswarm/study.py).  5× and not 10×: the
+rates (agents 500 Hz, sensors 1 kHz; zswarm/studies/step_size.py).  5× and not 10×: the
 reference's own step error is then a fifth of the default's (O(a·dt) ≤ 1 % on
 a time), which is all the criteria below need, at half the cost of the
-suite's most expensive fixture; `zswarm.study.refine`'s 10× gave the same
+suite's most expensive fixture; `zswarm.studies.step_size.refine`'s 10× gave the same
 verdicts and the numbers in the README.
 
 What the study may accept, and why:
@@ -34,7 +34,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import TOPO
-from zswarm import study
+from zswarm.studies import step_size as study
 from zswarm.scenario import load
 
 SCENARIOS = ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered", "thesis-3.3-moving5", "thesis-4.5-continuous5", "thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"]

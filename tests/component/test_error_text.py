@@ -14,7 +14,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import ROOT, TOPO, examples
-from zswarm import sweep, text
+from zswarm.studies import sweep
+from zswarm.util import quoting as text
 from zswarm.scenario import ScenarioError, fault_override, load, loads, parse_override
 
 ODD = ["a\nb", "a\tb", "a\x1b[2Jb"]

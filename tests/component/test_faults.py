@@ -11,9 +11,9 @@ import sys
 import pytest
 
 from tests.conftest import ROOT, TOPO
-from zswarm.report import make_report
+from zswarm.results import make_report
 from zswarm.scenario import ScenarioError, fault_override, load
-from zswarm.sim import simulate
+from zswarm.engines.sim import simulate
 
 T32 = TOPO / "thesis-3.2-fixed8.toml"
 

@@ -12,10 +12,10 @@ from agent.runtime import AgentNode
 from tests.conftest import TOPO
 from tests.fuzz_messages import Fuzzer, valid_cmd, valid_for_agent, valid_for_recorder
 from world.node import World
-from zswarm import keys, wire
-from zswarm.bus import MemoryBus
-from zswarm.clock import ManualClock
-from zswarm.record import Recorder, read, run_streams
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import MemoryBus
+from zswarm.scenario.clock import ManualClock
+from zswarm.recording.mcap_io import Recorder, read, run_streams
 from zswarm.scenario import load
 
 N = 100_000

@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from zswarm.family import recipes
-from zswarm.generate import generate, graphs_of
+from zswarm.families.contract import recipes
+from zswarm.studies.generate import generate, graphs_of
 
 RECIPES = {name: r for name, (_, r) in recipes().items()}
-from zswarm.report import make_report
+from zswarm.results import make_report
 from zswarm.scenario import load, loads
-from zswarm.sim import simulate
+from zswarm.engines.sim import simulate
 
 
 @pytest.mark.parametrize("family", sorted(RECIPES))

@@ -8,10 +8,11 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from zswarm.record import RawOut, read, transcode
-from zswarm.report import completeness, load_recording, make_report
+from zswarm.recording.mcap_io import RawOut, read, transcode
+from zswarm.report import load_recording
+from zswarm.results import completeness, make_report
 from zswarm.scenario import load
-from zswarm.sim import LEAN_SKIP, simulate
+from zswarm.engines.sim import LEAN_SKIP, simulate
 
 TOPO = Path(__file__).resolve().parents[2] / "topologies"
 
@@ -48,7 +49,7 @@ def test_dropped_messages_are_counted_per_channel(fixed8):
 
 def test_without_final_stats_the_count_is_a_lower_bound(fixed8):
     """Agent 5's final stats lost (a killed process sends none): its counts are a lower bound."""
-    from zswarm import wire
+    from zswarm.transport import wire
 
     sc, msgs = fixed8
     final5 = [m for m in msgs if m[0] == "stats/agent/5" and wire.decode(m[1])["counters"].get("final")]
@@ -96,9 +97,9 @@ def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
     token is gone but which sent stats within RECENT_STATS_S of world time before the stop
     (its final stats, sent before the token went, can be seen after); one killed earlier
     is not waited for."""
-    from zswarm import keys, wire
-    from zswarm.bus import MemoryBus
-    from zswarm.record import RECENT_STATS_S, Recorder
+    from zswarm.transport import keys, wire
+    from zswarm.transport.bus import MemoryBus
+    from zswarm.recording.mcap_io import RECENT_STATS_S, Recorder
 
     bus = MemoryBus()
 
@@ -170,7 +171,7 @@ def test_transcoding_a_cut_raw_file_keeps_what_it_holds(tmp_path, fixed8):
     """The launcher's report of a run whose recorder was SIGKILLed: the cut raw file becomes
     a viewer recording with every message it held and a report; a raw file with no complete
     message is kept, not replaced by an empty recording."""
-    from zswarm.record import EmptyRecording
+    from zswarm.recording.mcap_io import EmptyRecording
 
     sc, msgs = fixed8
     path = tmp_path / "recording.raw.mcap"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, TOPO
-from zswarm import so3
+from zswarm.math import so3
 from zswarm.scenario import ScenarioError, load, loads
 
 

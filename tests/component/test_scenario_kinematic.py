@@ -8,8 +8,8 @@ import pytest
 
 from world.node import World
 from world.plant import KinematicPlant
-from zswarm import keys, wire
-from zswarm.bus import MemoryBus
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import MemoryBus
 from zswarm.scenario import ScenarioError, loads
 
 TOPO = Path(__file__).resolve().parents[2] / "topologies"

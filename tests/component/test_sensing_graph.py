@@ -8,13 +8,13 @@ import pytest
 
 from agent.runtime import AgentNode
 from world.node import World
-from zswarm import keys, wire
-from zswarm.bus import MemoryBus
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import MemoryBus
 from zswarm.scenario import ScenarioError, load
 
 MODULE = '''
 from dataclasses import dataclass
-from zswarm.algorithm import AlgorithmSpec, Field, Publish
+from zswarm.scenario.algorithm import AlgorithmSpec, Field, Publish
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,7 +5,7 @@ step at the agents' 100 Hz with a predict/correct split and 200 Hz sensors.
 Each number is compared with the interval the notes' printed figures stand
 for, widened by the two steps' distance to dt → 0 (tests/notes.py): STEP_32,
 twice the largest distance measured between these runs at their own rates and
-at 10x them (zswarm.study.refine, 2026-12-05: at most 1.6 %, at t = 40 s, over
+at 10x them (zswarm.studies.step_size.refine, 2026-12-05: at most 1.6 %, at t = 40 s, over
 the means and maxima below, for both observers).
 """
 
@@ -16,9 +16,9 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.notes import agrees
-from zswarm.report import make_report
+from zswarm.results import make_report
 from zswarm.scenario import load
-from zswarm.sim import simulate
+from zswarm.engines.sim import simulate
 
 STEP_32 = 0.04  # 2 x 1.6 %, rounded up (module docstring)
 

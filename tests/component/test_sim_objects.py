@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from zswarm import report, wire
-from zswarm.bus import MemoryBus
-from zswarm.record import decode
+from zswarm import results
+from zswarm.transport import wire
+from zswarm.transport.bus import MemoryBus
+from zswarm.recording.mcap_io import decode
 from zswarm.scenario import load
-from zswarm.sim import simulate
+from zswarm.engines.sim import simulate
 
 SCENARIOS = sorted(p.name for p in TOPO.glob("*.toml"))
 # World seconds per scenario: long enough for every process's 1 s stats, the §4/§5
@@ -59,7 +60,7 @@ def test_objects_and_bytes_give_the_same_run(tmp_path, name):
         out = tmp_path / str(objects)
         out.mkdir()
         msgs = simulate(sc, out, DURATION, sc.seed, record=False, objects=objects)
-        summary = report.make_report(out, sc, "sim", DURATION, 0.0, sc.seed, plots=False, messages=msgs)
+        summary = results.make_report(out, sc, "sim", DURATION, 0.0, sc.seed, plots=False, messages=msgs)
         runs[objects] = (msgs, (out / "errors.csv").read_bytes(), json.dumps(_results(summary), sort_keys=True, default=str))
     (m_obj, csv_obj, sum_obj), (m_bytes, csv_bytes, sum_bytes) = runs[True], runs[False]
     assert any(type(p) is wire.Message for _, p, _ in m_obj) and not any(type(p) is wire.Message for _, p, _ in m_bytes)
@@ -102,7 +103,7 @@ def test_a_message_decode_would_refuse_travels_as_bytes():
 
 
 def _truth_times(path):
-    from zswarm.record import read
+    from zswarm.recording.mcap_io import read
 
     return [t for s, _, t in read(path) if s == "truth"]
 
@@ -111,8 +112,8 @@ def test_a_long_run_writes_as_it_goes_and_the_file_is_the_same(tmp_path, monkeyp
     """Past DEFER_MESSAGES the recorder writes what it held and then each message as it
     comes: the recording holds the same messages as one written after the run, and the
     CLI's report reads that file (``keep`` stays empty: the memory no longer holds them all)."""
-    import zswarm.sim as sim_mod
-    from zswarm.record import read
+    import zswarm.engines.sim as sim_mod
+    from zswarm.recording.mcap_io import read
 
     sc = load(TOPO / "thesis-3.2-fixed8.toml")
     for d in ("all", "spill"):

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from zswarm.report import make_report
+from zswarm.results import make_report
 from zswarm.scenario import ScenarioError, load, loads
-from zswarm.sim import simulate
+from zswarm.engines.sim import simulate
 
 NOTES = {  # READING-NOTES, Chapter 5: max_k |R̄_k|_I below 0.1 from, below 0.01 from (s)
     "thesis-5.6-hybrid7": (58.5, 102.0),
@@ -47,7 +47,7 @@ def test_hybrid_jumps_at_start_then_finitely_and_settles_as_the_notes(hybrid):
     # Every ξ_k jumps 0 -> 0.9π at the first step after t = 0 (10 ms: the agents' first step).
     assert all(j["t"] <= 0.011 and j["xi_before"] == pytest.approx(0.0, abs=1e-9) and j["xi_after"] == pytest.approx(0.9 * math.pi) for j in first)
     # READING-NOTES counts 8 in 150 s: six at the start, two at 7.6 and 9.8 s (printed to ±0.05 s).
-    # The same 8 at the agents' 100 Hz and at 10x that (zswarm.study.refine, 2026-12-05: 7.61 and
+    # The same 8 at the agents' 100 Hz and at 10x that (zswarm.studies.step_size.refine, 2026-12-05: 7.61 and
     # 9.82 s against 7.61 and 9.81 s): a count that is the equations' at three steps, and times
     # within the notes' printed precision plus twice the 0.01 s the step moves them.
     later = sorted(j["t"] for e in s["edges"].values() for j in e["jump_log"] if j["t"] > 0.011)
@@ -79,7 +79,7 @@ def test_velocity_free_jumps_xi_and_zeta_at_start_and_settles(tmp_path):
     s = run(tmp_path, "thesis-5.6-velocity-free7")
     sy = s["synchronization"]
     # READING-NOTES: 8 ξ-jumps and 7 ζ-jumps (every ζ_i once, at the start) in 150 s; the same at
-    # the agents' 100 Hz and at 10x that (zswarm.study.refine, 2026-12-05: the two later ξ-jumps at
+    # the agents' 100 Hz and at 10x that (zswarm.studies.step_size.refine, 2026-12-05: the two later ξ-jumps at
     # 7.53 and 9.89 s against 7.50 and 9.86 s), so the counts are the equations'.
     assert s["jumps_total"] == 8 and s["zeta_jumps_total"] == 7, (s["jumps_total"], s["zeta_jumps_total"])
     for a in s["agents"].values():

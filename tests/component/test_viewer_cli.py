@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from tests.conftest import ROOT, TOPO
-from zswarm import procutil
+from zswarm.transport import procutil
 
 
 def zswarm(*args: str, cwd=ROOT) -> subprocess.CompletedProcess[str]:

@@ -7,7 +7,8 @@ from hypothesis.extra import numpy as hnp
 
 from agent.algorithms import bearing_pose_fixed
 from tests.conftest import examples
-from zswarm import so3, wire
+from zswarm.math import so3
+from zswarm.transport import wire
 
 R = np.eye(3)
 R2 = so3.exp(np.array([0.3, -1.2, 2.0]))
@@ -400,8 +401,8 @@ def test_run_control_is_the_worlds_and_makes_sense():
 
 
 def test_the_recorder_stops_only_on_the_worlds_stop():
-    from zswarm.bus import MemoryBus
-    from zswarm.record import Recorder
+    from zswarm.transport.bus import MemoryBus
+    from zswarm.recording.mcap_io import Recorder
 
     bus = MemoryBus()
     rec = Recorder(bus, "t", None)

@@ -10,9 +10,9 @@ import json
 import sys
 from pathlib import Path
 
-from zswarm.report import make_report
+from zswarm.results import make_report
 from zswarm.scenario import load, parse_override
-from zswarm.sim import simulate
+from zswarm.engines.sim import simulate
 
 
 def main(spec: str) -> None:

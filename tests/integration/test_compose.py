@@ -32,7 +32,7 @@ from tests.integration.dockerbase import BASE_IMAGE, Rootfs
 from tests.integration.dockerbase import apt_install as _apt_install
 from tests.integration.dockerbase import image_exists as _image_exists
 from tests.integration.dockerbase import run as _run
-from zswarm import compose
+from zswarm.engines import compose
 from zswarm.scenario import load
 
 pytestmark = pytest.mark.integration
@@ -241,7 +241,7 @@ def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
             assert a["attitude_error_final"] < 1e-2, (i, a)
             assert a["position_error_final"] < 0.1, (i, a)
     assert (results / "thesis-3.2-fixed8" / "recording.mcap").stat().st_size > 100_000
-    from zswarm.record import read
+    from zswarm.recording.mcap_io import read
 
     ctl = [m for stream, m, _ in read(results / "thesis-3.2-fixed8" / "recording.mcap") if stream.startswith("ctl/")]
     assert ctl and all(len(m.get("mac", "")) == 32 for m in ctl), ctl[:2]  # signed in the containers

@@ -10,7 +10,7 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import fail_if_overloaded, not_alive, wait_for, zswarm
-from zswarm.bus import LEASE_MS
+from zswarm.transport.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
 T32 = str(TOPO / "thesis-3.2-fixed8.toml")
@@ -18,7 +18,7 @@ T32 = str(TOPO / "thesis-3.2-fixed8.toml")
 # A SIGKILLed process's TCP connection closes at once, the router drops its session and its
 # liveliness token with it: measured 0.05–0.45 s from the kill to the neighbour's mark
 # (the launcher's SIGKILL lands within its 0.1 s poll).  A hung process would take up to
-# the 1 s lease (zswarm.bus.zenoh_config) plus the lease's keep-alive period.
+# the 1 s lease (zswarm.transport.bus.zenoh_config) plus the lease's keep-alive period.
 DETECT_BOUND_S = 1.0
 
 

@@ -18,7 +18,7 @@ import pytest
 from tests.conftest import TOPO
 from tests.foxglove_ws import Client
 from tests.integration.conftest import zswarm
-from zswarm.launch import free_port
+from zswarm.engines.launch import free_port
 from zswarm.scenario import load as load_scenario
 
 pytestmark = pytest.mark.integration

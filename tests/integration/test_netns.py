@@ -27,8 +27,8 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
-from zswarm.bus import LEASE_MS
-from zswarm.record import read
+from zswarm.transport.bus import LEASE_MS
+from zswarm.recording.mcap_io import read
 from zswarm.report import load_recording
 
 pytestmark = pytest.mark.integration
@@ -36,7 +36,7 @@ pytestmark = pytest.mark.integration
 NET = "10.201.0"
 HOSTS = {"router": 1, "world": 2, "fleet-a": 3, "fleet-b": 4, "lone": 5}
 PLACE = {**{i: "fleet-a" for i in (1, 2, 3, 4)}, **{i: "fleet-b" for i in (5, 6, 7)}, 8: "lone"}
-CUT_S = 3.0  # wall seconds, > the 1 s lease (zswarm.bus.zenoh_config): the router closes agent 8's session
+CUT_S = 3.0  # wall seconds, > the 1 s lease (zswarm.transport.bus.zenoh_config): the router closes agent 8's session
 LEASE_S = LEASE_MS / 1000
 # Eight agents at 100 Hz, the world at 200 Hz, the recorder and the router on 2 cores at
 # time scale 1 are at the machine's capacity (measured on a quiet machine: 1585-1802 of

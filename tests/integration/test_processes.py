@@ -13,9 +13,9 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
-from zswarm import keys
-from zswarm.bus import ZenohBus, zenoh_config
-from zswarm.launch import free_port
+from zswarm.transport import keys
+from zswarm.transport.bus import ZenohBus, zenoh_config
+from zswarm.engines.launch import free_port
 from zswarm.report import load_recording
 
 pytestmark = pytest.mark.integration
@@ -104,7 +104,7 @@ def test_world_and_recorder_exit_within_2s_mid_run(procs, tmp_path, sig):
     t0 = time.monotonic()
     rec.send_signal(sig)
     assert rec.wait(5) == 0 and time.monotonic() - t0 < 2.0
-    from zswarm.record import ensure_recording, read
+    from zswarm.recording.mcap_io import ensure_recording, read
 
     # --no-report leaves the payloads as they came (recording.raw.mcap): readable as they
     # are, and transcoded into the viewer recording by whatever reads the folder next.
@@ -119,7 +119,7 @@ def test_world_and_recorder_exit_within_2s_mid_run(procs, tmp_path, sig):
 
 def _messages_on_disk(path) -> int:
     """Messages in the complete chunks of an MCAP file cut anywhere, counted record by
-    record (mcap's StreamReader, not zswarm.record.read)."""
+    record (mcap's StreamReader, not zswarm.recording.mcap_io.read)."""
     from mcap.records import Message
     from mcap.stream_reader import StreamReader
 
@@ -143,7 +143,7 @@ def test_a_sigkilled_recorder_leaves_a_report_of_what_was_on_disk(procs, tmp_pat
     import shutil
 
     from tests.integration.conftest import pid_alive
-    from zswarm.record import read
+    from zswarm.recording.mcap_io import read
 
     out = tmp_path / "out"
     p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
@@ -244,7 +244,7 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
 
     import zenoh
 
-    from zswarm import wire
+    from zswarm.transport import wire
 
     out = tmp_path / "out"
     p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")

@@ -11,8 +11,8 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, zswarm
-from zswarm import keys
-from zswarm.record import read
+from zswarm.transport import keys
+from zswarm.recording.mcap_io import read
 from zswarm.report import load_recording
 from zswarm.scenario import load as load_scenario
 
@@ -161,7 +161,7 @@ def test_a_killed_launcher_takes_its_children_with_it(procs, tmp_path, when):
     # stops them (launch.stop_all's own deadlines); here each also finds its router gone.
     wait_for(lambda: not [c for c in kids if pid_alive(c["pid"])], 20, "every child gone after the launcher's SIGKILL")
     if when == "running":
-        from zswarm.record import ensure_recording
+        from zswarm.recording.mcap_io import ensure_recording
 
         rec = load_recording(ensure_recording(out, None))  # what `zswarm report DIR` reads
         assert rec.counts.get("truth", 0) > 0 and rec.counts.get("est", 0) > 0  # what was recorded up to the kill

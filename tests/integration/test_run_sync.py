@@ -23,8 +23,8 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import fail_if_overloaded, not_alive, stop_tail, wait_for, zswarm
-from zswarm import keys, wire
-from zswarm.bus import ZenohBus, zenoh_config
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import ZenohBus, zenoh_config
 from zswarm.scenario import load
 
 pytestmark = pytest.mark.integration

@@ -36,9 +36,9 @@ from collections import defaultdict
 import pytest
 
 from tests.integration.conftest import not_alive, pid_alive, zswarm
-from zswarm.bus import LEASE_MS
-from zswarm.generate import generate
-from zswarm.record import read
+from zswarm.transport.bus import LEASE_MS
+from zswarm.studies.generate import generate
+from zswarm.recording.mcap_io import read
 
 pytestmark = pytest.mark.integration
 N, DURATION = 16, 20.0

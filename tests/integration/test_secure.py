@@ -16,11 +16,12 @@ import zenoh
 
 from tests.conftest import TOPO
 from tests.integration.conftest import unconfirmed, wait_for, zswarm
-from zswarm import keys, so3, wire
-from zswarm.bus import zenoh_config
-from zswarm.launch import free_port
-from zswarm.record import ensure_recording, read
-from zswarm.secure import make_certs
+from zswarm.math import so3
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import zenoh_config
+from zswarm.engines.launch import free_port
+from zswarm.recording.mcap_io import ensure_recording, read
+from zswarm.transport.secure import make_certs
 
 pytestmark = pytest.mark.integration
 T32 = str(TOPO / "thesis-3.2-fixed8.toml")

@@ -26,7 +26,7 @@ from agent.algorithms import attitude_sync_velocity_free as vf
 from agent.algorithms.attitude_sync_terms import Edge, coupling, xi_coefficients
 from world.dynamics import RigidBodies
 from zswarm.families import synergistic as hybrid
-from zswarm.so3 import Ra, exp, psi
+from zswarm.math.so3 import Ra, exp, psi
 
 A = np.diag([5.0, 8.57, 12.0])
 U_VEC = np.array([0.0, 0.6455, 0.7638]) / np.linalg.norm([0.0, 0.6455, 0.7638])

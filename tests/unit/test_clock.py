@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from zswarm.clock import AgentClock, ManualClock
+from zswarm.scenario.clock import AgentClock, ManualClock
 from zswarm.scenario import ClockSpec
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from world.dynamics import RigidBodies
-from zswarm import so3
+from zswarm.math import so3
 
 J_AXI = np.diag([1.0, 2.0, 3.5])  # distinct principal moments: the free body tumbles (non-trivial ω(t))
 ROT = so3.Ra(0.7, np.array([1.0, 2.0, -0.5]))

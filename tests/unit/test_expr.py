@@ -6,7 +6,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import examples
-from zswarm.expr import ExprError, parse
+from zswarm.scenario.expr import ExprError, parse
 
 
 @pytest.mark.parametrize(

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import examples
-from zswarm import so3
+from zswarm.math import so3
 from zswarm.families import synergistic as hybrid
 
 A45 = np.diag([5.0, 8.57, 12.0])

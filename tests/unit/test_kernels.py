@@ -1,4 +1,4 @@
-"""zswarm/kernels.py's compiled loops give the numbers of the numpy/Python code they replace,
+"""zswarm/math/kernels.py's compiled loops give the numbers of the numpy/Python code they replace,
 bit for bit (so a run is the same with or without them: golden sim passes either way), on any
 CPU and BLAS: neither side calls the BLAS (the numpy code's 3x3 products are so3.mul's
 elementwise sums, the compiled ones the same sums, no fused multiply-add), so the promise holds
@@ -21,10 +21,10 @@ import pytest
 from agent.algorithms import attitude_sync_terms as terms
 from agent.algorithms import attitude_sync_velocity_free as vf
 from world.dynamics import RigidBodies
-from zswarm import kernels
-from zswarm.so3 import exp_batch, log
+from zswarm.math import kernels
+from zswarm.math.so3 import exp_batch, log
 
-NEEDED = "zswarm._kernels was not built (no C compiler at install?): pip install -e . with gcc"
+NEEDED = "zswarm.math._kernels was not built (no C compiler at install?): pip install -e . with gcc"
 
 
 def _bodies(rng: np.random.Generator, n: int, scale: np.ndarray) -> RigidBodies:
@@ -102,11 +102,11 @@ def test_flow_aux_is_the_numpy_loop(monkeypatch, dt):
 
 
 def test_the_module_refuses_arrays_it_cannot_read():
-    """zswarm._kernels reads arrays through the buffer protocol: one of the wrong kind, layout
+    """zswarm.math._kernels reads arrays through the buffer protocol: one of the wrong kind, layout
     or size, a row outside the rate table, or a wrong number of arguments is an exception
     (TypeError, ValueError, IndexError), never a read or write out of bounds."""
     assert kernels.flow_aux is not None, NEEDED
-    from zswarm import _kernels as k
+    from zswarm.math import _kernels as k
 
     R, w, J, tau = np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3)), np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3))
     Ro, wo = np.empty_like(R), np.empty_like(w)
@@ -216,13 +216,13 @@ def test_the_default_build_gives_the_same_numbers(tmp_path):
     from tests.conftest import ROOT
 
     gcc = shutil.which("gcc")
-    assert gcc is not None, "gcc is needed to build zswarm._kernels (pyproject.toml ext-modules)"
+    assert gcc is not None, "gcc is needed to build zswarm.math._kernels (pyproject.toml ext-modules)"
     so = tmp_path / "_kernels_default.so"
     flags = ["-O2", "-ffp-contract=off", "-fno-math-errno", "-Wno-psabi", "-DZSWARM_DEFAULT_ONLY", "-shared", "-fPIC"]
-    subprocess.run([gcc, *flags, "-I", sysconfig.get_paths()["include"], str(ROOT / "zswarm" / "_kernels.c"), "-o", str(so), "-lm"], check=True, timeout=120)
+    subprocess.run([gcc, *flags, "-I", sysconfig.get_paths()["include"], str(ROOT / "zswarm" / "math" / "_kernels.c"), "-o", str(so), "-lm"], check=True, timeout=120)
     assert b"vfmadd" not in subprocess.run(["objdump", "-d", str(so)], capture_output=True, check=True, timeout=60).stdout  # no FMA instruction in it
     env = {**os.environ, "ZSWARM_KERNELS_FILE": str(so)}
-    check = f"import zswarm.kernels as k; assert k._lib.__file__ == {str(so)!r}, k._lib.__file__"
+    check = f"import zswarm.math.kernels as k; assert k._lib.__file__ == {str(so)!r}, k._lib.__file__"
     subprocess.run([sys.executable, "-c", check], env=env, check=True, timeout=60, cwd=ROOT)
     # The golden runs of the scenarios whose numbers these loops make most of (noise, the filters).
     golden = ("thesis-5.6-hybrid7-noisy", "thesis-5.6-velocity-free7", "thesis-4.5-continuous5-noisy", "thesis-5.6-velocity-free7-noisy")

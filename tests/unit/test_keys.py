@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from zswarm import keys, secure, wire
-from zswarm.bus import key_matches
+from zswarm.transport import keys, secure, wire
+from zswarm.transport.bus import key_matches
 
 
 def test_recorded_keys_round_trip_and_refuse_anything_else():

@@ -7,8 +7,8 @@ import numpy as np
 
 from world import sensors
 from world.plant import CommandInbox, KinematicPlant
-from zswarm import wire
-from zswarm.links import LinkSpec
+from zswarm.transport import wire
+from zswarm.scenario.links import LinkSpec
 from zswarm.scenario import PLANT_INPUTS, CommandPolicy
 
 rng = np.random.default_rng(3)

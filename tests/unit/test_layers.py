@@ -18,10 +18,10 @@ from tests.conftest import ROOT
 
 PACKAGES = ("zswarm", "agent", "world")
 # None: zswarm sim gets the agent and world classes it hosts through the entry points
-# zswarm.processes (zswarm.plugins.process_class), as it gets algorithms and report families.
+# zswarm.processes (zswarm.util.plugins.process_class), as it gets algorithms and report families.
 UP_ARROWS_ALLOWED: set[tuple[str, str]] = set()
 # Modules that must not decide by the algorithm's graph, params or plant what to compute.
-ASK_THE_FAMILY = ("zswarm/basin.py", "zswarm/sweep.py", "zswarm/study.py", "zswarm/sim.py", "zswarm/launch.py", "zswarm/cli.py", "zswarm/report/pipeline.py", "zswarm/report/base.py", "zswarm/family.py", "zswarm/report/recording.py", "zswarm/report/faults.py")
+ASK_THE_FAMILY = ("zswarm/studies/basin.py", "zswarm/studies/sweep.py", "zswarm/studies/step_size.py", "zswarm/engines/sim.py", "zswarm/engines/launch.py", "zswarm/cli.py", "zswarm/results/pipeline.py", "zswarm/report/base.py", "zswarm/families/contract.py", "zswarm/report/decoded.py", "zswarm/report/fault_costs.py")
 SNIFFING = re.compile(r"is_sync\(|is_formation\(|info\.graph\b|info\.params\b|\.plant\s*==|report_sync|report_formation")
 
 
@@ -124,8 +124,8 @@ def test_the_report_and_the_commands_ask_the_family():
 
 
 def test_every_builtin_algorithm_names_a_family_that_resolves():
-    from zswarm import family
-    from zswarm.algorithm import builtin, resolve
+    from zswarm.families import contract as family
+    from zswarm.scenario.algorithm import builtin, resolve
 
     names = {n: family.resolve(resolve(n)[0].SPEC.report).name for n in builtin()}
     assert len(names) == 11
@@ -135,17 +135,17 @@ def test_every_builtin_algorithm_names_a_family_that_resolves():
 def test_the_loader_and_the_command_line_stay_small():
     """Issue 30: the scenario loader and the CLI under 600 lines each (1251 and 810 before);
     their parts live with the subsystems and commands that own them."""
-    for f in ("zswarm/scenario.py", "zswarm/cli.py"):
+    for f in ("zswarm/scenario/__init__.py", "zswarm/cli.py"):
         n = len((ROOT / f).read_text().splitlines())
         assert n < 600, (f, n)
 
 
 # Issue 47: the core's studies and engines never name an experiment family; they ask the
-# scenario's (zswarm.family).  Checked on the code (names, attributes and strings; docstrings
+# scenario's (zswarm.families.contract).  Checked on the code (names, attributes and strings; docstrings
 # and comments may cite the families as examples).
 STUDIES_AND_ENGINES = (
-    "zswarm/sweep.py", "zswarm/basin.py", "zswarm/study.py", "zswarm/generate.py", "zswarm/sim.py", "zswarm/launch.py", "zswarm/cli.py",
-    "zswarm/cluster.py", "zswarm/measure.py", "zswarm/family.py", "agent/batched.py", "agent/batched_links.py",
+    "zswarm/studies/sweep.py", "zswarm/studies/basin.py", "zswarm/studies/step_size.py", "zswarm/studies/generate.py", "zswarm/engines/sim.py", "zswarm/engines/launch.py", "zswarm/cli.py",
+    "zswarm/engines/cluster.py", "zswarm/families/measure.py", "zswarm/families/contract.py", "agent/batched.py", "agent/batched_links.py",
 )
 FAMILY_NAMES = re.compile(r"\b(sync|tree|leader_follower|formation|synchronization)\b")
 
@@ -175,3 +175,84 @@ def test_the_studies_and_engines_name_no_family():
 def test_the_family_name_check_finds_a_family_name():
     words = [w for _, w in _code_words(ast.parse('"""the sync family"""\nif sc.info.report == "sync":\n    tree = 1\n'))]
     assert sorted(w for w in words if FAMILY_NAMES.search(w)) == ["sync", "tree"]  # not the docstring's
+
+
+
+# Issue 47: zswarm/ in subpackages by layer, bottom up; a module imports its own layer and those
+# below it only (imports inside functions too: the graph is every import the code can run).
+LAYERS = {
+    "util": "small helpers every layer uses: quoting, whole files, plugins by entry point",
+    "math": "SO(3), its compiled loops, bit-stable trigonometry, the timing library, the bounds",
+    "scenario": "what an experiment is: the typed scenario file, graph, clocks, links, faults, the algorithm contract",
+    "transport": "talking over Zenoh and being a process: messages, keys, the Bus, TLS, process helpers",
+    "recording": "MCAP recordings and the viewers: writing, reading, Foxglove messages, Rerun",
+    "report": "the building blocks of a report: the decoded recording, series, the table, fault costs, defaults",
+    "families": "the experiment-family contract, the batched measures' base, zswarm's four families",
+    "results": "a run's results from its recording: summary.json, CSVs, figures, the table",
+    "engines": "the ways to run a scenario: sim, run's processes, compose, recorder, replay, worker pools",
+    "studies": "many runs: sweep, basin, the step-size study, generate",
+}
+TOP = ("cli", "__main__")  # the command line, above every layer
+MAX_LINES = 600
+# Files not yet split below MAX_LINES (issue 47), each held to its length when this list was made: it only shrinks.
+NOT_YET_SPLIT = {
+    "agent/batched.py": 1523,
+    "zswarm/transport/wire.py": 1047,
+    "zswarm/studies/sweep.py": 952,
+    "agent/runtime.py": 868,
+    "zswarm/recording/mcap_io.py": 754,
+    "zswarm/studies/basin.py": 687,
+    "agent/batched_links.py": 615,
+}
+
+
+def _layer(module: str) -> int:
+    parts = module.split(".")
+    if len(parts) == 1:
+        return -1  # the zswarm package itself (its __init__ imports nothing)
+    if parts[1] in TOP:
+        return len(LAYERS)
+    assert parts[1] in LAYERS, f"{module}: outside zswarm's layers {tuple(LAYERS)}"
+    return list(LAYERS).index(parts[1])
+
+
+def test_every_module_of_zswarm_is_in_a_layer_and_imports_down():
+    graph = _graph()
+    up = []
+    for m, deps in graph.items():
+        if m.split(".")[0] != "zswarm":
+            continue
+        for d in deps:
+            if d.split(".")[0] == "zswarm" and _layer(d) > _layer(m):
+                up.append(f"{m} ({list(LAYERS)[_layer(m)] if 0 <= _layer(m) < len(LAYERS) else 'top'}) imports {d}")
+    assert up == []
+
+
+def test_each_layer_says_its_job():
+    for name in LAYERS:
+        doc = ast.get_docstring(ast.parse((ROOT / "zswarm" / name / "__init__.py").read_text()))
+        assert doc and len(doc) > 40, name
+
+
+def test_the_layer_check_finds_an_upward_import():
+    assert _layer("zswarm.math.so3") < _layer("zswarm.scenario.graph") < _layer("zswarm.engines.sim") < _layer("zswarm.cli")
+
+
+def test_no_two_modules_share_a_name():
+    names: dict[str, list[str]] = {}
+    for pkg in PACKAGES:
+        for p in (ROOT / pkg).rglob("*.py"):
+            if p.name not in ("__init__.py", "__main__.py"):
+                names.setdefault(p.stem, []).append(str(p.relative_to(ROOT)))
+    assert {k: v for k, v in names.items() if len(v) > 1} == {}
+
+
+def test_files_stay_under_600_lines():
+    long = {}
+    for pkg in PACKAGES:
+        for p in (ROOT / pkg).rglob("*.py"):
+            n = len(p.read_text().splitlines())
+            rel = str(p.relative_to(ROOT))
+            if n > NOT_YET_SPLIT.get(rel, MAX_LINES):
+                long[rel] = n
+    assert long == {}

@@ -1,7 +1,7 @@
 """LinkCounter: loss from sequence gaps per incarnation, restarts followed at once, a stray
 sequence number that cannot pin a link (issue 14)."""
 
-from zswarm.links import RESYNC, LinkCounter
+from zswarm.scenario.links import RESYNC, LinkCounter
 
 
 def feed(c, msgs):

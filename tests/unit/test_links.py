@@ -1,4 +1,4 @@
-"""Link models (zswarm/links.py) against their distributions.
+"""Link models (zswarm/scenario/links.py) against their distributions.
 
 Statistical checks use N = 20 000 messages and 4-sigma bands (a false
 failure about once in 16 000 runs; the seeds are fixed anyway, so these are
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from zswarm.links import PURPOSES, LinkDraws, LinkModel, LinkSpec, block, link_seed
+from zswarm.scenario.links import PURPOSES, LinkDraws, LinkModel, LinkSpec, block, link_seed
 
 N = 20_000
 

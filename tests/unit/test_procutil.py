@@ -14,7 +14,7 @@ import pytest
 CHILD = textwrap.dedent(
     """
     import os, signal, sys
-    from zswarm import procutil
+    from zswarm.transport import procutil
     stop = procutil.stop_on_signals()
     with stop._cond:  # what Event.wait holds around its checks
         os.kill(os.getpid(), signal.SIGINT)
@@ -36,7 +36,7 @@ def test_the_signal_handlers_are_put_back_on_close():
     import signal
     import threading
 
-    from zswarm.procutil import SignalEvent
+    from zswarm.transport.procutil import SignalEvent
 
     before = signal.getsignal(signal.SIGTERM)
     ev = threading.Event()
@@ -50,7 +50,7 @@ def test_the_signal_handlers_are_put_back_on_close():
 def test_warm_up_leaves_what_the_start_up_made_to_no_collection():
     # gc.freeze(): a collection during the run walks only what the run allocated (the
     # imports' objects took 75-170 ms per full pass, all processes at the same moment).
-    code = "import gc; from zswarm import procutil; procutil.warm_up(); print(gc.get_freeze_count())"
+    code = "import gc; from zswarm.transport import procutil; procutil.warm_up(); print(gc.get_freeze_count())"
     p = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
     assert int(p.stdout) > 10000  # numpy and zswarm's modules: tens of thousands of objects
@@ -68,7 +68,7 @@ def test_trim_heap_gives_back_what_a_burst_freed():
     512 bytes), one in 64 kept so that the pages stay mapped, 63 in 64 freed: without
     the trim RSS keeps nearly all of it (glibc only trims the top of a heap); the trim
     frees every page without a live object, about 62 MiB.  Asserted: at least half."""
-    from zswarm import procutil
+    from zswarm.transport import procutil
 
     burst = [bytes(1000) for _ in range(64 << 10)]
     kept = burst[::64]

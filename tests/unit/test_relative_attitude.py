@@ -19,7 +19,7 @@ from agent.algorithms import relative_attitude_continuous as cont
 from agent.algorithms import relative_attitude_hybrid as hyb
 from agent.algorithms import relative_pose_hybrid as pose
 from agent.algorithms.relative_attitude_terms import EdgeData, relative_error
-from zswarm import so3
+from zswarm.math import so3
 from zswarm.families import synergistic as hybrid
 
 EDGES = ((1, 2), (2, 3), (3, 4), (4, 5))

@@ -1,4 +1,4 @@
-"""The typed scenario schema (zswarm.schema): what msgspec accepts and what the translator says
+"""The typed scenario schema (zswarm.scenario.schema): what msgspec accepts and what the translator says
 are one declaration.  tests/component/test_golden_errors.py checks the words against the old
 hand-written loader's; here, that the msgspec bounds and the worded bounds agree on every value."""
 
@@ -12,13 +12,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from zswarm.algorithm import StalePolicy
-from zswarm.clock import ClockSpec
-from zswarm.links import LinksTable, LinkTable
-from zswarm.plants import CommandPolicy, NoiseTable, WorldTable
-from zswarm.reader import ScenarioError, _Ctx
+from zswarm.scenario.algorithm import StalePolicy
+from zswarm.scenario.clock import ClockSpec
+from zswarm.scenario.links import LinksTable, LinkTable
+from zswarm.scenario.world_config import CommandPolicy, NoiseTable, WorldTable
+from zswarm.scenario.reading import ScenarioError, _Ctx
 from zswarm.scenario import Header, ScenarioFile
-from zswarm.schema import Bounds, _unwrap, bounds
+from zswarm.scenario.schema import Bounds, _unwrap, bounds
 
 TABLES = (ClockSpec, LinkTable, LinksTable, CommandPolicy, NoiseTable, WorldTable, StalePolicy, Header)
 BOUNDED = [

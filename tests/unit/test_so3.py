@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from tests.conftest import examples
-from zswarm import so3
+from zswarm.math import so3
 
 vec = st.lists(st.floats(-10, 10, allow_nan=False), min_size=3, max_size=3).map(np.array)
 angle = st.floats(0.0, math.pi)
@@ -117,7 +117,7 @@ def test_mul_and_apply_are_the_same_sums_for_one_matrix_and_a_stack():
     """so3.mul and so3.apply: (a_i0 b_0j + a_i1 b_1j) + a_i2 b_2j, each operation rounded, so one
     matrix (Python floats) and each matrix of a stack (numpy's elementwise ufuncs) give the same
     bits, and both agree with the exact product to round-off."""
-    from zswarm.so3 import apply, exp_batch, mul
+    from zswarm.math.so3 import apply, exp_batch, mul
 
     rng = np.random.default_rng(23)
     A, B = exp_batch(rng.normal(size=(200, 3)) * 2.0), exp_batch(rng.normal(size=(200, 3)) * 2.0)

@@ -5,7 +5,7 @@ import pytest
 
 from zswarm.report import convergence_time
 from zswarm.scenario import ScenarioError
-from zswarm.sweep import parse_vary, read_done, split_values
+from zswarm.studies.sweep import parse_vary, read_done, split_values
 
 
 def test_values_lists_and_ranges():

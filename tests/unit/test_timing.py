@@ -1,4 +1,4 @@
-"""The timing library (zswarm/timing.py) against fine integrations of the same motion.
+"""The timing library (zswarm/math/timing.py) against fine integrations of the same motion.
 
 The reference integrates Ṙ = R[ω(t)]^x with 20 000 exponential steps over the
 interval, ω the same piecewise-linear interpolation of the samples the
@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from zswarm import so3
-from zswarm.timing import body_vector_at, interval_mean_rate, relative_attitude_at, rotation_over, rotation_rate
+from zswarm.math import so3
+from zswarm.math.timing import body_vector_at, interval_mean_rate, relative_attitude_at, rotation_over, rotation_rate
 
 
 def w(t):
@@ -111,7 +111,7 @@ def test_relative_attitude_without_gyro_follows_the_geodesic():
     """A velocity-free agent has no gyro: R_ij between (and just past) samples is on their geodesic."""
     import numpy as np
 
-    from zswarm import so3, timing
+    from zswarm.math import so3, timing
 
     R0 = so3.Ra(0.3, np.array([1.0, 2.0, 0.5]))
     w = np.array([0.2, -0.1, 0.4])

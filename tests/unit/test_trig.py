@@ -1,5 +1,5 @@
-"""zswarm/trig.py's sin and cos (the ξ_k filter's, compiled four draws at once in
-zswarm/_kernels.c): the compiled and the Python operations give the same bits, and the
+"""zswarm/math/trig.py's sin and cos (the ξ_k filter's, compiled four draws at once in
+zswarm/math/_kernels.c): the compiled and the Python operations give the same bits, and the
 numbers are within their derived error of the true sine and cosine.
 
 The reference is numpy's long double (x86-64's 80-bit format, sinl/cosl: 11 more bits than a
@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from zswarm import kernels, trig
+from zswarm.math import kernels, trig
 
-NEEDED = "zswarm._kernels was not built (no C compiler at install?): pip install -e . with gcc"
+NEEDED = "zswarm.math._kernels was not built (no C compiler at install?): pip install -e . with gcc"
 # The bound: fdlibm's kernel polynomials are within 1 ulp of sin y and cos y given y and its
 # tail (k_sin.c, k_cos.c); the tail dropped here is at most half an ulp of y, carried into the
 # result with a factor |cos y| or |sin y| <= 1 (+0.5 ulp); and cos y is 1 - (z/2 - z r) without

@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import files
-from zswarm.family import Family, Recipe, Report, Sweep
-from zswarm.report import base, text
-from zswarm.report.recording import Recording
+from zswarm.util import files
+from zswarm.families.contract import Family, Recipe, Report, Sweep
+from zswarm.report import base, table as text
+from zswarm.report.decoded import Recording
 from zswarm.report.series import final_of_grid as _final
 from zswarm.report.series import held as _held
 from zswarm.report.series import max_over as _max

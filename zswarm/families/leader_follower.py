@@ -3,7 +3,7 @@ own estimate against the truth, and their means over followers.
 
 The report is :mod:`zswarm.report.base`'s (the defaults of every family).  On the batched
 engine the prescribed truth is shared by the draws and each follower's |R̃_i|_I and ||p̃_i||
-(3.15) are measured at its estimates, as :func:`zswarm.report.recording.errors` measures them
+(3.15) are measured at its estimates, as :func:`zswarm.report.decoded.errors` measures them
 on a recording: at the agents' common ticks (:class:`FollowerTicks`), or at each draw's own
 stamps when lossy or jittery sensor links make the draws publish apart
 (:class:`FollowerStamps`).
@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.family import Batched, Family, Recipe
-from zswarm.measure import FINAL_WINDOW_S, Context, Published, Result, Ticks, Truths, coarse_grid, mean_rows, nanmean_of, rounded, truth_at
+from zswarm.families.contract import Batched, Family, Recipe
+from zswarm.families.measure import FINAL_WINDOW_S, Context, Published, Result, Ticks, Truths, coarse_grid, mean_rows, nanmean_of, rounded, truth_at
 
 WORLD = {"step": 0.001, "sensor_rate": 200.0}
 

@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import files
+from zswarm.util import files
 from zswarm.families.synergistic import HYBRID_PARAMS_5
-from zswarm.family import Basin, Batched, Family, Recipe, Report, Sweep
-from zswarm.measure import FINAL_WINDOW_S, Context, Result, Truth, coarse_grid, rounded
-from zswarm.report import base, text
-from zswarm.report.recording import Recording
+from zswarm.families.contract import Basin, Batched, Family, Recipe, Report, Sweep
+from zswarm.families.measure import FINAL_WINDOW_S, Context, Result, Truth, coarse_grid, rounded
+from zswarm.report import base, table as text
+from zswarm.report.decoded import Recording
 from zswarm.report.series import final_of_grid as _final
 from zswarm.report.series import held as _held
 from zswarm.report.series import leave_time, settle_time

@@ -29,8 +29,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm.algorithm import InitialField
-from zswarm.so3 import Mat3, Ra, Vec3, psi, trace
+from zswarm.scenario.algorithm import InitialField
+from zswarm.math.so3 import Mat3, Ra, Vec3, psi, trace
 
 # The thesis' parameters of the §4.5 and §5.6 hybrid schemes (zswarm generate's recipes).
 HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}
@@ -258,7 +258,7 @@ def check_parameters(A: Mat3, u: Vec3, gamma: float, delta: float, Xi: Sequence[
 
 # --------------------------------------------------------------------------- scenario parameters
 # The [algorithm.params] of the §4 observers and Chapter 5 laws (SPEC.params, the
-# zswarm.algorithm.Params protocol): read and checked against Assumption 4.4, Prop. 4.2 and
+# zswarm.scenario.algorithm.Params protocol): read and checked against Assumption 4.4, Prop. 4.2 and
 # Condition 5.1 here, beside the math; their fields go to the algorithms' Gains by name.
 
 _PARAMS_FIELD = "algorithm.params"
@@ -403,7 +403,7 @@ def design_command(args: Any) -> int:
 
     import numpy as np
 
-    from zswarm import procutil
+    from zswarm.transport import procutil
 
     vals = [procutil.number_arg(x, "--A") for x in args.A.split(",")]
     if len(vals) == 3:

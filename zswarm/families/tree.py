@@ -23,15 +23,15 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import files
+from zswarm.util import files
 from zswarm.families.synergistic import HYBRID_PARAMS_4, design_arguments, design_command
 from zswarm.families.tree_measures import BASIN_GRID_S, TreeStamps, TreeTicks
-from zswarm.family import Basin, Batched, Command, Family, Recipe, Report
-from zswarm.report import base, text
-from zswarm.report.recording import Recording, estimates_with_truth
+from zswarm.families.contract import Basin, Batched, Command, Family, Recipe, Report
+from zswarm.report import base, table as text
+from zswarm.report.decoded import Recording, estimates_with_truth
 from zswarm.report.series import final, settle_time
 from zswarm.scenario import Scenario
-from zswarm.so3 import nearest_rotations
+from zswarm.math.so3 import nearest_rotations
 
 
 @dataclass

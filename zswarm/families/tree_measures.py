@@ -1,4 +1,4 @@
-"""The tree family's measures on the batched engine (zswarm.measure): the §4.5 observers'
+"""The tree family's measures on the batched engine (zswarm.families.measure): the §4.5 observers'
 estimates on the prescribed truth, which the draws share, as tree_metrics measures a
 recording: at the agents' common ticks (:class:`TreeTicks`), or at each draw's own stamps
 when lossy or jittery sensor links make the draws publish apart (:class:`TreeStamps`)."""
@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.so3 import nearest_rotations
-from zswarm.measure import FINAL_WINDOW_S, Context, Published, Result, Ticks, Truths, coarse_grid, mean_rows, nanmean_of, rounded, truth_at
+from zswarm.math.so3 import nearest_rotations
+from zswarm.families.measure import FINAL_WINDOW_S, Context, Published, Result, Ticks, Truths, coarse_grid, mean_rows, nanmean_of, rounded, truth_at
 
 BASIN_GRID_S = 0.01  # s: the basin series' grid (tree_metrics' default step)
 

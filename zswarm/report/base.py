@@ -4,7 +4,7 @@ The error the convergence time is judged on is, at each point of a 0.1 s grid,
 the mean over followers of each one's newest estimate error (agents tick on
 their own clocks; NaN until every follower has an estimate); the headline
 finals are the means over followers; the plots are the individual and average
-error norms (thesis Figs. 3.4–3.7).  :class:`zswarm.family.Family` takes each
+error norms (thesis Figs. 3.4–3.7).  :class:`zswarm.families.contract.Family` takes each
 report function a family leaves out from here.
 """
 
@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import files
-from zswarm.report import faults, text
-from zswarm.report.recording import Recording
+from zswarm.util import files
+from zswarm.report import fault_costs as faults, table as text
+from zswarm.report.decoded import Recording
 from zswarm.report.series import nanmean, settle_time
 from zswarm.scenario import Scenario
 

@@ -1,0 +1,53 @@
+"""Results files written whole or not at all.
+
+A full disk or a dying process must not leave a 0-byte ``summary.json`` or half a CSV that
+reads as a result: each file is written beside its place (``NAME.part``) and renamed over it
+once complete (a rename within a folder is atomic); on any failure the part is removed and
+the error goes on to the caller, which names the path and the problem in one line
+(``zswarm.transport.procutil.write_problem``, printed by ``zswarm.cli.main``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+@contextmanager
+def whole(path: Path) -> Iterator[Path]:
+    """Yield the temporary path to write; on success it replaces ``path``."""
+    tmp = path.with_name(path.name + ".part")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text(path: Path, text: str) -> None:
+    """``path.write_text(text)``, whole or not at all (and on disk: fsync before the rename)."""
+    with whole(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def write_bytes(path: Path, data: bytes) -> None:
+    """``path.write_bytes(data)``, whole or not at all."""
+    with whole(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def save_png(fig: object, path: Path) -> None:
+    """A matplotlib figure as a PNG at ``path``, whole or not at all."""
+    with whole(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")  # type: ignore[attr-defined]
+
+
+class RecordingError(Exception):
+    """A recording that cannot be read or written as a whole (message names the file)."""
