@@ -14,9 +14,9 @@ import threading
 from typing import Any
 
 from agent.runtime import AgentNode, run_realtime
+from zswarm.scenario.clock import WallClock
 from zswarm.transport import keys, procutil, wire
 from zswarm.transport.bus import ZenohBus
-from zswarm.scenario.clock import WallClock
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:

@@ -8,7 +8,7 @@ decoded, the family's max_k |R̄_k|_I), then the same draws on the batched engin
 for M draws at once.  Sweeps (the §3 observers, which have no basin): one run the way
 ``zswarm sweep --engine sim`` runs it on a cluster's worker (``sweep.run_job``: sim in memory,
 the report's files, the row), then M runs of the same sweep point (their seeds differ; the
-noiseless scenario, so they share a batch) on the batched engine (``sweep.run_batch``).
+noiseless scenario, so they share a batch) on the batched engine (``sweep_batched.run_batch``).
 Links (issue 46): the §5.6 basins once more with emulated command links (``--links``, by
 default 2 ms of delay and 10 % loss: each draw its own losses, sim's numbers), and once with
 lossy sensor links (``--sensor-links``, by default 3 ms of delay, 2 ms of jitter and 10 % loss:
@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from agent import batched
-from zswarm.studies import basin, sweep
+from zswarm.studies import basin, sweep, sweep_batched
 from zswarm.report.base import THRESHOLDS
 from zswarm.scenario import load, parse_override
 
@@ -88,7 +88,7 @@ def main() -> None:
         sim_s = cpu(sweep.run_job, *source, jobs[0], a.duration, THRESHOLDS)
         print(f"{stem:26} {'sim (sweep)':14} {1:>5} {sim_s:9.3f} {1e6 * sim_s / steps:14.1f} {'':>12}")
         for m in sizes:
-            per = cpu(sweep.run_batch, source, jobs[:m], a.duration, THRESHOLDS) / m
+            per = cpu(sweep_batched.run_batch, source, jobs[:m], a.duration, THRESHOLDS) / m
             print(f"{stem:26} {'batched':14} {m:>5} {per:9.4f} {1e6 * per / steps:14.2f} {sim_s / per:11.0f}x", flush=True)
 
 

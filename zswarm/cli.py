@@ -1,5 +1,5 @@
 """The ``zswarm`` command: builds the parser and hands each subcommand to the run function of its
-module (``zswarm.engines.sim.command``, ``zswarm.studies.sweep.command``, ...); run, router, report and certs are
+module (``zswarm.engines.sim.command``, ``zswarm.studies.sweep_command.command``, ...); run, router, report and certs are
 small enough to stay here."""
 
 from __future__ import annotations
@@ -303,9 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     cmds = {
         "run": cmd_run,
         "sim": _lazy("zswarm.engines.sim", "command"),
-        "sweep": _lazy("zswarm.studies.sweep", "command"),
+        "sweep": _lazy("zswarm.studies.sweep_command", "command"),
         "basin": _lazy("zswarm.studies.basin", "command"),
-        "basin-compare": _lazy("zswarm.studies.basin", "compare_command"),
+        "basin-compare": _lazy("zswarm.studies.basin_compare", "compare_command"),
         "router": cmd_router,
         "compose": _lazy("zswarm.engines.compose", "command"),
         "record": _lazy("zswarm.engines.recorder", "command"),

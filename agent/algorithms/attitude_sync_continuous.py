@@ -27,8 +27,8 @@ import numpy as np
 
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, continuous_coupling, measured_edges, predict
 from zswarm.families import synergistic
-from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.math.so3 import Mat3, Vec3
+from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 
 
 @dataclass(frozen=True, slots=True)

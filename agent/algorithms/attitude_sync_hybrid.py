@@ -47,8 +47,8 @@ from agent.algorithms.attitude_sync_terms import (
     tail_xi,
 )
 from zswarm.families import synergistic
-from zswarm.scenario.algorithm import POSE_ESTIMATE, AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.math.so3 import Mat3, Vec3
+from zswarm.scenario.algorithm import POSE_ESTIMATE, AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 
 
 @dataclass(frozen=True, slots=True)

@@ -60,9 +60,9 @@ from typing import Any
 import numpy as np
 
 from zswarm.math import kernels
-from zswarm.scenario.algorithm import Field, View, number
 from zswarm.math.so3 import Mat3, T, Vec3, apply, dot, exp_batch, hat, log_batch, mul, psi, trace
 from zswarm.math.trig import sincos
+from zswarm.scenario.algorithm import Field, View, number
 
 
 @dataclass(frozen=True, slots=True)

@@ -43,11 +43,11 @@ import numpy as np
 
 from agent.algorithms.attitude_sync_hybrid import flow_and_jump, held_coupling
 from agent.algorithms.attitude_sync_terms import COMMAND, EDGE_FIELDS, Edge, Terms, jump, measured_edges, published_xi, tail_xi
-from zswarm.math import kernels
 from zswarm.families import synergistic
-from zswarm.scenario.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
+from zswarm.math import kernels
 from zswarm.math.so3 import Mat3, Ra, T, Vec3, apply, exp, exp_batch, hat, log, mul, psi
 from zswarm.math.trig import sincos
+from zswarm.scenario.algorithm import IDENTITY, POSE_ESTIMATE, AlgorithmSpec, Initial, InitialField, Part, Publish, StalePolicy, View
 
 SUBSTEP_S = 1e-3  # longest sub-step of the (Q_i, ζ_i) filter (see the module docstring)
 

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from agent.algorithms.bearing_terms import EDGE_FIELDS, NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
-from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.math.so3 import Mat3, Vec3, exp, mul
+from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,8 +18,8 @@ from dataclasses import dataclass, replace
 
 from agent.algorithms import bearing_pose_fixed
 from agent.algorithms.bearing_terms import NeighborData, bearing_correction, edge_messages, neighbor_data, position_rate
-from zswarm.scenario.algorithm import Initial, Part, Publish, View
 from zswarm.math.so3 import Mat3, Vec3, exp, mul
+from zswarm.scenario.algorithm import Initial, Part, Publish, View
 
 
 @dataclass(frozen=True, slots=True)

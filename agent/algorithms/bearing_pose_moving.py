@@ -26,8 +26,8 @@ from dataclasses import dataclass, replace
 from agent.algorithms import bearing_pose_fixed
 from agent.algorithms.bearing_pose_fixed import Gains, Outputs, State, initial_state, publish
 from agent.algorithms.bearing_terms import NeighborData, neighbor_data
-from zswarm.scenario.algorithm import Part, StalePolicy, View
 from zswarm.math.so3 import Vec3
+from zswarm.scenario.algorithm import Part, StalePolicy, View
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "step", "inputs", "initial_state", "publish", "SPEC"]
 

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.scenario.algorithm import Field, View
 from zswarm.math.so3 import Mat3, T, Vec3, apply, cross, dot
+from zswarm.scenario.algorithm import Field, View
 
 
 @dataclass(frozen=True, slots=True)

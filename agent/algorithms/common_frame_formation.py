@@ -48,8 +48,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from agent.algorithms import planar_localization_terms as pl
-from zswarm.scenario.algorithm import AlgorithmSpec, Field, Initial, InitialField, Part, Publish, Reader, StalePolicy, View
 from zswarm.math.limits import MAX_ABS
+from zswarm.scenario.algorithm import AlgorithmSpec, Field, Initial, InitialField, Part, Publish, Reader, StalePolicy, View
 
 EDGE_OUT = {
     "vel": Field((3,), doc="v_i, body frame (m/s): V̄_i for the neighbour's (7)"),

@@ -24,8 +24,8 @@ import numpy as np
 
 from agent.algorithms.relative_attitude_terms import EDGE_FIELDS, EdgeData, continuous_correction, edge_data, edge_messages
 from zswarm.families import synergistic
-from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 from zswarm.math.so3 import Mat3, Vec3, exp, mul
+from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, StalePolicy, View
 
 
 @dataclass(frozen=True, slots=True)

@@ -42,8 +42,8 @@ from agent.algorithms import relative_attitude_continuous
 from agent.algorithms.relative_attitude_continuous import Inputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, hybrid_correction, relative_error
 from zswarm.families import synergistic
-from zswarm.scenario.algorithm import POSE_ESTIMATE, Initial, Part, Publish, View
 from zswarm.math.so3 import Mat3, Vec3, exp, mul
+from zswarm.scenario.algorithm import POSE_ESTIMATE, Initial, Part, Publish, View
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "EdgeData", "flow_set", "jump_set", "jump_map", "flow_xi", "step", "SPEC"]
 

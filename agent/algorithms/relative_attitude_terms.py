@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from zswarm.families import synergistic
-from zswarm.scenario.algorithm import Field, View, number
 from zswarm.math.so3 import Mat3, T, Vec3, apply, dot, exp, mul, psi
+from zswarm.scenario.algorithm import Field, View, number
 
 
 @dataclass(frozen=True, slots=True)

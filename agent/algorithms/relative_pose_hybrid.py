@@ -32,8 +32,8 @@ from dataclasses import dataclass, field, replace
 from agent.algorithms import relative_attitude_hybrid as att
 from agent.algorithms.relative_attitude_hybrid import Outputs
 from agent.algorithms.relative_attitude_terms import EdgeData, edge_data, edge_messages, relative_position_rate
-from zswarm.scenario.algorithm import Initial, Part, Publish, View
 from zswarm.math.so3 import Mat3, Vec3, apply, exp
+from zswarm.scenario.algorithm import Initial, Part, Publish, View
 
 __all__ = ["Gains", "State", "Inputs", "Outputs", "step", "SPEC"]
 

@@ -281,7 +281,7 @@ def test_a_restarted_neighbour_is_used_at_once():
 def test_the_inbox_is_bounded_under_a_flood():
     """A flood of arrivals between two ticks (junk or not) grew the agent's queue without bound
     (+26 MB): past MAX_PENDING waiting, an arrival is dropped and counted (inbox_overflow)."""
-    from agent.runtime import MAX_PENDING
+    from agent.inbox import MAX_PENDING
 
     sc, bus, clock, node, got = setup()
     junk = b"\x92" + b"\x00" * 1000

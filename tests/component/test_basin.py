@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, TOPO, interrupt_when
-from zswarm.studies import basin
+from zswarm.studies import basin, basin_compare
 from zswarm.scenario import ScenarioError, load, parse_override, with_rotations
 
 
@@ -137,26 +137,26 @@ def test_paired_differences_only_between_folders_that_drew_the_same_starts():
 
     a = entry("hybrid", {1: 90.0, 2: 95.0, 3: 100.0})
     b = entry("continuous", {1: 91.0, 2: 99.0, 3: 97.0, 4: 80.0})  # draw 4 has no partner
-    (line,) = basin.paired([a, b])
+    (line,) = basin_compare.paired([a, b])
     # differences −1, −4, +3: median −1, mean −2/3, hybrid earlier in 2 of 3
     assert "paired on 3 identical starts: hybrid − continuous settle time: median -1.00 s, mean -0.67 s, from -4.00 to +3.00 s; hybrid earlier in 2 of 3" == line
-    assert basin.paired([a, entry("other seed", {1: 1.0}, draws=(2, "law"))]) == []
-    assert basin.paired([a, entry("vf", {1: 1.0}, draws=(1, "law+Q"))]) == []  # Q_i(0) drawn too: other starts
-    assert basin.paired([a, entry("hybrid", {1: 1.0})]) == []  # the same scheme twice: nothing to pair
+    assert basin_compare.paired([a, entry("other seed", {1: 1.0}, draws=(2, "law"))]) == []
+    assert basin_compare.paired([a, entry("vf", {1: 1.0}, draws=(1, "law+Q"))]) == []  # Q_i(0) drawn too: other starts
+    assert basin_compare.paired([a, entry("hybrid", {1: 1.0})]) == []  # the same scheme twice: nothing to pair
 
 
 def test_folders_pair_only_when_their_own_starts_match(tmp_path):
     """Draw 0 and every --near draw start from the scenario's own attitudes, so two scenarios
     pair only when those match: the §5.6 continuous and hybrid laws do, a moved start does not."""
     c7, h7 = TOPO / "thesis-5.6-continuous7.toml", TOPO / "thesis-5.6-hybrid7.toml"
-    kc, kh = basin.sc_kind({"topology": str(c7)}), basin.sc_kind({"topology": str(h7)})
+    kc, kh = basin_compare.sc_kind({"topology": str(c7)}), basin_compare.sc_kind({"topology": str(h7)})
     assert kc == kh and kc.startswith("agents[].R@")  # what the draws randomise (the family's basin_start)
     moved = tmp_path / "moved.toml"
     text = c7.read_text()
     assert text.count('R = { angle = "-pi/2", axis = [0, 0, 1] }') >= 1
     moved.write_text(text.replace('R = { angle = "-pi/2", axis = [0, 0, 1] }', 'R = { angle = "-pi/3", axis = [0, 0, 1] }', 1))
-    assert basin.sc_kind({"topology": str(moved)}) not in (kc, "?")
-    assert basin.sc_kind({"topology": str(tmp_path / "gone.toml")}) == "?"
+    assert basin_compare.sc_kind({"topology": str(moved)}) not in (kc, "?")
+    assert basin_compare.sc_kind({"topology": str(tmp_path / "gone.toml")}) == "?"
 
 
 @pytest.mark.parametrize("engine", ["sim", "batched"])

@@ -15,7 +15,8 @@ from world.node import World
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
 from zswarm.scenario.clock import ManualClock
-from zswarm.recording.mcap_io import Recorder, read, run_streams
+from zswarm.recording.capture import Recorder
+from zswarm.recording.mcap_io import read, run_streams
 from zswarm.scenario import load
 
 N = 100_000

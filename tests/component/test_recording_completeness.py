@@ -99,7 +99,8 @@ def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
     is not waited for."""
     from zswarm.transport import keys, wire
     from zswarm.transport.bus import MemoryBus
-    from zswarm.recording.mcap_io import RECENT_STATS_S, Recorder
+    from zswarm.recording.capture import Recorder
+    from zswarm.recording.mcap_io import RECENT_STATS_S
 
     bus = MemoryBus()
 

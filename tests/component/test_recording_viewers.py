@@ -201,7 +201,7 @@ def test_recordings_of_earlier_versions_still_report(tmp_path):
     from mcap.writer import Writer
 
     from zswarm.transport.bus import MemoryBus
-    from zswarm.recording.mcap_io import Recorder
+    from zswarm.recording.capture import Recorder
 
     sc = load(TOPO / "thesis-3.2-fixed8.toml")
     msgs = simulate(sc, tmp_path, 0.5, sc.seed, record=False, objects=False)  # payloads as bytes, as old recordings held

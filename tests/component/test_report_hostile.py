@@ -157,7 +157,8 @@ def test_junk_payloads_do_not_reach_the_disk(tmp_path, fixed8):
     in the viewer recording and in summary.json."""
     from zswarm.transport import keys
     from zswarm.transport.bus import MemoryBus
-    from zswarm.recording.mcap_io import Recorder, max_payload, read, transcode
+    from zswarm.recording.capture import Recorder
+    from zswarm.recording.mcap_io import max_payload, read, transcode
 
     sc, msgs = fixed8
     bus = MemoryBus()

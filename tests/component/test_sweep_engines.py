@@ -230,7 +230,7 @@ def test_batched_rows_are_sims_with_lossy_sensor_links(tmp_path, topology, vary,
     """Sensor links with jitter, loss and bursts (agent/batched.py _DrawSensorLinks): each draw
     loses and delays the packets its sim run does, so its agents idle, catch up and step between
     packets at its own ticks, read their neighbours' messages stamped at or before each step
-    (batched_links.DrawInbox) and send at their own ticks: the rows are sim's column by column,
+    (batched_inbox.DrawInbox) and send at their own ticks: the rows are sim's column by column,
     lost sensor packets and messages sent included.  Each draw loses packets of its own (the two
     repeats of a lossy point differ)."""
     args = ["--vary", vary, *sets, "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "1"]

@@ -58,7 +58,7 @@ def test_the_recorder_confirms_the_final_stats_it_has_and_only_those():
     question until then, and never answers for stats it does not have.  Without a
     recorder the question ends at once."""
     from zswarm.transport import keys, wire
-    from zswarm.recording.mcap_io import Recorder
+    from zswarm.recording.capture import Recorder
 
     def final(i: int) -> bytes:
         return wire.encode("stats", i, 0, 1.0, role="agent", counters={"final": True})

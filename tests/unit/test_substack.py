@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.batched import SUB_ROWS, _put, _spread, _sub_rows, _take
+from agent.batched_arrays import SUB_ROWS, _put, _spread, _sub_rows, _take
 
 
 @dataclass(frozen=True)

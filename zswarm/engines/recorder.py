@@ -1,5 +1,5 @@
 """``zswarm record``: the recorder as a process of its own — it subscribes to a run, writes the
-raw recording (zswarm.recording.mcap_io.Recorder), waits for the processes' final stats, transcodes,
+raw recording (zswarm.recording.capture.Recorder), waits for the processes' final stats, transcodes,
 and writes the report when the run has stopped."""
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ def command(args: argparse.Namespace) -> int:
     from zswarm.transport import wire
     from zswarm.transport.bus import ZenohBus
     from zswarm.engines.launch import results_dir
-    from zswarm.recording.mcap_io import RAW_SUFFIX, Recorder
+    from zswarm.recording.capture import Recorder
+    from zswarm.recording.mcap_io import RAW_SUFFIX
 
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args, "recorder")

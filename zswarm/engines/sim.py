@@ -17,7 +17,7 @@ from pathlib import Path
 from zswarm.transport import keys, procutil, wire
 from zswarm.util import plugins
 from zswarm.transport.bus import MemoryBus
-from zswarm.recording.mcap_io import Recorder
+from zswarm.recording.capture import Recorder
 from zswarm.scenario import Scenario, fault_actions
 
 LEAN_SKIP = ("sense/", "edge/", "cmd/")

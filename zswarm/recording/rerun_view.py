@@ -47,8 +47,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.transport import wire
 from zswarm.scenario import Scenario
+from zswarm.transport import wire
 
 log = logging.getLogger("zswarm.view")
 

@@ -299,7 +299,7 @@ class ZenohBus:
         sample to a Python thread of its own (zenoh-python's default).  Cheaper (no thread
         wake-up per sample) but the receiving thread then waits for the GIL for every
         sample, holding up the link: on an overloaded machine long enough to miss the
-        lease (see ``agent.runtime.Inbox.handler``)."""
+        lease (see ``agent.inbox.Inbox.handler``)."""
 
         def _cb(sample: Any) -> None:
             key = str(sample.key_expr)

@@ -330,7 +330,7 @@ def positive_float(s: str) -> float:
 
 
 # --------------------------------------------------------------------------- the commands' shared helpers
-# (each command's run function lives with its module: zswarm.engines.sim.command, zswarm.studies.sweep.command, ...)
+# (each command's run function lives with its module: zswarm.engines.sim.command, zswarm.studies.sweep_command.command, ...)
 
 
 def load_args(args: Any) -> Any:
