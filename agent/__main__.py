@@ -15,7 +15,7 @@ from typing import Any
 
 from agent.runtime import AgentNode, run_realtime
 from zswarm.scenario.clock import WallClock
-from zswarm.transport import keys, procutil, wire
+from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport.bus import ZenohBus
 
 
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         if started.is_set():
             return
         try:
-            start.update(wire.decode_ctl(payload, "start"))
+            start.update(run_control.decode_ctl(payload, "start"))
         except wire.MessageError as exc:
             ignored_ctl[0] += 1
             log.warning("ignored malformed start on %s: %s", key, exc)
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def on_stop(key: str, payload: bytes) -> None:
         try:
-            wire.decode_ctl(payload, "stop")
+            run_control.decode_ctl(payload, "stop")
         except wire.MessageError as exc:
             ignored_ctl[0] += 1
             if ignored_ctl[0] <= 3:

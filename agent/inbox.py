@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from zswarm.scenario.links import LinkCounter, LinkModel
-from zswarm.transport import wire
+from zswarm.transport import wire, wire_fast
 
 log = logging.getLogger("zswarm.agent")
 
@@ -67,7 +67,7 @@ class Inbox:
     ) -> Callable[[str, bytes], None]:
         """A bus callback for messages of type ``expect``; ``validate`` raises ValueError
         on a message that decodes but is not what this agent's algorithm reads;
-        ``decode``: ``wire.decode(payload, expect)`` or a faster equivalent (``wire.decoder``).
+        ``decode``: ``wire.decode(payload, expect)`` or a faster equivalent (``wire_fast.decoder``).
 
         The callback only stamps the arrival on the receiver's clock and queues the
         payload (one deque append, thread-safe): decoding, validation, link emulation

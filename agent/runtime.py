@@ -32,7 +32,7 @@ from zswarm.scenario import Scenario
 from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, initial_value, jumps, make_gains
 from zswarm.scenario.clock import AgentClock
 from zswarm.scenario.links import LinkModel
-from zswarm.transport import keys, wire
+from zswarm.transport import keys, wire, wire_fast
 from zswarm.transport.bus import Bus
 
 log = logging.getLogger("zswarm.agent")
@@ -162,10 +162,10 @@ class AgentNode:
             (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
         )
         sense_link = f"world->{agent_id}"
-        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense"), sender=lambda link: 0), direct=False)
+        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire_fast.decoder("sense"), sender=lambda link: 0), direct=False)
         if self.spec.neighbors:
             edge_in = {n: (f.shape, f.optional) for n, f in self.aspec.edge_in.items()}
-            handler = self.inbox.handler("edge", _edge_links(agent_id, self.spec.neighbors), self.aspec.check_edge, wire.decoder("edge", edge_in), sender=_edge_sender)
+            handler = self.inbox.handler("edge", _edge_links(agent_id, self.spec.neighbors), self.aspec.check_edge, wire_fast.decoder("edge", edge_in), sender=_edge_sender)
             bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         # Detection: an in-neighbour whose liveliness token goes (its process died, or hung past

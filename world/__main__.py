@@ -13,7 +13,7 @@ import threading
 import time
 
 from world.node import World
-from zswarm.transport import keys, procutil, wire
+from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport.bus import ZenohBus
 from zswarm.scenario.clock import WallClock
 
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         epoch = time.time() + START_LEAD_S / 1.0
         clock = WallClock(epoch, args.time_scale)
         world.now = clock.now  # command arrivals are stamped in world time
-        start = wire.encode_ctl("start", 0, 0, 0.0, inc=world.inc, epoch=epoch, time_scale=args.time_scale, duration=duration, seed=seed, run=run)
+        start = run_control.encode_ctl("start", 0, 0, 0.0, inc=world.inc, epoch=epoch, time_scale=args.time_scale, duration=duration, seed=seed, run=run)
         pub_start.put(start)
         log.info("start: epoch %.3f, time scale %g, duration %g s", epoch, args.time_scale, duration)
         next_announce = time.monotonic() + 1.0
@@ -116,12 +116,12 @@ def main(argv: list[str] | None = None) -> int:
             if time.monotonic() >= next_announce:
                 # Re-announce so that a late (re)started process can join the run.
                 pub_start.put(start)
-                pub_progress.put(wire.encode_ctl("progress", 0, n_progress, t, inc=world.inc, duration=duration))
+                pub_progress.put(run_control.encode_ctl("progress", 0, n_progress, t, inc=world.inc, duration=duration))
                 n_progress += 1
                 next_announce += 0.5
         end_t = min(clock.now(), duration)
         world.publish_stats(end_t, final=True)
-        pub_stop.put(wire.encode_ctl("stop", 0, 0, end_t, inc=world.inc, reason=reason))
+        pub_stop.put(run_control.encode_ctl("stop", 0, 0, end_t, inc=world.inc, reason=reason))
         log.info("stopped (%s) at t = %.3f s after %d samples, %d late", reason, end_t, world.samples, world.late)
         # Asked after the stop: once the recorder answers, the router has passed the stop on too.
         if not procutil.confirm_final(bus, keys.recorded(run, "world", 0), log):

@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from world.dynamics import RigidBodies
-from zswarm.transport import wire
+from zswarm.transport import wire, wire_fast
 from zswarm.scenario.links import LinkCounter, LinkModel, LinkSpec
 from zswarm.scenario import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
 
@@ -94,7 +94,7 @@ class CommandInbox:
         self.now = now
         self.policy = policy
         self.fields = dict(fields)
-        self._decode = wire.decoder("cmd", {n: (tuple(shape), False) for n, shape in self.fields.items()})
+        self._decode = wire_fast.decoder("cmd", {n: (tuple(shape), False) for n, shape in self.fields.items()})
         self._lock = threading.Lock()
         self.links: dict[int, _CmdLink] = {}
         for i in self.ids:

@@ -8,7 +8,7 @@ from hypothesis.extra import numpy as hnp
 from agent.algorithms import bearing_pose_fixed
 from tests.conftest import examples
 from zswarm.math import so3
-from zswarm.transport import wire
+from zswarm.transport import run_control, wire, wire_fast, wire_json
 
 R = np.eye(3)
 R2 = so3.exp(np.array([0.3, -1.2, 2.0]))
@@ -124,11 +124,11 @@ def test_json_round_trip_is_exact_and_matches_its_schema(mtype):
     # Vectors perturbed (every bit of the mantissa in play); rotations stay rotations.
     fields = {k: (v + rng.standard_normal(v.shape) / 3.0 if isinstance(v, np.ndarray) and v.shape[-2:] != (3, 3) else v) for k, v in CASES[mtype].items()}
     m = wire.decode(wire.encode(mtype, 3, 42, 1.0 / 3.0, **fields))
-    text = orjson.dumps(wire.to_json(m), option=orjson.OPT_NON_STR_KEYS)
+    text = orjson.dumps(wire_json.to_json(m), option=orjson.OPT_NON_STR_KEYS)
     obj = orjson.loads(text)
-    jsonschema.validate(obj, wire.json_schema(mtype))
-    assert _same(wire.from_json(obj), m)
-    assert _same(wire.decode(wire.payload_from_json(obj)), m)
+    jsonschema.validate(obj, wire_json.json_schema(mtype))
+    assert _same(wire_json.from_json(obj), m)
+    assert _same(wire.decode(wire_json.payload_from_json(obj)), m)
 
 
 @pytest.mark.parametrize(
@@ -147,18 +147,18 @@ def test_json_round_trip_is_exact_and_matches_its_schema(mtype):
     ],
 )
 def test_malformed_json_raises_message_error_only(change, match):
-    obj = wire.to_json(wire.decode(wire.encode("est", 3, 1, 0.5, **CASES["est"])))
+    obj = wire_json.to_json(wire.decode(wire.encode("est", 3, 1, 0.5, **CASES["est"])))
     obj.update(change)
     with pytest.raises(wire.MessageError, match=match):
-        wire.from_json(obj)
+        wire_json.from_json(obj)
     with pytest.raises(wire.MessageError):
-        wire.payload_from_json(obj)
+        wire_json.payload_from_json(obj)
 
 
 def test_json_of_a_non_map_is_rejected():
     for bad in ([1, 2], "x", None, 3):
         with pytest.raises(wire.MessageError, match="not a map"):
-            wire.from_json(bad)
+            wire_json.from_json(bad)
 
 
 # ---------------------------------------------------------------- the receivers' fast decoder
@@ -177,7 +177,7 @@ def _identical(a, b):
 
 
 EDGE_IN = {"R_hat": ((3, 3), False), "p_hat": ((3,), False), "b": ((3,), False), "vel": ((3,), True), "s": ((), True)}
-DECODERS = {"sense": wire.decoder("sense"), "edge": wire.decoder("edge", EDGE_IN), "cmd": wire.decoder("cmd", {"tau": ((3,), False)})}
+DECODERS = {"sense": wire_fast.decoder("sense"), "edge": wire_fast.decoder("edge", EDGE_IN), "cmd": wire_fast.decoder("cmd", {"tau": ((3,), False)})}
 
 
 def _outcome(dec, payload):
@@ -373,7 +373,7 @@ def test_stats_counters_are_bounded(counters, match):
     with pytest.raises(wire.MessageError, match=match):
         wire.decode(payload)
     with pytest.raises(wire.MessageError, match=match):
-        wire.from_json({"v": wire.VERSION, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters})
+        wire_json.from_json({"v": wire.VERSION, "type": "stats", "src": 1, "seq": 0, "inc": 0, "t": 0.0, "role": "agent", "counters": counters})
 
 
 def test_real_counters_pass():
@@ -384,9 +384,9 @@ def test_real_counters_pass():
 
 def test_run_control_is_the_worlds_and_makes_sense():
     ok_stop = wire.encode("stop", 0, 0, 1.0, reason="duration")
-    assert wire.decode_ctl(ok_stop, "stop")["reason"] == "duration"
+    assert run_control.decode_ctl(ok_stop, "stop")["reason"] == "duration"
     start = {"epoch": 1.0, "time_scale": 0.5, "duration": 10.0, "seed": 1, "run": "r"}
-    assert wire.decode_ctl(wire.encode("start", 0, 0, 0.0, **start), "start")["time_scale"] == 0.5
+    assert run_control.decode_ctl(wire.encode("start", 0, 0, 0.0, **start), "start")["time_scale"] == 0.5
     # Any payload on ctl/stop stopped every agent and the recorder; a start with time_scale 0
     # crashed the agents.
     for payload, match in (
@@ -397,7 +397,7 @@ def test_run_control_is_the_worlds_and_makes_sense():
         (wire.encode("start", 0, 0, 0.0, **{**start, "duration": -1.0}), "duration must be > 0"),
     ):
         with pytest.raises(wire.MessageError, match=match):
-            wire.decode_ctl(payload, "start" if b"start" in payload else "stop")
+            run_control.decode_ctl(payload, "start" if b"start" in payload else "stop")
 
 
 def test_the_recorder_stops_only_on_the_worlds_stop():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from zswarm.transport import keys, secure, wire
+from zswarm.transport import keys, run_control, secure, wire
 from zswarm.transport.bus import key_matches
 
 
@@ -44,19 +44,19 @@ def test_run_control_and_tokens_with_a_run_secret(monkeypatch):
     its tag; without it anything decodes as before (processes started by hand, old files)."""
     plain = wire.encode("stop", 0, 0, 2.0, reason="forged")
     monkeypatch.setenv(keys.SECRET_ENV, "s3cret")
-    signed = wire.encode_ctl("start", 0, 0, 0.0, epoch=1, time_scale=1, duration=5, seed=1, run="r")  # ints for floats: signed as decoded
-    assert wire.decode_ctl(signed, "start")["mac"]
+    signed = run_control.encode_ctl("start", 0, 0, 0.0, epoch=1, time_scale=1, duration=5, seed=1, run="r")  # ints for floats: signed as decoded
+    assert run_control.decode_ctl(signed, "start")["mac"]
     with pytest.raises(wire.MessageError, match="not signed with this run's secret"):
-        wire.decode_ctl(plain, "stop")
+        run_control.decode_ctl(plain, "stop")
     tagged = keys.alive("r", "agent", 3)
     assert tagged.startswith("zswarm/r/alive/agent/3/") and keys.parse_alive(tagged) == ("agent", 3)
     assert keys.parse_alive("zswarm/r/alive/agent/3") is None  # a token without the tag: not the run's
     assert keys.parse_alive(tagged.replace("/agent/3/", "/agent/4/")) is None  # another's tag
     monkeypatch.setenv(keys.SECRET_ENV, "other")
     with pytest.raises(wire.MessageError, match="not signed"):
-        wire.decode_ctl(signed, "start")
+        run_control.decode_ctl(signed, "start")
     monkeypatch.delenv(keys.SECRET_ENV)
-    assert wire.decode_ctl(plain, "stop")["reason"] == "forged" and keys.parse_alive(tagged) == ("agent", 3)
+    assert run_control.decode_ctl(plain, "stop")["reason"] == "forged" and keys.parse_alive(tagged) == ("agent", 3)
 
 
 def test_one_parser_takes_every_key_apart_and_back():

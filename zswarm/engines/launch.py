@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from zswarm import results
-from zswarm.transport import keys, procutil, wire
+from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport import secure as sec
 from zswarm.transport.bus import ZenohBus, zenoh_config
 from zswarm.scenario import Fault, Scenario, fault_actions
@@ -242,13 +242,13 @@ class _Router:
 
     def _on_progress(self, key: str, payload: bytes) -> None:
         try:
-            self.progress[0] = wire.decode_ctl(payload, "progress")["t"]
+            self.progress[0] = run_control.decode_ctl(payload, "progress")["t"]
         except wire.MessageError:
             pass
 
     def _on_start(self, key: str, payload: bytes) -> None:
         try:
-            m = wire.decode_ctl(payload, "start")
+            m = run_control.decode_ctl(payload, "start")
         except wire.MessageError:
             return
         self.start.update(epoch=m["epoch"], time_scale=m["time_scale"])

@@ -18,7 +18,7 @@ FINAL_STATS_WAIT_S = 8.0  # the recorder's wait for the processes' final stats a
 
 def command(args: argparse.Namespace) -> int:
     from zswarm import results
-    from zswarm.transport import wire
+    from zswarm.transport import run_control, wire
     from zswarm.transport.bus import ZenohBus
     from zswarm.engines.launch import results_dir
     from zswarm.recording.capture import Recorder
@@ -44,7 +44,7 @@ def command(args: argparse.Namespace) -> int:
         def on_start(key: str, payload: bytes) -> None:
             if not start:
                 try:
-                    start.update(wire.decode_ctl(payload, "start"))
+                    start.update(run_control.decode_ctl(payload, "start"))
                 except wire.MessageError:
                     pass
 

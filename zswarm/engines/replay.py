@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from zswarm.transport import keys, procutil, wire
+from zswarm.transport import keys, procutil, wire, wire_json
 from zswarm.recording.mcap_io import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, read, recorded_run_id
 from zswarm.scenario import Scenario
 
@@ -84,7 +84,7 @@ def replay(
             continue
         if bus is not None and run is not None:
             try:
-                data = payload if isinstance(payload, bytes) else wire.payload_from_json(payload)
+                data = payload if isinstance(payload, bytes) else wire_json.payload_from_json(payload)
             except wire.MessageError:
                 sent["malformed_skipped"] += 1
                 continue

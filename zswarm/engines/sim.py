@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from zswarm.transport import keys, procutil, wire
+from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.util import plugins
 from zswarm.transport.bus import MemoryBus
 from zswarm.recording.capture import Recorder
@@ -97,7 +97,7 @@ def simulate(
     bus.declare_token(keys.alive(run, "world", 0))
     for i in agents:
         sessions[i].declare_token(keys.alive(run, "agent", i))
-    ctl_start.put(wire.encode_ctl("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run))
+    ctl_start.put(run_control.encode_ctl("start", 0, 0, 0.0, epoch=0.0, time_scale=0.0, duration=duration, seed=seed, run=run))
 
     # (time, priority, id, generation): world samples have priority 0, agent ticks 1; a
     # restarted agent's ticks carry its new generation (its old ones are dropped).
@@ -169,7 +169,7 @@ def simulate(
         raise
 
     t_now[0] = duration
-    ctl_stop.put(wire.encode_ctl("stop", 0, 0, duration, reason="duration"))
+    ctl_stop.put(run_control.encode_ctl("stop", 0, 0, duration, reason="duration"))
     world.publish_stats(duration, final=True)
     for a in agents.values():
         a.publish_stats(duration, final=True)

@@ -15,7 +15,7 @@ import msgpack
 
 from zswarm.recording.mcap_io import ALIVE_CHANNEL, HOLD_RECORDED_S, RECENT_STATS_S, RawOut, ViewerOut, decode, max_payload, unpack
 from zswarm.scenario import Scenario
-from zswarm.transport import keys, wire
+from zswarm.transport import keys, run_control, wire
 from zswarm.transport.bus import Bus
 
 log = logging.getLogger("zswarm.recording.capture")
@@ -116,7 +116,7 @@ class Recorder:
             self._buf.append((stream, payload, t))
         if key.endswith("/ctl/stop"):
             try:
-                m = wire.decode_ctl(payload, "stop")  # only the world's stop ends the recording
+                m = run_control.decode_ctl(payload, "stop")  # only the world's stop ends the recording
                 if self.stop_t is None:
                     self.stop_t = m["t"]
                 self.stopped.set()

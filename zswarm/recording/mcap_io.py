@@ -1,7 +1,7 @@
 """Recording of a run into an MCAP file that Foxglove and Lichtblick open.
 
 Every message of the run is written as JSON with a JSON schema per message
-type (``zswarm.truth``, ``zswarm.est``, … from :func:`zswarm.transport.wire.json_schema`)
+type (``zswarm.truth``, ``zswarm.est``, … from :func:`zswarm.transport.wire_json.json_schema`)
 on a channel named after its key without the ``zswarm/<run>`` prefix:
 ``/truth``, ``/est/3``, ``/sense/3``, ``/edge/1/3``, ``/cmd/3``,
 ``/stats/agent/3``, ``/ctl/start``, … plus ``/events/alive`` (liveliness
@@ -47,7 +47,7 @@ from mcap.reader import NonSeekingReader
 
 from zswarm.recording.foxglove import object_schema
 from zswarm.scenario import Scenario
-from zswarm.transport import wire
+from zswarm.transport import wire, wire_json
 from zswarm.util.files import RecordingError
 
 log = logging.getLogger("zswarm.recording.mcap_io")
@@ -264,7 +264,7 @@ class ViewerOut(_McapOut):
             self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream[:256], "reason": str(exc)[:256], "size": size}, t)
             self.count += 1
             return None
-        self.log_json(stream, m["type"], wire.to_json(m), t)
+        self.log_json(stream, m["type"], wire_json.to_json(m), t)
         self.count += 1
         self.views.on_message(stream, m, t)
         return m
@@ -280,7 +280,7 @@ class ViewerOut(_McapOut):
         if ch is None:
             import foxglove
 
-            js = wire.json_schema(schema) if isinstance(schema, str) else schema
+            js = wire_json.json_schema(schema) if isinstance(schema, str) else schema
             ch = self._channels[stream] = foxglove.Channel("/" + stream, schema=js, context=self.ctx)
         ch.log(_dumps(obj), log_time=t)
         if WRITE_ERRORS.count != self._errors0:
@@ -455,7 +455,7 @@ def ensure_recording(results: Path, scenario: Scenario | None) -> Path:
 def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:
     """Yield ``(stream, message, log_time_ns)`` of the run's messages in file order.
 
-    ``message`` is the JSON object as written (:func:`zswarm.transport.wire.from_json`
+    ``message`` is the JSON object as written (:func:`zswarm.transport.wire_json.from_json`
     validates it), or the msgpack payload (bytes) of an old recording.  The
     derived viewer channels are left out.  Uses the streaming reader, so a
     file cut short (no summary section) is read up to its last complete chunk
@@ -500,7 +500,7 @@ def decode(message: bytes | dict[str, Any], expect: str | tuple[str, ...] | None
     """A message as :func:`read` (or an in-memory recording) gives it, decoded and validated."""
     if type(message) is wire.Message or isinstance(message, bytes):  # validated already (sim), or a payload
         return wire.decode(message, expect)
-    return wire.from_json(message, expect)
+    return wire_json.from_json(message, expect)
 
 
 def unpack(payload: bytes | dict[str, Any]) -> Any:

@@ -25,7 +25,7 @@ import msgpack
 import numpy as np
 
 from zswarm.math import so3
-from zswarm.transport import wire
+from zswarm.transport import run_control, wire
 from zswarm.recording.mcap_io import ALIVE_CHANNEL, MALFORMED_CHANNEL, decode, read, unpack
 
 
@@ -122,7 +122,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
             m = decode(payload)
             wire.check_stream(topic, m)  # est/i is agent i's, whatever src it claims (counted malformed)
             if kind == "ctl":
-                wire.check_signature(m)  # the world's, signed when the run has a secret
+                run_control.check_signature(m)  # the world's, signed when the run has a secret
         except wire.MessageError:
             malformed += 1
             counts[kind] -= 1  # not a message of this stream: not counted as recorded on it
