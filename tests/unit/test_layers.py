@@ -246,3 +246,11 @@ def test_files_stay_under_600_lines():
             if n > MAX_LINES:
                 long[rel] = n
     assert long == {}
+
+
+def test_the_architecture_page_names_every_module():
+    """docs/architecture.md's table of the layers cannot drift from the package: every module
+    of every layer is named there (its picture is drawn from the package)."""
+    page = (ROOT / "docs" / "architecture.md").read_text()
+    missing = [f"{name}/{p.stem}" for name in LAYERS for p in (ROOT / "zswarm" / name).glob("*.py") if p.name != "__init__.py" and f"`{p.stem}`" not in page]
+    assert missing == []
