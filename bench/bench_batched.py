@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 
 from agent import batched
-from zswarm.studies import basin, sweep, sweep_batched
 from zswarm.report.base import THRESHOLDS
 from zswarm.scenario import load, parse_override
+from zswarm.studies import basin, sweep, sweep_batched
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMES = ("thesis-5.6-continuous7", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7", "thesis-4.5-continuous5", "thesis-4.5-hybrid5")

@@ -35,8 +35,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_runtime import cpu_seconds  # noqa: E402
-from zswarm.studies import generate  # noqa: E402
+
 from zswarm.scenario import Scenario  # noqa: E402
+from zswarm.studies import generate  # noqa: E402
 
 
 def cpu_window(pids: dict[str, int], start: float, window: float) -> dict[str, float]:
@@ -97,8 +98,8 @@ def row(missed: int, ticks: int, edge_p99_ms: list[float], cpu: dict[str, float]
 
 
 def run_raw(sc: Scenario, sizes: dict[str, Any], duration: float) -> dict[str, Any]:
-    from zswarm.transport.bus import ZenohBus, zenoh_config
     from zswarm.engines.launch import free_port
+    from zswarm.transport.bus import ZenohBus, zenoh_config
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     cfg = sizes | {"rate": sc.agents[0].clock.rate, "sensor_rate": sc.sensor_rate, "duration": duration}

@@ -80,9 +80,9 @@ def cpu_seconds(pid: int) -> float | None:
 def raw_zenoh(n: int, size: int, secure: bool = False) -> np.ndarray:
     """Latencies of raw pub/sub via a router; ``secure``: mutual TLS, and an access control
     that lets the publisher put on its key only (as zswarm.transport.secure.acl does per process)."""
+    from zswarm.engines.launch import free_port
     from zswarm.transport import secure as sec
     from zswarm.transport.bus import ZenohBus, zenoh_config
-    from zswarm.engines.launch import free_port
 
     ep = f"{'tls' if secure else 'tcp'}/127.0.0.1:{free_port()}"
     with tempfile.TemporaryDirectory() as d:

@@ -90,10 +90,10 @@ def numbers(x: Any, path: str = "") -> dict[str, Any]:
 def run(name: str, out: Path, overrides: tuple[str, ...] = ()) -> dict[str, Any]:
     """``zswarm sim`` of a shipped scenario (with ``--set`` overrides) for DURATION s, its report's
     numbers and its CSVs' digests."""
-    from zswarm.scenario.overrides import parse_override
+    from zswarm.engines.sim import simulate
     from zswarm.results import make_report
     from zswarm.scenario import load
-    from zswarm.engines.sim import simulate
+    from zswarm.scenario.overrides import parse_override
 
     sc = load(TOPO / f"{name}.toml", [parse_override(o) for o in overrides])
     simulate(sc, out, DURATION, sc.seed)

@@ -13,9 +13,9 @@ import threading
 import time
 
 from world.node import World
+from zswarm.scenario.clock import WallClock
 from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport.bus import ZenohBus
-from zswarm.scenario.clock import WallClock
 
 START_LEAD_S = 0.5  # wall seconds between the start announcement and the epoch
 # How late a sample may still be taken rather than skipped.  A busy machine stops the world

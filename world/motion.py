@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm.scenario.expr import Expr
 from zswarm.math.so3 import Ra, exp_batch
+from zswarm.scenario.expr import Expr
 
 
 class PrescribedMotion:

@@ -16,9 +16,9 @@ from numpy.typing import NDArray
 from world import sensors
 from world.motion import PrescribedMotion, prescribed
 from world.plant import CommandInbox, KinematicPlant, RigidBodyPlant
+from zswarm.scenario import PLANT_INPUTS, Scenario
 from zswarm.transport import keys
 from zswarm.transport.bus import Bus
-from zswarm.scenario import PLANT_INPUTS, Scenario
 
 
 @functools.lru_cache(maxsize=1024)  # per command message: the parse once per key (the agents' few)

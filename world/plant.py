@@ -48,9 +48,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from world.dynamics import RigidBodies
-from zswarm.transport import wire, wire_fast
-from zswarm.scenario.links import LinkCounter, LinkModel, LinkSpec
 from zswarm.scenario import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
+from zswarm.scenario.links import LinkCounter, LinkModel, LinkSpec
+from zswarm.transport import wire, wire_fast
 
 __all__ = ["PLANTS", "PLANT_INPUTS", "COMMAND_POLICIES", "CommandPolicy", "CommandInbox", "RigidBodyPlant", "KinematicPlant"]
 

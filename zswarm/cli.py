@@ -386,8 +386,8 @@ def cmd_certs(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from zswarm import results
-    from zswarm.transport import wire
     from zswarm.recording.mcap_io import decode, ensure_recording, read
+    from zswarm.transport import wire
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
     rec_path = ensure_recording(args.results, sc)

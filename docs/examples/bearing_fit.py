@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from zswarm.families.contract import Family, Report
-from zswarm.report import base, table as text
+from zswarm.report import base
+from zswarm.report import table as text
 from zswarm.report.series import final, held, max_over, settle_time
 
 GRID_S = 0.1  # s

@@ -7,10 +7,10 @@ import pytest
 from agent.runtime import AgentNode
 from tests.conftest import TOPO
 from zswarm.math import so3
+from zswarm.scenario import load
+from zswarm.scenario.clock import ManualClock
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
-from zswarm.scenario.clock import ManualClock
-from zswarm.scenario import load
 
 
 def setup():

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT, TOPO, interrupt_when
-from zswarm.studies import basin, basin_compare
 from zswarm.scenario import ScenarioError, load, parse_override, with_rotations
+from zswarm.studies import basin, basin_compare
 
 
 def test_uniform_rotations_are_haar():

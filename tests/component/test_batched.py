@@ -32,10 +32,10 @@ import pytest
 from agent import batched
 from tests.conftest import TOPO
 from zswarm import report
-from zswarm.families import contract as family
-from zswarm.studies import basin
-from zswarm.scenario import load, parse_override
 from zswarm.engines.sim import simulate
+from zswarm.families import contract as family
+from zswarm.scenario import load, parse_override
+from zswarm.studies import basin
 
 DURATION = 4.0  # s: the hybrid law's jumps at t = 0 and the first flow, 400 agent steps
 DRAWS = (0, 1, 2, 3)  # draw 0: the thesis' start on the undesired set; 1-3 uniform

@@ -34,8 +34,8 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import TOPO
-from zswarm.studies import step_size as study
 from zswarm.scenario import load
+from zswarm.studies import step_size as study
 
 SCENARIOS = ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered", "thesis-3.3-moving5", "thesis-4.5-continuous5", "thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"]
 FROM_ESCAPE = {"thesis-4.5-continuous5"}

@@ -14,9 +14,9 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import ROOT, TOPO, examples
+from zswarm.scenario import ScenarioError, fault_override, load, loads, parse_override
 from zswarm.studies import sweep
 from zswarm.util import quoting as text
-from zswarm.scenario import ScenarioError, fault_override, load, loads, parse_override
 
 ODD = ["a\nb", "a\tb", "a\x1b[2Jb"]
 FIXED8 = TOPO / "thesis-3.2-fixed8.toml"

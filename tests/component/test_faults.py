@@ -11,9 +11,9 @@ import sys
 import pytest
 
 from tests.conftest import ROOT, TOPO
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import ScenarioError, fault_override, load
-from zswarm.engines.sim import simulate
 
 T32 = TOPO / "thesis-3.2-fixed8.toml"
 

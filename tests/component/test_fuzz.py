@@ -12,12 +12,12 @@ from agent.runtime import AgentNode
 from tests.conftest import TOPO
 from tests.fuzz_messages import Fuzzer, valid_cmd, valid_for_agent, valid_for_recorder
 from world.node import World
-from zswarm.transport import keys, wire
-from zswarm.transport.bus import MemoryBus
-from zswarm.scenario.clock import ManualClock
 from zswarm.recording.capture import Recorder
 from zswarm.recording.mcap_io import read, run_streams
 from zswarm.scenario import load
+from zswarm.scenario.clock import ManualClock
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import MemoryBus
 
 N = 100_000
 

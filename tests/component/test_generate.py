@@ -13,9 +13,9 @@ from zswarm.families.contract import recipes
 from zswarm.studies.generate import generate, graphs_of
 
 RECIPES = {name: r for name, (_, r) in recipes().items()}
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import load, loads
-from zswarm.engines.sim import simulate
 
 
 @pytest.mark.parametrize("family", sorted(RECIPES))

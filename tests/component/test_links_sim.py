@@ -5,9 +5,9 @@ import math
 import pytest
 
 from tests.conftest import TOPO
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import loads
-from zswarm.engines.sim import simulate
 
 
 def sim_with(tmp_path, links_toml, duration=5.0):

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from zswarm.engines.sim import LEAN_SKIP, simulate
 from zswarm.recording.mcap_io import RawOut, read, transcode
 from zswarm.report import load_recording
 from zswarm.results import completeness, make_report
 from zswarm.scenario import load
-from zswarm.engines.sim import LEAN_SKIP, simulate
 
 TOPO = Path(__file__).resolve().parents[2] / "topologies"
 
@@ -97,10 +97,10 @@ def test_the_recorder_waits_for_the_final_stats_of_the_processes_still_up():
     token is gone but which sent stats within RECENT_STATS_S of world time before the stop
     (its final stats, sent before the token went, can be seen after); one killed earlier
     is not waited for."""
-    from zswarm.transport import keys, wire
-    from zswarm.transport.bus import MemoryBus
     from zswarm.recording.capture import Recorder
     from zswarm.recording.mcap_io import RECENT_STATS_S
+    from zswarm.transport import keys, wire
+    from zswarm.transport.bus import MemoryBus
 
     bus = MemoryBus()
 

@@ -21,10 +21,10 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
 from tests.conftest import TOPO
+from zswarm.engines.sim import simulate
 from zswarm.report import errors, load_recording
 from zswarm.results import make_report
 from zswarm.scenario import load
-from zswarm.engines.sim import simulate
 
 
 class JsonSchemaDecoderFactory(McapDecoderFactory):
@@ -200,8 +200,8 @@ def test_recordings_of_earlier_versions_still_report(tmp_path):
     import msgpack
     from mcap.writer import Writer
 
-    from zswarm.transport.bus import MemoryBus
     from zswarm.recording.capture import Recorder
+    from zswarm.transport.bus import MemoryBus
 
     sc = load(TOPO / "thesis-3.2-fixed8.toml")
     msgs = simulate(sc, tmp_path, 0.5, sc.seed, record=False, objects=False)  # payloads as bytes, as old recordings held

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
+from zswarm.engines.sim import simulate
 from zswarm.math import so3
-from zswarm.transport import wire
-from zswarm.report import errors, load_recording, OUTSIDE_RUN_MARGIN_S, TRUTH_GAP_PERIODS, TRUTH_GAP_S
+from zswarm.report import OUTSIDE_RUN_MARGIN_S, TRUTH_GAP_PERIODS, TRUTH_GAP_S, errors, load_recording
 from zswarm.results import make_report
 from zswarm.scenario import load, parse_override
-from zswarm.engines.sim import simulate
+from zswarm.transport import wire
 
 DURATION = 3.0
 
@@ -155,10 +155,10 @@ def test_junk_payloads_do_not_reach_the_disk(tmp_path, fixed8):
     The recorder writes a payload as it came only up to what a message of the run can be
     (record.max_payload); a bigger one is described (stream, size) and counted malformed,
     in the viewer recording and in summary.json."""
-    from zswarm.transport import keys
-    from zswarm.transport.bus import MemoryBus
     from zswarm.recording.capture import Recorder
     from zswarm.recording.mcap_io import max_payload, read, transcode
+    from zswarm.transport import keys
+    from zswarm.transport.bus import MemoryBus
 
     sc, msgs = fixed8
     bus = MemoryBus()

@@ -19,10 +19,10 @@ import pytest
 
 from tests import browser
 from tests.conftest import ROOT, TOPO
+from zswarm.engines.sim import simulate
 from zswarm.families import contract as family
 from zswarm.recording import rerun_view
 from zswarm.scenario import load
-from zswarm.engines.sim import simulate
 
 DURATION = 1.5
 SCENARIOS = sorted(p.stem for p in TOPO.glob("*.toml"))

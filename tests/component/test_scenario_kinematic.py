@@ -8,9 +8,9 @@ import pytest
 
 from world.node import World
 from world.plant import KinematicPlant
+from zswarm.scenario import ScenarioError, loads
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
-from zswarm.scenario import ScenarioError, loads
 
 TOPO = Path(__file__).resolve().parents[2] / "topologies"
 

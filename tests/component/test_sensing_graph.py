@@ -8,9 +8,9 @@ import pytest
 
 from agent.runtime import AgentNode
 from world.node import World
+from zswarm.scenario import ScenarioError, load
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
-from zswarm.scenario import ScenarioError, load
 
 MODULE = '''
 from dataclasses import dataclass

@@ -16,9 +16,9 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.notes import agrees
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import load
-from zswarm.engines.sim import simulate
 
 STEP_32 = 0.04  # 2 x 1.6 %, rounded up (module docstring)
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import load
-from zswarm.engines.sim import simulate
 
 
 @pytest.fixture(scope="module")
@@ -94,9 +94,9 @@ def test_a_stated_initial_state_makes_the_run_independent_of_the_seed(tmp_path):
     knots stated (no noise, no link model in this scenario), nothing is drawn from the
     seed: two seeds give the same estimates, the first estimate is the stated one, and each
     robot's commanded yaw rate passes through its knots (Catmull–Rom interpolates them)."""
-    from zswarm.transport import wire
     from zswarm.report import load_recording
     from zswarm.scenario import loads
+    from zswarm.transport import wire
 
     sc = loads(_stated((TOPO / "decarli-8-formation.toml").read_text()), "stated.toml")
     assert sc.agent(3).estimate["p"] == (3.5, -1.0, 0.25) and sc.agent(3).estimate["yaw"] == pytest.approx(-0.5)

@@ -16,11 +16,11 @@ import pytest
 
 from tests.conftest import TOPO
 from zswarm import results
-from zswarm.transport import wire
-from zswarm.transport.bus import MemoryBus
+from zswarm.engines.sim import simulate
 from zswarm.recording.mcap_io import decode
 from zswarm.scenario import load
-from zswarm.engines.sim import simulate
+from zswarm.transport import wire
+from zswarm.transport.bus import MemoryBus
 
 SCENARIOS = sorted(p.name for p in TOPO.glob("*.toml"))
 # World seconds per scenario: long enough for every process's 1 s stats, the §4/§5

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import ScenarioError, load, loads
-from zswarm.engines.sim import simulate
 
 NOTES = {  # READING-NOTES, Chapter 5: max_k |R̄_k|_I below 0.1 from, below 0.01 from (s)
     "thesis-5.6-hybrid7": (58.5, 102.0),

@@ -14,11 +14,11 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.notes import agrees, interval
+from zswarm.engines.sim import simulate
+from zswarm.families.tree import tree_metrics
 from zswarm.report import load_recording
 from zswarm.results import make_report
-from zswarm.families.tree import tree_metrics
 from zswarm.scenario import load
-from zswarm.engines.sim import simulate
 
 STEP_45 = {10.0: 0.1, 20.0: 0.2}  # 2 x 4.6 % and 2 x 9.4 %, rounded up (module docstring)
 # §3.3.4's mean position error at 100 Hz against 10x the rates: 1.0 % above at 10 s, 2.6 % at 20 s,

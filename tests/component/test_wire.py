@@ -401,8 +401,8 @@ def test_run_control_is_the_worlds_and_makes_sense():
 
 
 def test_the_recorder_stops_only_on_the_worlds_stop():
-    from zswarm.transport.bus import MemoryBus
     from zswarm.recording.capture import Recorder
+    from zswarm.transport.bus import MemoryBus
 
     bus = MemoryBus()
     rec = Recorder(bus, "t", None)

@@ -10,9 +10,9 @@ import json
 import sys
 from pathlib import Path
 
+from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import load, parse_override
-from zswarm.engines.sim import simulate
 
 
 def main(spec: str) -> None:

@@ -16,11 +16,11 @@ import pytest
 from tests.conftest import TOPO
 from tests.fuzz_messages import Fuzzer, valid_cmd, valid_for_agent, valid_for_recorder
 from tests.integration.conftest import wait_for, zswarm
-from zswarm.transport import keys, wire
-from zswarm.transport.bus import ZenohBus, zenoh_config
 from zswarm.engines.launch import free_port
 from zswarm.recording.mcap_io import ensure_recording, read, run_streams
 from zswarm.scenario import load
+from zswarm.transport import keys, wire
+from zswarm.transport.bus import ZenohBus, zenoh_config
 
 pytestmark = pytest.mark.integration
 N = 100_000

@@ -27,9 +27,9 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
-from zswarm.transport.bus import LEASE_MS
 from zswarm.recording.mcap_io import read
 from zswarm.report import load_recording
+from zswarm.transport.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
 

@@ -13,10 +13,10 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import wait_for, zswarm
-from zswarm.transport import keys
-from zswarm.transport.bus import ZenohBus, zenoh_config
 from zswarm.engines.launch import free_port
 from zswarm.report import load_recording
+from zswarm.transport import keys
+from zswarm.transport.bus import ZenohBus, zenoh_config
 
 pytestmark = pytest.mark.integration
 TOPOLOGY = str(TOPO / "thesis-3.2-fixed8.toml")

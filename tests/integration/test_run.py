@@ -11,10 +11,10 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, zswarm
-from zswarm.transport import keys
 from zswarm.recording.mcap_io import read
 from zswarm.report import load_recording
 from zswarm.scenario import load as load_scenario
+from zswarm.transport import keys
 
 pytestmark = pytest.mark.integration
 

@@ -23,9 +23,9 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import fail_if_overloaded, not_alive, stop_tail, wait_for, zswarm
+from zswarm.scenario import load
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import ZenohBus, zenoh_config
-from zswarm.scenario import load
 
 pytestmark = pytest.mark.integration
 NAME = "thesis-5.6-hybrid7"

@@ -36,9 +36,9 @@ from collections import defaultdict
 import pytest
 
 from tests.integration.conftest import not_alive, pid_alive, zswarm
-from zswarm.transport.bus import LEASE_MS
-from zswarm.studies.generate import generate
 from zswarm.recording.mcap_io import read
+from zswarm.studies.generate import generate
+from zswarm.transport.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
 N, DURATION = 16, 20.0

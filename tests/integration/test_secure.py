@@ -16,11 +16,11 @@ import zenoh
 
 from tests.conftest import TOPO
 from tests.integration.conftest import unconfirmed, wait_for, zswarm
+from zswarm.engines.launch import free_port
 from zswarm.math import so3
+from zswarm.recording.mcap_io import ensure_recording, read
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import zenoh_config
-from zswarm.engines.launch import free_port
-from zswarm.recording.mcap_io import ensure_recording, read
 from zswarm.transport.secure import make_certs
 
 pytestmark = pytest.mark.integration

@@ -8,8 +8,8 @@ import time
 import pytest
 
 from tests.integration.conftest import wait_for
-from zswarm.transport.bus import ZenohBus, zenoh_config
 from zswarm.engines.launch import free_port
+from zswarm.transport.bus import ZenohBus, zenoh_config
 
 pytestmark = pytest.mark.integration
 
@@ -57,8 +57,8 @@ def test_the_recorder_confirms_the_final_stats_it_has_and_only_those():
     session: the recorder answers once it has that process's final stats, holds the
     question until then, and never answers for stats it does not have.  Without a
     recorder the question ends at once."""
-    from zswarm.transport import keys, wire
     from zswarm.recording.capture import Recorder
+    from zswarm.transport import keys, wire
 
     def final(i: int) -> bytes:
         return wire.encode("stats", i, 0, 1.0, role="agent", counters={"final": True})

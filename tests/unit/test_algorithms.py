@@ -14,8 +14,8 @@ import pytest
 from agent.algorithms import bearing_pose_fixed as fixed
 from agent.algorithms import bearing_pose_fixed_filtered as filt
 from agent.algorithms.bearing_terms import NeighborData
-from zswarm.math.timing import interval_mean_rate
 from zswarm.math import so3
+from zswarm.math.timing import interval_mean_rate
 
 P = {1: np.array([0.0, 0, 0]), 2: np.array([2.0, 0, 1]), 3: np.array([2.0, 2, 2])}
 

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from zswarm.scenario.clock import AgentClock, ManualClock
 from zswarm.scenario import ClockSpec
+from zswarm.scenario.clock import AgentClock, ManualClock
 
 
 def test_drift_and_offset_map_world_to_own_clock():

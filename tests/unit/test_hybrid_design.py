@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import examples
-from zswarm.math import so3
 from zswarm.families import synergistic as hybrid
+from zswarm.math import so3
 
 A45 = np.diag([5.0, 8.57, 12.0])
 U45 = np.array([0.0, 0.6455, 0.7638])

@@ -7,9 +7,9 @@ import numpy as np
 
 from world import sensors
 from world.plant import CommandInbox, KinematicPlant
-from zswarm.transport import wire
-from zswarm.scenario.links import LinkSpec
 from zswarm.scenario import PLANT_INPUTS, CommandPolicy
+from zswarm.scenario.links import LinkSpec
+from zswarm.transport import wire
 
 rng = np.random.default_rng(3)
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from world.motion import PrescribedMotion
-from zswarm.scenario.expr import parse
 from zswarm.math.so3 import exp
+from zswarm.scenario.expr import parse
 
 OMEGA = [["-cos(2*t)", "sin(9*t)", "1"], ["sqrt(1+t)", "abs(sin(3*t))**1.5", "tan(0.1*t)"], ["exp(-t)", "2", "-t/3"]]
 VEL = [["cos(t)", "0", "0.5"], None, ["t**2/10", "sin(t)", "-1"]]

@@ -1,6 +1,6 @@
 """report.overload: when a run says it did not keep up."""
 
-from zswarm.results import overload, OVERLOAD_PCT, table
+from zswarm.results import OVERLOAD_PCT, overload, table
 
 
 def agents(*missed, steps=980, idle=0):

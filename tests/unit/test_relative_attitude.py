@@ -19,8 +19,8 @@ from agent.algorithms import relative_attitude_continuous as cont
 from agent.algorithms import relative_attitude_hybrid as hyb
 from agent.algorithms import relative_pose_hybrid as pose
 from agent.algorithms.relative_attitude_terms import EdgeData, relative_error
-from zswarm.math import so3
 from zswarm.families import synergistic as hybrid
+from zswarm.math import so3
 
 EDGES = ((1, 2), (2, 3), (3, 4), (4, 5))
 IDS = (1, 2, 3, 4, 5)

@@ -12,13 +12,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from zswarm.scenario import Header, ScenarioFile
 from zswarm.scenario.algorithm import StalePolicy
 from zswarm.scenario.clock import ClockSpec
 from zswarm.scenario.links import LinksTable, LinkTable
-from zswarm.scenario.world_config import CommandPolicy, NoiseTable, WorldTable
 from zswarm.scenario.reading import ScenarioError, _Ctx
-from zswarm.scenario import Header, ScenarioFile
 from zswarm.scenario.schema import Bounds, _unwrap, bounds
+from zswarm.scenario.world_config import CommandPolicy, NoiseTable, WorldTable
 
 TABLES = (ClockSpec, LinkTable, LinksTable, CommandPolicy, NoiseTable, WorldTable, StalePolicy, Header)
 BOUNDED = [

@@ -29,9 +29,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from zswarm.scenario import Scenario
 from zswarm.transport import keys, procutil
 from zswarm.transport.keys import SECRET_ENV
-from zswarm.scenario import Scenario
 
 PORT = 7447
 

@@ -24,10 +24,10 @@ from pathlib import Path
 from typing import IO, Any
 
 from zswarm import results
+from zswarm.scenario import Fault, Scenario, fault_actions
 from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport import secure as sec
 from zswarm.transport.bus import ZenohBus, zenoh_config
-from zswarm.scenario import Fault, Scenario, fault_actions
 from zswarm.util.quoting import one_line
 
 

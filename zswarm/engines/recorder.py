@@ -18,11 +18,11 @@ FINAL_STATS_WAIT_S = 8.0  # the recorder's wait for the processes' final stats a
 
 def command(args: argparse.Namespace) -> int:
     from zswarm import results
-    from zswarm.transport import run_control, wire
-    from zswarm.transport.bus import ZenohBus
     from zswarm.engines.launch import results_dir
     from zswarm.recording.capture import Recorder
     from zswarm.recording.mcap_io import RAW_SUFFIX
+    from zswarm.transport import run_control, wire
+    from zswarm.transport.bus import ZenohBus
 
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args, "recorder")

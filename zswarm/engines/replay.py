@@ -23,9 +23,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from zswarm.transport import keys, procutil, wire, wire_json
 from zswarm.recording.mcap_io import ALIVE_CHANNEL, MALFORMED_CHANNEL, ViewerOut, read, recorded_run_id
 from zswarm.scenario import Scenario
+from zswarm.transport import keys, procutil, wire, wire_json
 
 log = logging.getLogger("zswarm.engines.replay")
 

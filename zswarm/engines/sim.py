@@ -14,11 +14,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from zswarm.transport import keys, procutil, run_control, wire
-from zswarm.util import plugins
-from zswarm.transport.bus import MemoryBus
 from zswarm.recording.capture import Recorder
 from zswarm.scenario import Scenario, fault_actions
+from zswarm.transport import keys, procutil, run_control, wire
+from zswarm.transport.bus import MemoryBus
+from zswarm.util import plugins
 
 LEAN_SKIP = ("sense/", "edge/", "cmd/")
 # Messages the recorder of a sim holds to write the viewer file after the run (Recorder's

@@ -43,11 +43,11 @@ from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
+from zswarm.report import base
 from zswarm.util import plugins
 from zswarm.util.plugins import FAMILY_GROUP as GROUP
 from zswarm.util.plugins import OWN_FAMILIES as OWN
 from zswarm.util.plugins import family_module as module_of
-from zswarm.report import base
 
 if TYPE_CHECKING:
     import argparse

@@ -22,15 +22,16 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.util import files
 from zswarm.families.contract import Family, Recipe, Report, Sweep
-from zswarm.report import base, table as text
+from zswarm.report import base
+from zswarm.report import table as text
 from zswarm.report.decoded import Recording
 from zswarm.report.series import final_of_grid as _final
 from zswarm.report.series import held as _held
 from zswarm.report.series import max_over as _max
 from zswarm.report.series import settle_time
 from zswarm.scenario import Scenario
+from zswarm.util import files
 
 GRID_S = 0.01
 # Persistent excitation of edge (i, j) (Theorem 1, (10), Remark 2): ∫ |v_j,xy|² dt over a window

@@ -23,17 +23,18 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.util import files
-from zswarm.families.synergistic import HYBRID_PARAMS_5
 from zswarm.families.contract import Basin, Batched, Family, Recipe, Report, Sweep
 from zswarm.families.measure import FINAL_WINDOW_S, Context, Result, Truth, coarse_grid, rounded
-from zswarm.report import base, table as text
+from zswarm.families.synergistic import HYBRID_PARAMS_5
+from zswarm.report import base
+from zswarm.report import table as text
 from zswarm.report.decoded import Recording
 from zswarm.report.series import final_of_grid as _final
 from zswarm.report.series import held as _held
 from zswarm.report.series import leave_time, settle_time
 from zswarm.report.series import norm_I as _norm_I
 from zswarm.scenario import Scenario
+from zswarm.util import files
 
 GRID_S = 0.01
 BASIN_GRID_S = GRID_S  # basin_series' grid (the batched engine measures on it too)

@@ -29,8 +29,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from zswarm.scenario.algorithm import InitialField
 from zswarm.math.so3 import Mat3, Ra, Vec3, psi, trace
+from zswarm.scenario.algorithm import InitialField
 
 # The thesis' parameters of the §4.5 and §5.6 hybrid schemes (zswarm generate's recipes).
 HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}

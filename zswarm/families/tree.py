@@ -23,15 +23,16 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.util import files
+from zswarm.families.contract import Basin, Batched, Command, Family, Recipe, Report
 from zswarm.families.synergistic import HYBRID_PARAMS_4, design_arguments, design_command
 from zswarm.families.tree_measures import BASIN_GRID_S, TreeStamps, TreeTicks
-from zswarm.families.contract import Basin, Batched, Command, Family, Recipe, Report
-from zswarm.report import base, table as text
+from zswarm.math.so3 import nearest_rotations
+from zswarm.report import base
+from zswarm.report import table as text
 from zswarm.report.decoded import Recording, estimates_with_truth
 from zswarm.report.series import final, settle_time
 from zswarm.scenario import Scenario
-from zswarm.math.so3 import nearest_rotations
+from zswarm.util import files
 
 
 @dataclass

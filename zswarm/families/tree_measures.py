@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.math.so3 import nearest_rotations
 from zswarm.families.measure import FINAL_WINDOW_S, Context, Published, Result, Ticks, Truths, coarse_grid, mean_rows, nanmean_of, rounded, truth_at
+from zswarm.math.so3 import nearest_rotations
 
 BASIN_GRID_S = 0.01  # s: the basin series' grid (tree_metrics' default step)
 

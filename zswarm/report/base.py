@@ -15,11 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.util import files
-from zswarm.report import fault_costs as faults, table as text
+from zswarm.report import fault_costs as faults
+from zswarm.report import table as text
 from zswarm.report.decoded import Recording
 from zswarm.report.series import nanmean, settle_time
 from zswarm.scenario import Scenario
+from zswarm.util import files
 
 # Default thresholds of the convergence times (summary.json "convergence", zswarm sweep):
 # |R̃|_I = sin(θ/2) below 1e-2 is θ < 1.15°; 0.1 m is 4 % of the §3.2 agents'

@@ -25,8 +25,8 @@ import msgpack
 import numpy as np
 
 from zswarm.math import so3
-from zswarm.transport import run_control, wire
 from zswarm.recording.mcap_io import ALIVE_CHANNEL, MALFORMED_CHANNEL, decode, read, unpack
+from zswarm.transport import run_control, wire
 
 
 @dataclass

@@ -21,13 +21,14 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from zswarm.families import contract as family
-from zswarm.util import files
 from zswarm.recording.mcap_io import ensure_recording
-from zswarm.report import fault_costs as faults, table as text
+from zswarm.report import fault_costs as faults
+from zswarm.report import table as text
 from zswarm.report.base import THRESHOLDS
 from zswarm.report.decoded import Recording, errors, load_recording, truth_gaps
 from zswarm.report.series import final
 from zswarm.scenario import Scenario
+from zswarm.util import files
 
 
 def final_mean(rows: np.ndarray, t_end: float, col: int, window: float = 1.0) -> float:

@@ -60,9 +60,9 @@ from zswarm.scenario.graph import GraphError, _sensing, _tree, check_leader_foll
 from zswarm.scenario.links import LinkSpec, LinksTable, _links, purposes
 from zswarm.scenario.motion_checks import _check_finite_over_run, _snapshots
 from zswarm.scenario.overrides import Override, _apply, parse_field, parse_override, parse_value, render
-from zswarm.scenario.world_config import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy, NoiseTable, WorldTable, _plant
 from zswarm.scenario.reading import ScenarioError, _Ctx, _user_code
 from zswarm.scenario.schema import Table, bounds
+from zswarm.scenario.world_config import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy, NoiseTable, WorldTable, _plant
 from zswarm.util.quoting import shown
 
 # Re-exported: the scenario's parts live with their subsystems; importers may keep asking here.

@@ -15,8 +15,8 @@ from zswarm.scenario.algorithm import AlgorithmSpec, InitialField
 from zswarm.scenario.clock import ClockSpec, _clock
 from zswarm.scenario.expr import Expr
 from zswarm.scenario.graph import SHAPES
-from zswarm.scenario.world_config import _inertia
 from zswarm.scenario.reading import _Ctx, _user_code
+from zswarm.scenario.world_config import _inertia
 from zswarm.util.quoting import toml_key
 
 

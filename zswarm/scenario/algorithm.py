@@ -44,10 +44,10 @@ from typing import Annotated, Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
-from zswarm.util import plugins
-from zswarm.scenario.schema import Table, bounds
-from zswarm.math.so3 import rotations_ok
 from zswarm.math.limits import ROT_TOL
+from zswarm.math.so3 import rotations_ok
+from zswarm.scenario.schema import Table, bounds
+from zswarm.util import plugins
 
 ENTRY_POINT_GROUP = "zswarm.algorithms"
 BUILTIN_PACKAGE = "agent.algorithms."  # where zswarm's own algorithms live (registered in pyproject.toml)

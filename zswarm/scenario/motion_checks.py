@@ -12,8 +12,8 @@ from zswarm.math import so3
 from zswarm.math.limits import MAX_ABS
 
 if TYPE_CHECKING:
-    from zswarm.scenario.agent_config import AgentSpec
     from zswarm.scenario import Formation
+    from zswarm.scenario.agent_config import AgentSpec
 
 
 # Motions are checked on this grid over the whole run (at most this many points): an

@@ -14,10 +14,10 @@ from typing import Annotated, Any, Literal
 import msgspec
 import numpy as np
 
+from zswarm.math.limits import MAX_ABS
 from zswarm.scenario.algorithm import AlgorithmSpec
 from zswarm.scenario.reading import _Ctx
 from zswarm.scenario.schema import Table, bounds
-from zswarm.math.limits import MAX_ABS
 
 # The world's plants and command policy (world/plant.py); imported lazily there to keep
 # the loader free of the world package's numerics.

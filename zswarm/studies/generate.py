@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 
 from zswarm.families import contract as zswarm_family
-from zswarm.transport import procutil
 from zswarm.families.contract import Recipe
-from zswarm.scenario.graph import SHAPES
 from zswarm.scenario import Scenario, ScenarioError, loads
+from zswarm.scenario.graph import SHAPES
+from zswarm.transport import procutil
 
 # The graphs a generator draws for each kind of graph an algorithm asks for (zswarm.scenario.graph.SHAPES):
 # with roles, a DAG of followers on lower-numbered in-neighbours; an oriented tree (head the

@@ -17,8 +17,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from zswarm.util.files import RecordingError
 from zswarm.scenario import Override, Scenario, ScenarioError, load
+from zswarm.util.files import RecordingError
 from zswarm.util.quoting import one_line
 
 EXIT_USAGE = 2

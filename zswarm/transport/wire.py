@@ -17,12 +17,35 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from zswarm.transport.wire_schema import (  # the types and bounds, which users read as wire.X
-    ENVELOPE, MAX_COUNTER_ITEMS, MAX_ID, MAX_IDS, MAX_OPEN, MAX_SEQ, MAX_VALUE_LEN, OPEN, SCHEMAS, UNIT_TOL, VERSION, _F8, _FIELDS, _MISSING, _OPTIONAL_OF, Message, MessageError, _arr, _dec_value, _enc_value, _finite, _id, _Slow,
-)
 from zswarm.math.limits import MAX_ABS, ROT_TOL  # (ROT_TOL: see _check_semantic)
-from zswarm.transport import keys
 from zswarm.math.so3 import _rotation_ok, rotations_ok
+from zswarm.transport import keys
+from zswarm.transport.wire_schema import (  # the types and bounds, which users read as wire.X
+    _F8,
+    _FIELDS,
+    _MISSING,
+    _OPTIONAL_OF,
+    ENVELOPE,
+    MAX_COUNTER_ITEMS,
+    MAX_ID,
+    MAX_IDS,
+    MAX_OPEN,
+    MAX_SEQ,
+    MAX_VALUE_LEN,
+    OPEN,
+    SCHEMAS,
+    UNIT_TOL,
+    VERSION,
+    Message,
+    MessageError,
+    _arr,
+    _dec_value,
+    _enc_value,
+    _finite,
+    _id,
+    _Slow,
+)
+
 
 def encode(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> bytes:
     """Encode a message of type ``mtype`` from incarnation ``inc`` of ``src``; arrays may be numpy arrays."""

@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from zswarm.families import sync
-from zswarm.families.synergistic import HYBRID_PARAMS_5
 from zswarm.families.contract import Basin, Batched, Command, Family, Recipe, Sweep
 from zswarm.families.measure import Context, Result, Truth
+from zswarm.families.synergistic import HYBRID_PARAMS_5
 from zswarm.report.series import final_of_grid, settle_time
 
 STILL = 0.01  # rad/s: "at rest"
