@@ -144,8 +144,9 @@ def test_the_loader_and_the_command_line_stay_small():
 # scenario's (zswarm.families.contract).  Checked on the code (names, attributes and strings; docstrings
 # and comments may cite the families as examples).
 STUDIES_AND_ENGINES = (
-    "zswarm/studies/sweep.py", "zswarm/studies/basin.py", "zswarm/studies/step_size.py", "zswarm/studies/generate.py", "zswarm/engines/sim.py", "zswarm/engines/launch.py", "zswarm/cli.py",
-    "zswarm/engines/cluster.py", "zswarm/families/measure.py", "zswarm/families/contract.py", "agent/batched.py", "agent/batched_links.py",
+    *sorted(str(p.relative_to(ROOT)) for d in ("studies", "engines", "results") for p in (ROOT / "zswarm" / d).glob("*.py")),
+    "zswarm/cli.py", "zswarm/families/measure.py", "zswarm/families/contract.py",
+    *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "agent").glob("batched*.py")),
 )
 FAMILY_NAMES = re.compile(r"\b(sync|tree|leader_follower|formation|synchronization)\b")
 

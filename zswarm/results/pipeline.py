@@ -353,5 +353,6 @@ def write_summary(path: Path, summary: Mapping[str, Any]) -> None:
 
 def table(summary: dict[str, Any]) -> str:
     """The summary table printed at the end of a run: its title, its family's lines, the footer."""
-    fam = family.resolve(summary.get("report_family", "leader_follower"))
+    # (a summary.json older than report_family: the defaults every family falls back on)
+    fam = family.resolve(summary["report_family"]) if "report_family" in summary else family.Family()
     return "\n".join([text.title(summary), *fam.table_lines(summary), *text.footer_lines(summary)])
