@@ -21,7 +21,11 @@ PACKAGES = ("zswarm", "agent", "world")
 # zswarm.processes (zswarm.util.plugins.process_class), as it gets algorithms and report families.
 UP_ARROWS_ALLOWED: set[tuple[str, str]] = set()
 # Modules that must not decide by the algorithm's graph, params or plant what to compute.
-ASK_THE_FAMILY = ("zswarm/studies/basin.py", "zswarm/studies/sweep.py", "zswarm/studies/step_size.py", "zswarm/engines/sim.py", "zswarm/engines/launch.py", "zswarm/cli.py", "zswarm/results/pipeline.py", "zswarm/report/base.py", "zswarm/families/contract.py", "zswarm/report/decoded.py", "zswarm/report/fault_costs.py")
+ASK_THE_FAMILY = (
+    *sorted(str(p.relative_to(ROOT)) for d in ("studies", "engines", "results", "report") for p in (ROOT / "zswarm" / d).glob("*.py")),
+    "zswarm/cli.py",
+    "zswarm/families/contract.py",
+)
 SNIFFING = re.compile(r"is_sync\(|is_formation\(|info\.graph\b|info\.params\b|\.plant\s*==|report_sync|report_formation")
 
 
