@@ -42,12 +42,6 @@ DRAWS = (0, 1, 2, 3)  # draw 0: the thesis' start on the undesired set; 1-3 unif
 TOL = 1e-9
 
 
-def _grid(sc):
-    """The batched engine's basin grid for the scenario's family (its Basin's, else the report's 0.1 s)."""
-    b = family.of(sc).basin
-    return b.grid_s if b is not None else report.GRID_S
-
-
 def _draws(stem):
     topo = str(TOPO / f"{stem}.toml")
     base = load(topo)
@@ -139,7 +133,7 @@ def test_bearing_observers_are_sim_draw_by_draw(stem):
             ovs.append(parse_override(f"agents[{n}].estimate.R={basin._rows(R)}"))
             ovs.append(parse_override(f"agents[{n}].estimate.p={rng.uniform(-3, 3, 3).tolist()}"))
         scs.append(load(topo, ovs))
-    res = batched.run(scs, DURATION, base.seed, _grid(base), rows=True)
+    res = batched.run(scs, DURATION, base.seed, family.of(base).grid_s, rows=True)
     for n, sc in enumerate(scs):
         rec = report.load_recording(simulate(sc, Path("."), DURATION, sc.seed, lean=True, record=False))
         assert _square_gap(sc, rec, res, n) <= TOL, (stem, n)
@@ -188,7 +182,7 @@ def test_draws_of_their_own_gains_are_sim_draw_by_draw(stem):
     names = GAINS[stem]
     runs = [(1.0, 1), (0.5, 1), (2.0, 2), (1.0, 3)]  # (factor on the scenario's gains, seed)
     scs = [load(topo, [parse_override(f"algorithm.gains.{g}={base.gains[g] * f}") for g in names]) for f, _ in runs]
-    res = batched.run(scs, 2.0, 0, _grid(base), seeds=[s for _, s in runs], rows=True)
+    res = batched.run(scs, 2.0, 0, family.of(base).grid_s, seeds=[s for _, s in runs], rows=True)
     for n, (sc, (_, seed)) in enumerate(zip(scs, runs, strict=True)):
         rec = report.load_recording(simulate(sc, Path("."), 2.0, seed, lean=True, record=False))
         assert _square_gap(sc, rec, res, n) <= TOL, (stem, n)
@@ -239,7 +233,7 @@ def test_draws_of_their_own_seeds_and_noise_are_sim_draw_by_draw(stem):
     v0 = getattr(base, field)
     runs = [(v0, 11), (2 * v0, 12), (v0 / 2, 11), (v0, 11), (v0, 13)]  # (variance, seed)
     scs = [load(topo, [parse_override(f"noise.{field}={v}"), parse_override(f"noise.gyro_var={v / v0 * max(base.gyro_var, 0.005)}")]) for v, _ in runs]
-    res = batched.run(scs, 2.0, 0, _grid(base), seeds=[s for _, s in runs])
+    res = batched.run(scs, 2.0, 0, family.of(base).grid_s, seeds=[s for _, s in runs])
     for n, (sc, (_, seed)) in enumerate(zip(scs, runs, strict=True)):
         rec = report.load_recording(simulate(sc, Path("."), 2.0, seed, lean=True, record=False))
         assert _square_gap(sc, rec, res, n) <= TOL, (stem, n)

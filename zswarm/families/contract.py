@@ -189,6 +189,12 @@ class Family:
     commands: tuple[Command, ...] = ()
     name: str = ""
 
+    @property
+    def grid_s(self) -> float:
+        """The grid of the family's basin measure (its Basin's; without one, the report's 0.1 s):
+        what the batched engine measures its draws on."""
+        return self.basin.grid_s if self.basin is not None else base.GRID_S
+
     # The report's functions, its own or zswarm.report.base's.
     def __getattr__(self, name: str) -> Any:
         if name in _REPORT:

@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from zswarm import report
 from zswarm.families import contract as family
 from zswarm.scenario import Override, Scenario, load, loads
 from zswarm.studies.sweep import Job, Vary, _fmt, _job_row, _median, _open, columns
@@ -85,7 +84,7 @@ def run_batch(source: tuple[str, str], batch: Sequence[Job], duration: float, th
         scs.append(loaded[j.overrides])
     sc = scs[0]
     fam = family.of(sc)
-    res = plugins.engine("batched").run(scs, duration, 0, fam.basin.grid_s if fam.basin is not None else report.GRID_S, seeds=[j.seed for j in batch], rows=True)
+    res = plugins.engine("batched").run(scs, duration, 0, fam.grid_s, seeds=[j.seed for j in batch], rows=True)
     wall = round((time.monotonic() - t0) / len(batch), 3)
     hybrid = bool(getattr(sc.params, "Xi", ()))  # summary.json's jumps_total: the hybrid schemes' ξ_k
     commanded = res.commands > 0  # the agents command the world: summary.json has their "->world" links

@@ -84,7 +84,7 @@ class SpinMeasure:
 
     def __init__(self, ctx: Context) -> None:
         self.edges = sync.TruthEdges(ctx)  # the generic columns: max_k |R̄_k|_I, its finals
-        self.every = max(1, round(ctx.grid_s * ctx.sc.sensor_rate))
+        self.every = self.edges.every  # the samples on the basin grid
         self.t: list[float] = []
         self.s: list[np.ndarray] = []
 
