@@ -15,6 +15,7 @@ from typing import Any
 
 from agent.runtime import AgentNode, run_realtime
 from zswarm.scenario.clock import WallClock
+from zswarm.scenario.programs import agent_program
 from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport.bus import ZenohBus
 
@@ -40,6 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     log = procutil.setup_logging(f"agent-{args.id}")
     run = keys.check_run_id(args.run_id)
     seed = sc.seed if args.seed is None else args.seed
+    program = agent_program(sc, args.id, seed)  # all this process runs on (it keeps nothing else of the scenario)
+    del sc
     clock: list[WallClock] = []
     started = threading.Event()
     start: dict[str, Any] = {}
@@ -102,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         # Handlers only once the session is open: until then SIGTERM's default
         # action ends the process at once, even inside a connect wait.
         stop = procutil.stop_on_signals()
-        node = AgentNode(sc, args.id, bus, run, seed, now=lambda: clock[0].now() if clock else 0.0, inc=procutil.incarnation())
+        node = AgentNode(program, bus, run, now=lambda: clock[0].now() if clock else 0.0, inc=procutil.incarnation())
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.subscribe(keys.ctl(run, "stop"), on_stop)
         bus.watch_alive(keys.alive(run, "world", 0), on_world)

@@ -55,7 +55,6 @@ from agent.batched_sensing import NOISES, _DrawSensorLinks, _measure_draws, _Noi
 from agent.batched_steps import _step, _step_groups, _tick_draws
 from agent.batched_view import BatchedView
 from agent.inbox import RECENT_EDGE_MESSAGES
-from agent.runtime import setup
 from world.motion import prescribed, prescribed_key
 from world.node import PLAN_SAMPLES, Sensing
 from world.plant import RigidBodyPlant
@@ -66,6 +65,7 @@ from zswarm.scenario import Scenario, ScenarioText
 from zswarm.scenario.agent_config import Estimate
 from zswarm.scenario.algorithm import jumps as has_jumps
 from zswarm.scenario.links import LinkSpec
+from zswarm.scenario.programs import agent_program, world_program
 
 SENSORS = frozenset({"gyro", "rel_att", "attitude", "bearings", "position", "velocity"})  # what the batched world measures
 PER_DRAW_SENSORS = frozenset({"gyro", "rel_att", "attitude"})  # ... on a truth per draw (rigid bodies)
@@ -229,11 +229,12 @@ def run(
     plant: Any
     sensing: Sensing | None = None
     if shared:
-        key = prescribed_key(sc)
-        if any(prescribed_key(d) != key for d in draws[1:]):
+        world = world_program(sc, seeds[0])
+        key = prescribed_key(world)
+        if any(prescribed_key(world_program(d, seeds[0])) != key for d in draws[1:]):
             raise Unsupported("draws whose prescribed truths differ (the batched engine simulates it once for all)")
-        plant = prescribed(sc)
-        sensing = Sensing(sc, seeds[0])  # the world's sensors, its generators (one noise) and draw order
+        plant = prescribed(world)
+        sensing = Sensing(world)  # the world's sensors, its generators (one noise) and draw order
     else:
         R0 = np.array([[a.R_matrix for a in d.agents] for d in draws])  # (M, n, 3, 3)
         w0 = np.array([[a.omega0 for a in d.agents] for d in draws])
@@ -264,12 +265,12 @@ def run(
                 items |= {"bearing": len(sensing.pairs_of[i]) * ("bearings" in want[i]), "velocity": sc.moving and "velocity" in want[i]}
             noise[i] = _Noise(seeds, i, std, {f: int(c) for f, c in items.items()}, one_noise)
     for i in ids:
-        per = [setup(d, i, s) for d, s in zip(draws, seeds, strict=True)]
-        modules[i], _, tree_edges, _ = per[0]
-        gains[i] = draw_gains(modules[i], [p[1] for p in per])
+        per = [agent_program(d, i, s) for d, s in zip(draws, seeds, strict=True)]
+        modules[i], tree_edges = per[0].algorithm, per[0].tree_edges
+        gains[i] = draw_gains(modules[i], [p.gains for p in per])
         spec_parts = modules[i].SPEC.parts
         parts[i] = spec_parts[0] if spec_parts else None  # None: a leader that only publishes
-        states[i] = stack([modules[i].initial_state(p[3], gains[i]) for p in per])
+        states[i] = stack([modules[i].initial_state(p.initial, gains[i]) for p in per])
         views[i] = BatchedView(sc, i, tree_edges, inboxes[i], histories[i], packets[i] if shared else None)
     hybrid = has_jumps(sc.info)
     # A sensor delay (the same on every sensor link: batched_links.per_draw_sensors): the packets' releases

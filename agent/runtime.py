@@ -21,18 +21,17 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from functools import partial
-from types import MappingProxyType, ModuleType
 from typing import Any
 
 import numpy as np
 
 from agent.inbox import MAX_NEIGHBOR_EVENTS, Inbox, step_ends
 from agent.tick_view import TickView
-from zswarm.scenario import Scenario
-from zswarm.scenario.algorithm import AlgorithmSpec, Initial, Part, Publish, initial_value, jumps, make_gains
+from zswarm.scenario.algorithm import AlgorithmSpec, Part, Publish, jumps
 from zswarm.scenario.clock import AgentClock
 from zswarm.scenario.links import LinkModel
-from zswarm.transport import keys, wire, wire_fast
+from zswarm.scenario.programs import AgentProgram
+from zswarm.transport import keys, wire_fast
 from zswarm.transport.bus import Bus
 
 log = logging.getLogger("zswarm.agent")
@@ -96,7 +95,7 @@ class _PartState:
 
     def __init__(self, part: Part, clock_rate: float, scale: float = 1.0) -> None:
         self.part = part
-        self.rate = part.rate * scale if part.rate is not None else None  # Hz (Scenario.part_rate_scale)
+        self.rate = part.rate * scale if part.rate is not None else None  # Hz (AgentProgram.part_rate_scale)
         self.last = 0.0
         self.steps = 0  # steps taken after the first tick (the achieved rate, in the stats)
         self.t_first: float | None = None
@@ -106,66 +105,39 @@ class _PartState:
         self.min_gap = 1.0 / self.rate - 0.5 / clock_rate if self.rate is not None else 0.0
 
 
-def setup(scenario: Scenario, agent_id: int, seed: int) -> tuple[ModuleType, Any, dict[int, tuple[int, bool]], Initial]:
-    """What agent ``agent_id`` runs: its algorithm module, its Gains (its gains, and the
-    scenario's params onto the Gains fields of the same names), its tree edges (§4: neighbour
-    j -> (edge index k, whether it heads k and owns ξ_k)) and its :class:`Initial`; shared by
-    :class:`AgentNode` and the batched engine (agent/batched.py)."""
-    spec = scenario.agent(agent_id)
-    algo: ModuleType = scenario.module_for(spec.role)
-    aspec: AlgorithmSpec = algo.SPEC
-    values: dict[str, Any] = dict(spec.gains)
-    if scenario.params is not None:  # [algorithm.params]: onto the Gains fields of the same names
-        values.update(scenario.params.gains(scenario.ids))
-    gains = make_gains(algo, values)
-    tree_edges: dict[int, tuple[int, bool]] = {}
-    for k, (h, t) in enumerate(scenario.oriented, start=1):
-        if agent_id in (h, t):
-            tree_edges[t if h == agent_id else h] = (k, h == agent_id)
-    est = spec.estimate
-    init = Initial(
-        agent_id,
-        MappingProxyType({name: initial_value(f, est.get(name, f.default)) for name, f in aspec.initial.items()}),
-        est.stated,
-        tree_edges,
-        {a.id: {n: a.estimate[n] for n in a.estimate.stated} for a in scenario.agents},
-        seed,
-        np.array(spec.p),
-    )
-    return algo, gains, tree_edges, init
-
-
 class AgentNode:
     """One agent: subscribes to its sensor key and in-edges, steps its algorithm on its own clock."""
 
-    def __init__(self, scenario: Scenario, agent_id: int, bus: Bus, run: str, seed: int, now: Callable[[], float], inc: int = 0) -> None:
-        self.sc = scenario
+    def __init__(self, program: AgentProgram, bus: Bus, run: str, now: Callable[[], float], inc: int = 0) -> None:
+        """``program``: everything this agent runs on (zswarm.scenario.programs.agent_program)."""
+        self.program = program
+        agent_id = program.id
         self.inc = inc  # this process's incarnation, in every message it sends (wire.py)
-        self.stale = scenario.stale
+        self.stale = program.stale
         self.stale_terms: dict[int, int] = {}  # per in-neighbour: terms evaluated on a message older than max_age
         self.id = agent_id
-        self.spec = scenario.agent(agent_id)
         self.run = run
-        self.algo, self.gains, self.tree_edges, init = setup(scenario, agent_id, seed)
-        self.aspec: AlgorithmSpec = self.algo.SPEC
-        self.state = self.algo.initial_state(init, self.gains)
-        self.parts = [_PartState(p, self.spec.clock.rate, scenario.part_rate_scale) for p in self.aspec.parts]
+        self.algo, self.gains, self.tree_edges = program.algorithm, program.gains, program.tree_edges
+        self.aspec: AlgorithmSpec = program.spec
+        self.state = self.algo.initial_state(program.initial, self.gains)
+        self.parts = [_PartState(p, program.clock.rate, program.part_rate_scale) for p in self.aspec.parts]
         self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
         self.jump_count: dict[int, int] = {}
         self.agent_jumps: list[tuple[int, float, float, float]] = []  # (this id, t, ζ before, ζ after) not yet published
         self.agent_jump_count = 0
-        self.clock = AgentClock(self.spec.clock, seed=(seed * 1000003 + agent_id) % (1 << 63))
-        self.out = scenario.out_neighbors(agent_id)
+        self.clock = AgentClock(program.clock, seed=program.clock_seed)
+        self.out = program.out_neighbors
+        links, seed = program.links, program.seed
         self.inbox = Inbox(
             f"zswarm.agent.{agent_id}",
             lambda: self.clock.local(now()),
-            (lambda name: LinkModel(scenario.link_spec(name), name, seed)) if scenario.links_active else None,
+            (lambda name: LinkModel(links[name], name, seed)) if links is not None else None,
         )
         sense_link = f"world->{agent_id}"
         bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire_fast.decoder("sense"), sender=lambda link: 0), direct=False)
-        if self.spec.neighbors:
+        if program.neighbors:
             edge_in = {n: (f.shape, f.optional) for n, f in self.aspec.edge_in.items()}
-            handler = self.inbox.handler("edge", _edge_links(agent_id, self.spec.neighbors), self.aspec.check_edge, wire_fast.decoder("edge", edge_in), sender=_edge_sender)
+            handler = self.inbox.handler("edge", _edge_links(agent_id, program.neighbors), self.aspec.check_edge, wire_fast.decoder("edge", edge_in), sender=_edge_sender)
             bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         # Detection: an in-neighbour whose liveliness token goes (its process died, or hung past
@@ -202,7 +174,7 @@ class AgentNode:
         # Own clock from a tick to its command's put, last 16 (0 in sim, whose ticks take no
         # time): the part of the command's way to the world that the sensors' transit lacks.
         self.send_delays: deque[float] = deque(maxlen=16)
-        for j in self.spec.neighbors:  # last: a MemoryBus calls back at once for tokens already up
+        for j in program.neighbors:  # last: a MemoryBus calls back at once for tokens already up
             bus.watch_alive(keys.alive(run, "agent", j), partial(self._on_neighbor, j))
 
     def _on_neighbor(self, j: int, key: str, up: bool) -> None:
@@ -387,7 +359,7 @@ class AgentNode:
         local = self.clock.local
         packets = [(local(p["t"]), p) for p in self.inbox.recent_packets(self.clock.world(self.t_step))]
         newest_before = packets[0][1] if packets else self.inbox.get(self.sense_link)
-        return step_ends(packets, self.t_step, t_end, 1.0 / self.spec.clock.rate, newest_before)
+        return step_ends(packets, self.t_step, t_end, 1.0 / self.program.clock.rate, newest_before)
 
     def _send(self, pub: Publish, t_world: float, t_local: float) -> None:
         """Publish at the tick ``t_local`` (the links' send stamp) what refers to ``t_world``."""
@@ -429,7 +401,7 @@ class AgentNode:
         c = self.inbox.counters()
         c.update(
             {
-                "role": self.spec.role,
+                "role": self.program.role,
                 "steps": self.steps,
                 "step_rate_hz": (self.steps - 1) / span if span > 0 else 0.0,
                 "missed_deadlines": self.missed,
@@ -450,7 +422,7 @@ class AgentNode:
                 ps.part.name: {
                     "steps": ps.steps,
                     "rate_hz": (ps.steps - 1) / (ps.last - ps.t_first) if ps.t_first is not None and ps.last > ps.t_first else 0.0,
-                    "configured_hz": ps.rate if ps.rate is not None else self.spec.clock.rate,
+                    "configured_hz": ps.rate if ps.rate is not None else self.program.clock.rate,
                 }
                 for ps in self.parts
             }

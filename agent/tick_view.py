@@ -40,15 +40,15 @@ class TickView(timing.HistoryReads):
 
     def __init__(self, node: AgentNode) -> None:
         self._node = node
-        sc, a = node.sc, node.spec
+        a = node.program
         self.id = node.id
         self.role = a.role
         self.neighbors = a.neighbors
-        self.senses = sc.sensed(node.id)
+        self.senses = a.senses
         self.k_neighbors = a.k_neighbors
         self.out_neighbors = node.out
         self.tree_edges = node.tree_edges
-        self.moving = sc.moving
+        self.moving = a.moving
         self._links = {j: f"{j}->{node.id}" for j in a.neighbors}
         self.t = self.t_world = self.dt = 0.0
         self.period = 1.0 / a.clock.rate

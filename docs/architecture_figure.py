@@ -20,6 +20,7 @@ OUT = ROOT / "docs" / "figures" / "architecture.png"
 PATH = (
     ("scenario.toml", "agents, graph, algorithm and gains, world, sensors, clocks, links, faults"),
     ("zswarm.scenario.load", "a typed, checked Scenario (file: field: problem, exit 2)"),
+    ("programs", "one per process: AgentProgram (its entry, algorithm, typed gains, links), WorldProgram"),
     ("processes", "world (truth, sensors), one agent per process (AgentNode + the algorithm's step), recorder"),
     ("Zenoh bus", "keys from the graph's edges; at each receiver the link model (delay, jitter, loss, cuts)"),
     ("recorder", "recording.mcap: every message, truth, link events (Foxglove, Rerun)"),
@@ -60,18 +61,21 @@ def main() -> Path:
         ax.add_patch(FancyBboxPatch((0.3, y - h), 7.6, h, boxstyle="round,pad=0.02", fc=color, ec="#4a6a8a", lw=0.8))
         ax.text(0.45, y - 0.2, name, fontsize=10.5, weight="bold", va="center")
         ax.text(1.85, y - 0.2, job, fontsize=8, va="center", color="#333")
-        ax.text(0.45, y - 0.48, "  ".join(mods), fontsize=7.5, va="center", family="monospace", color="#1f3d5c")
+        listing = "  ".join(mods)
+        # 7.5 pt monospace fills the box's width at about 105 characters: a longer list is set smaller.
+        ax.text(0.45, y - 0.48, listing, fontsize=min(7.5, 7.5 * 105 / len(listing)), va="center", family="monospace", color="#1f3d5c")
     y_last = top - len(rows) * (h + gap)
     ax.text(0.3, y_last - 0.05, "agent/ (the agent program, algorithms, the batched engine) and world/ (truth, sensors) import zswarm;\nzswarm imports neither: sim and the batched engine find them by entry point.", fontsize=8, va="top", color="#333")
 
     # Right: one run's data path.
     ax.text(8.6, 8.95, "one run: from the file to the figures", fontsize=11, weight="bold", va="center")
-    bh, bgap = 0.82, 0.36
+    bh = 0.74
+    bgap = (8.55 - 0.25 - len(PATH) * bh) / (len(PATH) - 1)  # the column fills the page down to its margin
     for k, (what, detail) in enumerate(PATH):
         y = 8.55 - k * (bh + bgap)
         ax.add_patch(FancyBboxPatch((8.6, y - bh), 6.1, bh, boxstyle="round,pad=0.02", fc="#eaf5e4", ec="#4f7a3a", lw=0.8))
-        ax.text(8.75, y - 0.27, what, fontsize=10, weight="bold", va="center")
-        ax.text(8.75, y - 0.58, detail, fontsize=7.8, va="center", color="#333")
+        ax.text(8.75, y - 0.25, what, fontsize=10, weight="bold", va="center")
+        ax.text(8.75, y - 0.53, detail, fontsize=7.8, va="center", color="#333")
         if k:
             ax.add_patch(FancyArrowPatch((11.65, y + bgap - 0.02), (11.65, y + 0.02), arrowstyle="-|>", mutation_scale=12, color="#4f7a3a"))
     fig.savefig(OUT, dpi=110)

@@ -14,7 +14,8 @@ import time
 
 from world.node import World
 from zswarm.scenario.clock import WallClock
-from zswarm.transport import keys, procutil, run_control, wire
+from zswarm.scenario.programs import world_program
+from zswarm.transport import keys, procutil, run_control
 from zswarm.transport.bus import ZenohBus
 
 START_LEAD_S = 0.5  # wall seconds between the start announcement and the epoch
@@ -57,11 +58,13 @@ def main(argv: list[str] | None = None) -> int:
     seed = sc.seed if args.seed is None else args.seed
     duration = sc.duration if args.duration is None else args.duration
     run = keys.check_run_id(args.run_id)
+    program = world_program(sc, seed)  # all this process runs on (it keeps nothing else of the scenario)
+    del sc
     with ZenohBus(conf) as bus:
         # Handlers only once the session is open: until then SIGTERM's default
         # action ends the process at once, even inside a connect wait.
         stop = procutil.stop_on_signals()
-        world = World(sc, bus, run, seed, inc=procutil.incarnation())
+        world = World(program, bus, run, inc=procutil.incarnation())
         pub_start = bus.publisher(keys.ctl(run, "start"))
         pub_stop = bus.publisher(keys.ctl(run, "stop"), block=True)  # sent once: wait rather than drop
         pub_progress = bus.publisher(keys.ctl(run, "progress"))
@@ -78,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         world.counters()  # once: see procutil.warm_up
         procutil.warm_up()
         bus.declare_token(keys.alive(run, "world", 0))
-        need = {("agent", i) for i in sc.ids} | ({("recorder", 0)} if args.wait_for_recorder else set())
+        need = {("agent", i) for i in program.ids} | ({("recorder", 0)} if args.wait_for_recorder else set())
         deadline = time.monotonic() + args.startup_timeout
         log.info("waiting for %d processes on run %r", len(need), run)
         while not need <= alive:
@@ -111,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                 if world.next_time() > duration + 1e-9:
                     break
             world.sample()
-            if world.k % max(1, round(sc.sensor_rate)) == 0:
+            if world.k % max(1, round(program.sensor_rate)) == 0:
                 world.publish_stats(t)
             if time.monotonic() >= next_announce:
                 # Re-announce so that a late (re)started process can join the run.

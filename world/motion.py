@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from zswarm.math.so3 import Ra, exp_batch
 from zswarm.scenario.expr import Expr
+from zswarm.scenario.programs import WorldProgram
 
 
 class PrescribedMotion:
@@ -169,22 +170,22 @@ class PrescribedMotion:
         self.t = t
 
 
-def prescribed_key(sc: Any) -> tuple[Any, ...]:
-    """What :func:`prescribed` makes a truth of: equal for scenarios that share their truth."""
-    f = sc.formation
-    agents = tuple((a.R_matrix.tobytes(), tuple(a.p), repr(a.omega), repr(a.velocity), tuple(a.gyro_bias)) for a in sc.agents)
-    return (sc.step, sc.sensor_rate, None if f is None else (tuple(f.axis), f.rate), agents)
+def prescribed_key(w: WorldProgram) -> tuple[Any, ...]:
+    """What :func:`prescribed` makes a truth of: equal for worlds that share their truth."""
+    f = w.formation
+    bodies = tuple((b.R_matrix.tobytes(), tuple(b.p), repr(b.omega), repr(b.velocity), tuple(b.gyro_bias)) for b in w.bodies)
+    return (w.step, w.sensor_rate, None if f is None else (tuple(f.axis), f.rate), bodies)
 
 
-def prescribed(sc: Any) -> PrescribedMotion:
-    """The truth of a scenario with the prescribed plant (a zswarm.scenario.Scenario): every
-    agent's R_i(0), p_i(0), ω_i(t) and v_i(t), and the formation's rotation."""
-    f = sc.formation
+def prescribed(w: WorldProgram) -> PrescribedMotion:
+    """The truth of a world with the prescribed plant: every body's R_i(0), p_i(0), ω_i(t)
+    and v_i(t), and the formation's rotation."""
+    f = w.formation
     return PrescribedMotion(
-        np.array([a.R_matrix for a in sc.agents]),
-        np.array([a.p for a in sc.agents]),
-        [a.omega for a in sc.agents],
-        sc.step,
+        np.array([b.R_matrix for b in w.bodies]),
+        np.array([b.p for b in w.bodies]),
+        [b.omega for b in w.bodies],
+        w.step,
         formation=None if f is None else (np.array(f.axis), f.rate),
-        velocity=[a.velocity for a in sc.agents],
+        velocity=[b.velocity for b in w.bodies],
     )

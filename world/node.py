@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from world import sensors
 from world.motion import PrescribedMotion, prescribed
 from world.plant import CommandInbox, KinematicPlant, RigidBodyPlant
-from zswarm.scenario import PLANT_INPUTS, Scenario
+from zswarm.scenario.programs import WorldProgram
+from zswarm.scenario.world_config import PLANT_INPUTS
 from zswarm.transport import keys
 from zswarm.transport.bus import Bus
 
@@ -37,23 +38,26 @@ class Sensing:
     relative attitudes, velocity, body velocity, attitude, relative positions), so a seed gives
     the same measurements on every engine (the world's processes, sim, the batched engine)."""
 
-    def __init__(self, scenario: Scenario, seed: int) -> None:
+    def __init__(self, program: WorldProgram) -> None:
+        bodies = program.bodies
         # What each agent's algorithm declares it measures (zswarm.scenario.algorithm.SENSORS).
-        self.sensors = {i: scenario.sensors_of(i) for i in scenario.ids}
+        self.sensors = {b.id: b.sensors for b in bodies}
         want = frozenset().union(*self.sensors.values())
         self.want_bearings = "bearings" in want
-        self.ids = list(scenario.ids)
+        self.ids = list(program.ids)
         self.index = {i: k for k, i in enumerate(self.ids)}
-        self.bias = np.array([a.gyro_bias for a in scenario.agents])
-        self.gyro_std = math.sqrt(scenario.gyro_var)
-        self.bearing_std = math.sqrt(scenario.bearing_var)
-        self.velocity_std = math.sqrt(scenario.velocity_var)
-        self.rel_att_std = math.sqrt(scenario.rel_att_var)
-        self.attitude_std = math.sqrt(scenario.attitude_var)
-        self.rel_pos_std = math.sqrt(scenario.rel_pos_var)
+        self.bias = np.array([b.gyro_bias for b in bodies])
+        noise = program.noise
+        self.gyro_std = math.sqrt(noise.gyro_var)
+        self.bearing_std = math.sqrt(noise.bearing_var)
+        self.velocity_std = math.sqrt(noise.velocity_var)
+        self.rel_att_std = math.sqrt(noise.rel_att_var)
+        self.attitude_std = math.sqrt(noise.attitude_var)
+        self.rel_pos_std = math.sqrt(noise.rel_pos_var)
+        seed = program.seed
         self.rngs = {i: np.random.default_rng([seed % (1 << 63), i]) for i in self.ids}
-        self.nbrs = {i: scenario.graph_neighbors(i) for i in self.ids}
-        self.sensed = {i: scenario.sensed(i) for i in self.ids}
+        self.nbrs = {b.id: b.bearing_to for b in bodies}
+        self.sensed = {b.id: b.senses for b in bodies}
         # Bearing pairs (i, j), in each agent's neighbour order (the noise draw order).
         pairs = [(i, j) for i in self.ids for j in self.nbrs[i]]
         self.pair_i = np.array([self.index[i] for i, _ in pairs], dtype=int)
@@ -91,7 +95,7 @@ class Sensing:
             if "position" in want:
                 m["position"] = p[a]
             if "rel_pos" in want:
-                # toward the robots i senses (Scenario.sensed): the sensing graph is directed
+                # toward the robots i senses (Body.senses): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
             out[i] = m
         return out
@@ -105,38 +109,30 @@ class World:
     gives the same measurements on every engine.
     """
 
-    def __init__(self, scenario: Scenario, bus: Bus, run: str, seed: int, now: Callable[[], float] | None = None, inc: int = 0) -> None:
+    def __init__(self, program: WorldProgram, bus: Bus, run: str, now: Callable[[], float] | None = None, inc: int = 0) -> None:
+        """``program``: everything the world runs on (zswarm.scenario.programs.world_program)."""
         self.inc = inc  # this process's incarnation, in every message it sends (wire.py)
-        self.sc = scenario
-        self.moving = scenario.moving
+        self.program = program
+        self.moving = program.moving
         self.run = run
         # World time, for the arrival of commands: virtual in sim; a run sets its clock
         # here once the epoch is announced (before that no agent sends a command).
         self.now: Callable[[], float] = now if now is not None else self.next_time
         self.commands: CommandInbox | None = None
         self.motion: PrescribedMotion | RigidBodyPlant | KinematicPlant
-        if scenario.plant == "kinematic":
-            self.commands = CommandInbox(
-                list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["kinematic"]
-            )
-            self.motion = KinematicPlant(np.array([a.R_matrix for a in scenario.agents]), np.array([a.p for a in scenario.agents]), scenario.step, self.commands)
-            bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
-        elif scenario.plant == "rigid_body":
-            self.commands = CommandInbox(
-                list(scenario.ids), lambda: self.now(), scenario.link_spec, seed, scenario.commands, PLANT_INPUTS["rigid_body"]
-            )
-            self.motion = RigidBodyPlant(
-                np.array([a.R_matrix for a in scenario.agents]),
-                np.array([a.p for a in scenario.agents]),
-                np.array([a.omega0 for a in scenario.agents]),
-                np.array([np.array(a.J).reshape(3, 3) for a in scenario.agents]),
-                scenario.step,
-                self.commands,
-            )
+        bodies = program.bodies
+        if program.plant in ("kinematic", "rigid_body"):
+            self.commands = CommandInbox(list(program.ids), lambda: self.now(), program.command_link, program.seed, program.commands, PLANT_INPUTS[program.plant])
+            R0, p0 = np.array([b.R_matrix for b in bodies]), np.array([b.p for b in bodies])
+            if program.plant == "kinematic":
+                self.motion = KinematicPlant(R0, p0, program.step, self.commands)
+            else:
+                J = np.array([np.array(b.J).reshape(3, 3) for b in bodies])
+                self.motion = RigidBodyPlant(R0, p0, np.array([b.omega0 for b in bodies]), J, program.step, self.commands)
             bus.subscribe(keys.cmds_all(run), self.commands.handler(_cmd_agent))
         else:
-            self.motion = prescribed(scenario)
-        self.sensing = Sensing(scenario, seed)
+            self.motion = prescribed(program)
+        self.sensing = Sensing(program)
         self.ids = self.sensing.ids
         self.pub_sense = {i: bus.publisher(keys.sense(run, i)) for i in self.ids}
         self.pub_truth = bus.publisher(keys.truth(run))
@@ -150,7 +146,7 @@ class World:
 
     @property
     def period(self) -> float:
-        return 1.0 / self.sc.sensor_rate
+        return 1.0 / self.program.sensor_rate
 
     def next_time(self) -> float:
         return self.k * self.period

@@ -48,8 +48,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from world.dynamics import RigidBodies
-from zswarm.scenario import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
 from zswarm.scenario.links import LinkCounter, LinkModel, LinkSpec
+from zswarm.scenario.world_config import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
 from zswarm.transport import wire, wire_fast
 
 __all__ = ["PLANTS", "PLANT_INPUTS", "COMMAND_POLICIES", "CommandPolicy", "CommandInbox", "RigidBodyPlant", "KinematicPlant"]

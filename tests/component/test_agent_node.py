@@ -9,6 +9,7 @@ from tests.conftest import TOPO
 from zswarm.math import so3
 from zswarm.scenario import load
 from zswarm.scenario.clock import ManualClock
+from zswarm.scenario.programs import agent_program
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
 
@@ -17,7 +18,7 @@ def setup():
     sc = load(TOPO / "thesis-3.2-fixed8.toml")
     bus = MemoryBus()
     clock = ManualClock()
-    node = AgentNode(sc, 3, bus, "t", 1, now=clock.now)
+    node = AgentNode(agent_program(sc, 3, 1), bus, "t", now=clock.now)
     got = []
     bus.subscribe("zswarm/t/**", lambda k, p: got.append((k, p)))
     return sc, bus, clock, node, got
@@ -202,7 +203,7 @@ def test_emulated_links_stay_fifo_when_a_message_is_released_on_arrival():
 
     sc = load(TOPO / "thesis-3.2-fixed8.toml")
     bus, clock = MemoryBus(), ManualClock()
-    node = AgentNode(sc, 3, bus, "t", 1, now=clock.now)
+    node = AgentNode(agent_program(sc, 3, 1), bus, "t", now=clock.now)
     node.inbox._link_model = lambda name: Scripted(sc.link_spec(name), name, 1)
     _feed(bus, sc, clock, 0.0)
     _feed(bus, sc, clock, 0.005)
@@ -219,7 +220,7 @@ def test_the_commands_lead_counts_the_agents_own_delay_and_none_on_catch_up_step
     sc = load(TOPO / "thesis-5.6-hybrid7.toml")
     bus, clock = MemoryBus(), ManualClock()
     busy = [0.0]  # how long a step takes: the clock moves on while the agent computes
-    node = AgentNode(sc, 3, bus, "t", 1, now=lambda: clock.now() + busy[0])
+    node = AgentNode(agent_program(sc, 3, 1), bus, "t", now=lambda: clock.now() + busy[0])
     leads = []
     orig = node._step_part
     node._step_part = lambda ps, dt: (leads.append(node.view.command_lead), busy.__setitem__(0, 0.002), orig(ps, dt))[2]

@@ -16,6 +16,7 @@ from zswarm.recording.capture import Recorder
 from zswarm.recording.mcap_io import read, run_streams
 from zswarm.scenario import load
 from zswarm.scenario.clock import ManualClock
+from zswarm.scenario.programs import agent_program, world_program
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
 
@@ -31,7 +32,7 @@ def _delivered(counters: dict) -> int:
 def test_an_agent_takes_every_message_without_crashing():
     sc = load(TOPO / "thesis-3.2-fixed8.toml")
     bus, clock = MemoryBus(), ManualClock()
-    node = AgentNode(sc, 3, bus, "f", 1, now=clock.now)
+    node = AgentNode(agent_program(sc, 3, 1), bus, "f", now=clock.now)
     targets = [keys.sense("f", 3), keys.edge("f", 1, 3), keys.edge("f", 2, 3), keys.edge("f", 9, 3), "zswarm/f/edge/x/3"]
     fz = Fuzzer(1, valid_for_agent(sc, 3))
     rng = np.random.default_rng(2)
@@ -54,7 +55,7 @@ def test_an_agent_takes_every_message_without_crashing():
 def test_the_world_takes_every_command_without_crashing():
     sc = load(TOPO / "thesis-5.6-hybrid7.toml")
     bus, t = MemoryBus(), [0.0]
-    world = World(sc, bus, "f", 1, now=lambda: t[0])
+    world = World(world_program(sc, 1), bus, "f", now=lambda: t[0])
     truth: list[bytes] = []
     bus.subscribe(keys.truth("f"), lambda k, p: truth.append(p))
     targets = [keys.cmd("f", i) for i in sc.ids] + [keys.cmd("f", 99), "zswarm/f/cmd/x"]

@@ -9,6 +9,7 @@ import pytest
 from world.node import World
 from world.plant import KinematicPlant
 from zswarm.scenario import ScenarioError, loads
+from zswarm.scenario.programs import world_program
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
 
@@ -48,7 +49,7 @@ def test_world_on_a_kinematic_plant_measures_relative_positions():
     bus = MemoryBus()
     got = {}
     bus.subscribe(keys.sense("r", 3), lambda key, payload: got.setdefault("m", payload))
-    w = World(sc, bus, "r", seed=1)
+    w = World(world_program(sc, 1), bus, "r")
     w.sensing.sensors = {i: s | {"rel_pos"} for i, s in w.sensing.sensors.items()}  # this observer declares no rel_pos; fit it
     assert isinstance(w.motion, KinematicPlant)
     w.sample()  # MemoryBus delivers synchronously

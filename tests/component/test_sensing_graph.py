@@ -9,6 +9,7 @@ import pytest
 from agent.runtime import AgentNode
 from world.node import World
 from zswarm.scenario import ScenarioError, load
+from zswarm.scenario.programs import agent_program, world_program
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import MemoryBus
 
@@ -92,7 +93,7 @@ def test_world_senses_along_the_directed_edges_and_agents_talk_both_ways(tmp_pat
     got = {}
     for i in sc.ids:
         bus.subscribe(keys.sense("r", i), lambda key, payload, i=i: got.setdefault(i, wire.decode(payload, "sense")))
-    World(sc, bus, "r", seed=1).sample()
+    World(world_program(sc, 1), bus, "r").sample()
     assert {i: set(m["rel_pos"]) for i, m in got.items()} == {1: {2}, 2: {3}, 3: {1, 4}, 4: set()}
-    node = AgentNode(sc, 4, bus, "r", seed=1, now=lambda: 0.0)
+    node = AgentNode(agent_program(sc, 4, 1), bus, "r", now=lambda: 0.0)
     assert node.view.senses == () and node.view.neighbors == (3,) and node.out == (3,)

@@ -188,7 +188,7 @@ def test_the_family_name_check_finds_a_family_name():
 LAYERS = {
     "util": "small helpers every layer uses: quoting, whole files, plugins by entry point",
     "math": "SO(3), its compiled loops, bit-stable trigonometry, the timing library, the bounds",
-    "scenario": "what an experiment is: the typed scenario file, graph, clocks, links, faults, the algorithm contract",
+    "scenario": "what an experiment is: the typed scenario file, graph, clocks, links, faults, the algorithm contract, each process's program",
     "transport": "talking over Zenoh and being a process: messages, keys, the Bus, TLS, process helpers",
     "recording": "MCAP recordings and the viewers: writing, reading, Foxglove messages, Rerun",
     "report": "the building blocks of a report: the decoded recording, series, the table, fault costs, defaults",
@@ -259,3 +259,20 @@ def test_the_architecture_page_names_every_module():
     page = (ROOT / "docs" / "architecture.md").read_text()
     missing = [f"{name}/{p.stem}" for name in LAYERS for p in (ROOT / "zswarm" / name).glob("*.py") if p.name != "__init__.py" and f"`{p.stem}`" not in page]
     assert missing == []
+
+
+# Issue 47 (a composed scenario): each process is built from its own program
+# (zswarm.scenario.programs: an agent's AgentProgram, the world's WorldProgram), never from the
+# whole Scenario.  Their __main__ loads the file and composes the program; the batched engine
+# (agent/batched*) runs whole scenarios of draws and is not a process.
+def _process_modules(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(m for m in graph if m.split(".")[0] in ("agent", "world") and not m.split(".")[-1].startswith(("batched", "__main__")))
+
+
+def test_the_processes_see_their_programs_not_the_scenario():
+    graph = _graph()
+    mods = _process_modules(graph)
+    assert {"agent.runtime", "agent.tick_view", "agent.inbox", "world.node", "world.plant", "world.motion"} <= set(mods)
+    assert [m for m in mods if "zswarm.scenario" in graph[m]] == []  # the package: Scenario and its loader
+    words = [f"{m}: {w}" for m in mods for _, w in _code_words(_modules()[m]) if w == "Scenario"]
+    assert words == []

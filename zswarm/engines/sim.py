@@ -16,7 +16,8 @@ from pathlib import Path
 
 from zswarm.recording.capture import Recorder
 from zswarm.scenario import Scenario, fault_actions
-from zswarm.transport import keys, procutil, run_control, wire
+from zswarm.scenario.programs import agent_program, world_program
+from zswarm.transport import keys, procutil, run_control
 from zswarm.transport.bus import MemoryBus
 from zswarm.util import plugins
 
@@ -87,11 +88,12 @@ def simulate(
         rerun=None if rerun is None else rerun_view.live(scenario, run, rerun),
     )
     World, AgentNode = plugins.process_class("world"), plugins.process_class("agent")  # noqa: N806 - classes
-    world = World(scenario, bus, run, seed, now=lambda: t_now[0])
+    world = World(world_program(scenario, seed), bus, run, now=lambda: t_now[0])
     # Each agent on a session of its own: a kill closes it (its subscriptions and token go,
     # as with a killed process's Zenoh session); a restart is a new session and node.
     sessions = {i: bus.session() for i in scenario.ids}
-    agents = {i: AgentNode(scenario, i, sessions[i], run, seed, now=lambda: t_now[0]) for i in scenario.ids}
+    programs = {i: agent_program(scenario, i, seed) for i in scenario.ids}  # a restart runs the same program
+    agents = {i: AgentNode(programs[i], sessions[i], run, now=lambda: t_now[0]) for i in scenario.ids}
     ctl_start = bus.publisher(keys.ctl(run, "start"))
     ctl_stop = bus.publisher(keys.ctl(run, "stop"))
     bus.declare_token(keys.alive(run, "world", 0))
@@ -127,7 +129,7 @@ def simulate(
                 elif action == "restart":
                     gen[i] += 1
                     sessions[i] = bus.session()
-                    a = agents[i] = AgentNode(scenario, i, sessions[i], run, seed, now=lambda: t_now[0], inc=gen[i])
+                    a = agents[i] = AgentNode(programs[i], sessions[i], run, now=lambda: t_now[0], inc=gen[i])
                     sessions[i].declare_token(keys.alive(run, "agent", i))
                     heapq.heappush(queue, (a.clock.first_tick(te), 1, i, gen[i]))
                     next_stats[i] = te + 1.0
@@ -147,7 +149,7 @@ def simulate(
                     # SIGSTOPped: nothing runs; arrivals wait in its inbox.  The tick is taken at
                     # the SIGCONT, late, and catches up as a late tick of a real process does.
                     cont = next(te for te, _, act, j in events if act == "cont" and j == who)
-                    a.missed += max(0, int((cont - t) * a.spec.clock.rate))
+                    a.missed += max(0, int((cont - t) * a.program.clock.rate))
                     heapq.heappush(queue, (cont, 1, who, g))
                     continue
                 a.tick(t)
