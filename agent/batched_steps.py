@@ -267,17 +267,20 @@ def _step(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: A
     if inputs is None:
         return None
     states[i], outputs = part.step(states[i], inputs, dt, gains)
-    _count_jumps(outputs, jumps, agent_jumps, np.ones(len(jumps), dtype=bool))
+    _count_jumps(outputs, view.declared_jumps, jumps, agent_jumps, np.ones(len(jumps), dtype=bool))
     return outputs
 
 
-def _count_jumps(outputs: Any, jumps: np.ndarray, agent_jumps: np.ndarray, G: np.ndarray) -> None:
-    """Count a step's jumps (``outputs.jumps``: ξ_k, ``outputs.agent_jumps``: the agents' own) in
-    the draws of ``G``: a jump's value after is finite in the draws that jumped (NaN elsewhere)."""
-    for _k, _before, after in getattr(outputs, "jumps", ()):
-        jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(jumps.shape) if np.ndim(after) else True) & G
-    for _before, after in getattr(outputs, "agent_jumps", ()):
-        agent_jumps += (np.isfinite(np.asarray(after, dtype=float)).reshape(agent_jumps.shape) if np.ndim(after) else True) & G
+def _count_jumps(outputs: Any, declared: Mapping[str, Any], jumps: np.ndarray, agent_jumps: np.ndarray, G: np.ndarray) -> None:
+    """Count a step's jumps in the draws of ``G``, as its algorithm's SPEC.jumps declares them
+    (``declared``: the outputs' attribute -> Jumps; of an edge's variable in ``jumps``, of the
+    agent's own in ``agent_jumps``): a jump's value after is finite in the draws that jumped
+    (NaN elsewhere)."""
+    for attr, decl in declared.items():
+        count = jumps if decl.owner == "edge" else agent_jumps
+        for jump in getattr(outputs, attr, ()):
+            after = jump[-1]
+            count += (np.isfinite(np.asarray(after, dtype=float)).reshape(count.shape) if np.ndim(after) else True) & G
 
 
 def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, gains: Any, dt: float, jumps: np.ndarray, agent_jumps: np.ndarray, reads: Mapping[int, batched_links.Read], stale_terms: np.ndarray, base: np.ndarray | None = None) -> Any:
@@ -320,7 +323,7 @@ def _step_groups(part: Any, states: dict[int, Any], i: int, view: BatchedView, g
                 nones |= G
                 continue
             outputs = out if outputs is None or every else _where(G, out, outputs, M)
-            _count_jumps(out, jumps, agent_jumps, G)
+            _count_jumps(out, view.declared_jumps, jumps, agent_jumps, G)
     finally:
         view.group = None
         view._cache.clear()

@@ -54,6 +54,7 @@ class BatchedView(timing.HistoryReads):
         self.moving = sc.moving
         self.period = 1.0 / a.clock.rate
         self.max_age = sc.stale.max_age
+        self.declared_jumps = sc.module_for(a.role).SPEC.jumps  # what its steps' outputs list as jumps (the engine counts them)
         self.t = self.t_world = self.dt = 0.0
         self.command_lead = 0.5 * self.period
         self.first = False

@@ -4,6 +4,7 @@ kept for the tick (agent/runtime.py); and the steps a tick takes on the packets 
 
 from __future__ import annotations
 
+import copy
 import heapq
 import logging
 import statistics
@@ -15,7 +16,8 @@ from typing import Any, TypeVar
 import numpy as np
 
 from zswarm.scenario.links import LinkCounter, LinkModel
-from zswarm.transport import wire, wire_fast
+from zswarm.transport import wire
+from zswarm.transport.messages import Msg
 
 log = logging.getLogger("zswarm.agent")
 
@@ -28,6 +30,7 @@ MAX_LOGGED_KEYS = 16  # keys whose malformed messages are logged (once each); th
 # sensors and 100 Hz neighbours), a 1 s stall ~400.  Past this many, an arrival is dropped and
 # counted (inbox_overflow): a flood of junk grew the queue without bound (+26 MB).
 MAX_PENDING = 4096
+SERIES = ("gyro", "velocity", "velocity_body", "attitude", "position")  # the sense packet's arrays, kept as time series
 
 
 class Inbox:
@@ -41,15 +44,15 @@ class Inbox:
         # Link emulation (zswarm/scenario/links.py): each arrival is lost or held until its release time.
         self._link_model = link_model
         self.models: dict[str, LinkModel] = {}
-        self._held: list[tuple[float, int, str, str, dict[str, Any]]] = []
+        self._held: list[tuple[float, int, str, str, Msg]] = []
         self._held_n = 0
-        self.latest: dict[str, dict[str, Any]] = {}
+        self.latest: dict[str, Msg] = {}
         # Recent messages per edge, oldest first (sequence order): a step at time t
         # reads the newest one stamped at or before t (see :meth:`at_or_before`).
-        self.recent: dict[str, deque[dict[str, Any]]] = {}
+        self.recent: dict[str, deque[Msg]] = {}
         # Recent sensor packets, oldest first (in sequence order): the histories the
         # timing library integrates and interpolates over.
-        self.packets: deque[dict[str, Any]] = deque(maxlen=64)
+        self.packets: deque[Msg] = deque(maxlen=64)
         self._series: dict[str, deque[tuple[float, np.ndarray]]] = {}  # per array field: (t, value), as packets
         self.links: dict[str, LinkCounter] = {}
         self.malformed = 0
@@ -61,13 +64,13 @@ class Inbox:
         self,
         expect: str,
         link_of: Callable[[str], str | None],
-        validate: Callable[[dict[str, Any]], object] | None = None,
-        decode: Callable[[bytes], dict[str, Any]] | None = None,
+        validate: Callable[[Msg], object] | None = None,
+        decode: Callable[[bytes], Msg] | None = None,
         sender: Callable[[str], int] | None = None,
     ) -> Callable[[str, bytes], None]:
         """A bus callback for messages of type ``expect``; ``validate`` raises ValueError
         on a message that decodes but is not what this agent's algorithm reads;
-        ``decode``: ``wire.decode(payload, expect)`` or a faster equivalent (``wire_fast.decoder``).
+        ``decode``: ``wire.decode(payload, expect)`` (the default) or its equivalent.
 
         The callback only stamps the arrival on the receiver's clock and queues the
         payload (one deque append, thread-safe): decoding, validation, link emulation
@@ -102,8 +105,8 @@ class Inbox:
         self,
         expect: str,
         link_of: Callable[[str], str | None],
-        validate: Callable[[dict[str, Any]], object] | None,
-        decode: Callable[[bytes], dict[str, Any]],
+        validate: Callable[[Msg], object] | None,
+        decode: Callable[[bytes], Msg],
         sender: Callable[[str], int] | None,
         key: str,
         payload: bytes,
@@ -115,8 +118,8 @@ class Inbox:
             if link is None:
                 raise wire.MessageError("key is not one of this agent's links")
             msg = decode(payload)
-            if sender is not None and msg["src"] != sender(link):
-                raise wire.MessageError(f"from src {msg['src']} on {link}'s key")
+            if sender is not None and msg.src != sender(link):
+                raise wire.MessageError(f"from src {msg.src} on {link}'s key")
             if validate is not None:
                 validate(msg)
         except ValueError as exc:
@@ -126,8 +129,8 @@ class Inbox:
                 self._logged.add(key)
                 self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
             return
-        msg = dict(msg)  # the in-process bus shares one validated message among its receivers
-        msg["rx_net"] = rx  # off the network, before any emulated delay
+        msg = copy.copy(msg)  # the in-process bus shares one validated message among its receivers
+        msg.rx_net = rx  # off the network, before any emulated delay (not sent: Msg's dict)
         if self._held:
             # Held messages due by now go first: a message released on arrival
             # must not overtake one held on the same link (FIFO links), nor be
@@ -146,23 +149,24 @@ class Inbox:
                 return
         self._deliver(link, expect, msg, rx)
 
-    def _deliver(self, link: str, expect: str, msg: dict[str, Any], rx: float) -> None:
+    def _deliver(self, link: str, expect: str, msg: Msg, rx: float) -> None:
         """Store a message that has reached this agent."""
-        msg["rx"] = rx
-        sent = msg["t_local"] if "t_local" in msg else msg["t"]
+        msg.rx = rx
+        sent = msg.t_local if expect != "sense" else msg.t
         counter = self.links.get(link)
         if counter is None:
             counter = self.links[link] = LinkCounter()
         restarts = counter.restarts
-        if counter.see(msg["seq"], msg["inc"], rx - sent):
+        if counter.see(msg.seq, msg.inc, rx - sent):
             if counter.restarts != restarts and expect != "sense":
                 self.recent.pop(link, None)  # the dead incarnation's messages mean nothing now
             self.latest[link] = msg
             if expect == "sense":
                 self.packets.append(msg)
-                t = msg["t"]
-                for name, v in msg.items():
-                    if type(v) is np.ndarray:
+                t = msg.t
+                for name in SERIES:
+                    v = getattr(msg, name)
+                    if v is not None:
                         series = self._series.get(name)
                         if series is None:
                             series = self._series[name] = deque(maxlen=self.packets.maxlen)
@@ -186,7 +190,7 @@ class Inbox:
             release, _, link, expect, msg = heapq.heappop(self._held)
             self._deliver(link, expect, msg, release)
 
-    def get(self, link: str) -> dict[str, Any] | None:
+    def get(self, link: str) -> Msg | None:
         """The newest message on ``link`` (arrivals queued so far processed first)."""
         if self._pending:
             self.drain()
@@ -198,21 +202,21 @@ class Inbox:
         ps = list(self.packets)[-n:]
         if not ps:
             return 0.0
-        return max(0.0, statistics.median([p["rx_net"] - local(p["t"]) for p in ps]))
+        return max(0.0, statistics.median([p.rx_net - local(p.t) for p in ps]))
 
-    def recent_packets(self, after: float) -> list[dict[str, Any]]:
+    def recent_packets(self, after: float) -> list[Msg]:
         """Sensor packets acquired after world time ``after`` (oldest first), with the
         newest one at or before it first when there is one."""
-        return since(self.packets, after, lambda p: p["t"])
+        return since(self.packets, after, lambda p: p.t)
 
-    def at_or_before(self, link: str, t_world: float) -> dict[str, Any] | None:
+    def at_or_before(self, link: str, t_world: float) -> Msg | None:
         """The newest message on an edge stamped at or before ``t_world``; if every
         recent one is newer, the oldest of them (None: nothing received yet)."""
         recent = self.recent.get(link)
         if not recent:
             return None
         for m in reversed(recent):
-            if m["t"] <= t_world:
+            if m.t <= t_world:
                 return m
         return recent[0]
 
@@ -222,14 +226,14 @@ class Inbox:
         if j is None:
             series = self._series.get(name)
             return list(series) if series is not None else []
-        return [(p["t"], p[name][j]) for p in self.packets if j in p.get(name, ())]
+        return [(p.t, p[name][j]) for p in self.packets if j in p.get(name, ())]
 
     def vectors(self, key: int | str) -> list[tuple[float, np.ndarray, np.ndarray]]:
         """``(acquisition world time, body-frame vector, gyro)`` of recent sensor packets: the
         bearing toward agent ``key`` (int) or the packet field ``key`` ("velocity_body")."""
         if isinstance(key, int):
-            return [(p["t"], p["bearings"][key], p["gyro"]) for p in self.packets if key in p.get("bearings", ())]
-        return [(p["t"], p[key], p["gyro"]) for p in self.packets if key in p]
+            return [(p.t, p.bearings[key], p.gyro) for p in self.packets if p.bearings is not None and key in p.bearings]
+        return [(p.t, p[key], p.gyro) for p in self.packets if key in p]
 
     def counters(self) -> dict[str, Any]:
         self.drain()

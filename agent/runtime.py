@@ -31,7 +31,7 @@ from zswarm.scenario.algorithm import AlgorithmSpec, Part, Publish, jumps
 from zswarm.scenario.clock import AgentClock
 from zswarm.scenario.links import LinkModel
 from zswarm.scenario.programs import AgentProgram
-from zswarm.transport import keys, wire_fast
+from zswarm.transport import keys, wire
 from zswarm.transport.bus import Bus
 
 log = logging.getLogger("zswarm.agent")
@@ -121,10 +121,12 @@ class AgentNode:
         self.aspec: AlgorithmSpec = program.spec
         self.state = self.algo.initial_state(program.initial, self.gains)
         self.parts = [_PartState(p, program.clock.rate, program.part_rate_scale) for p in self.aspec.parts]
-        self.jumps: list[tuple[int, float, float, float]] = []  # (k, t, ξ before, ξ after) not yet published
+        # Jumps of the hybrid variables SPEC.jumps declares, not yet published: (variable, "edge" |
+        # "agent", its owner: edge k or this agent, t, before, after); counted per edge and own.
+        self.jumps: list[tuple[str, str, int, float, float, float]] = []
         self.jump_count: dict[int, int] = {}
-        self.agent_jumps: list[tuple[int, float, float, float]] = []  # (this id, t, ζ before, ζ after) not yet published
         self.agent_jump_count = 0
+        self.estimate_edges = frozenset(k for k, o in program.spec.estimate.items() if o.kind == "edges")
         self.clock = AgentClock(program.clock, seed=program.clock_seed)
         self.out = program.out_neighbors
         links, seed = program.links, program.seed
@@ -134,10 +136,10 @@ class AgentNode:
             (lambda name: LinkModel(links[name], name, seed)) if links is not None else None,
         )
         sense_link = f"world->{agent_id}"
-        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire_fast.decoder("sense"), sender=lambda link: 0), direct=False)
+        bus.subscribe(keys.sense(run, agent_id), self.inbox.handler("sense", lambda k: sense_link, decode=wire.decoder("sense"), sender=lambda link: 0), direct=False)
         if program.neighbors:
-            edge_in = {n: (f.shape, f.optional) for n, f in self.aspec.edge_in.items()}
-            handler = self.inbox.handler("edge", _edge_links(agent_id, program.neighbors), self.aspec.check_edge, wire_fast.decoder("edge", edge_in), sender=_edge_sender)
+            check_edge = self.aspec.check_edge
+            handler = self.inbox.handler("edge", _edge_links(agent_id, program.neighbors), lambda m: check_edge(m.values), wire.decoder("edge"), sender=_edge_sender)
             bus.subscribe(keys.edges_into(run, agent_id), handler, direct=False)
         self.pub_edge = {i: bus.publisher(keys.edge(run, agent_id, i)) for i in self.out}
         # Detection: an in-neighbour whose liveliness token goes (its process died, or hung past
@@ -220,7 +222,7 @@ class AgentNode:
         sense = self.inbox.get(self.sense_link)
         if sense is None:
             return  # nothing measured yet: no step, nothing to publish
-        t_m = self.clock.local(sense["t"])
+        t_m = self.clock.local(sense.t)
         t_end = min(t_m, t_tick)
         if self.started and t_end <= self.t_step:
             self.idle_ticks += 1
@@ -322,7 +324,7 @@ class AgentNode:
         """Point the view at a step ending at ``t_local`` (own clock), with ``packet`` the
         newest sensor packet at or before it; ``t_send``: when what it sends should reach the
         world (own clock: the tick plus the network's transit)."""
-        t_w = packet["t"] if self.clock.local(packet["t"]) == t_local else self.clock.world(t_local)
+        t_w = packet.t if self.clock.local(packet.t) == t_local else self.clock.world(t_local)
         self._count_stale()
         self.view.begin(t_local, t_w, packet, first)
         # A command is held from its arrival for one period: the middle of that hold, after
@@ -345,19 +347,22 @@ class AgentNode:
         if inputs is None:
             return None
         self.state, outputs = ps.part.step(self.state, inputs, dt, self.gains)
-        for k, before, after in getattr(outputs, "jumps", ()):
-            self.jumps.append((k, view.t_world, before, after))
-            self.jump_count[k] = self.jump_count.get(k, 0) + 1
-        for before, after in getattr(outputs, "agent_jumps", ()):
-            self.agent_jumps.append((self.id, view.t_world, before, after))
-            self.agent_jump_count += 1
+        for attr, decl in self.aspec.jumps.items():
+            for jump in getattr(outputs, attr, ()):
+                if decl.owner == "edge":
+                    k, before, after = jump
+                    self.jump_count[k] = self.jump_count.get(k, 0) + 1
+                else:
+                    (before, after), k = jump, self.id
+                    self.agent_jump_count += 1
+                self.jumps.append((decl.variable, decl.owner, k, view.t_world, before, after))
         return outputs
 
     def _step_ends(self, t_end: float) -> list[tuple[float, dict[str, Any]]]:
         """Where the steps from the last one to ``t_end`` end (own clock), each with the
         newest sensor packet at or before it (:func:`step_ends`)."""
         local = self.clock.local
-        packets = [(local(p["t"]), p) for p in self.inbox.recent_packets(self.clock.world(self.t_step))]
+        packets = [(local(p.t), p) for p in self.inbox.recent_packets(self.clock.world(self.t_step))]
         newest_before = packets[0][1] if packets else self.inbox.get(self.sense_link)
         return step_ends(packets, self.t_step, t_end, 1.0 / self.program.clock.rate, newest_before)
 
@@ -371,20 +376,24 @@ class AgentNode:
             if p is not None:
                 p.publish("edge", self.id, seq, t_stamp, inc=self.inc, t_local=t_local, **fields)
                 self.sent[i] += 1
-        e = pub.estimate
+        # The estimate as SPEC.estimate declares it: R̂, p̂, per-edge maps, named values.
         est: dict[str, Any] = {"t_local": t_local}
-        extra = {k: v for k, v in e.items() if k not in ("R_hat", "p_hat", "xi")}
-        for k in ("R_hat", "p_hat"):
-            if k in e:
-                est[k] = e[k]
-        if extra:
-            est["extra"] = extra
-        if e.get("xi"):
-            est["xi"] = e["xi"]
+        values: dict[str, Any] = {}
+        edges: dict[str, Any] = {}
+        for k, v in pub.estimate.items():
+            if k == "R_hat" or k == "p_hat":
+                est[k] = v
+            elif k in self.estimate_edges:
+                if v:
+                    edges[k] = v
+            else:
+                values[k] = v
+        if values:
+            est["values"] = values
+        if edges:
+            est["edges"] = edges
         if self.jumps:
             est["jumps"], self.jumps = self.jumps, []
-        if self.agent_jumps:
-            est["agent_jumps"], self.agent_jumps = self.agent_jumps, []
         if pub.command is not None and self.pub_cmd is not None:
             # To the world's plant (zero-order hold there), stamped with the time of the
             # measurements it was computed from.

@@ -61,7 +61,7 @@ class TickView(timing.HistoryReads):
 
     def begin(self, t: float, t_world: float, sense: Mapping[str, Any], first: bool) -> None:
         self.t, self.t_world, self.sense, self.first = t, t_world, sense, first
-        self.sense_t_world = sense["t"]
+        self.sense_t_world = sense["t"]  # a Mapping (the agent's Sense message, the batched engine's dict)
         self.sense_t = self._node.clock.local(sense["t"])
         self.dt = 0.0
         self._cache = {}
@@ -93,13 +93,13 @@ class TickView(timing.HistoryReads):
         m = None if self.first else self._node.inbox.at_or_before(self._links.get(j, ""), self.t_world)
         if m is not None:
             node = self._node
-            t_j = node.clock.local(m["t"])
+            t_j = node.clock.local(m.t)
             age = self.t - t_j
             stale = age > node.stale.max_age or j in node.lost  # a lost neighbour's data are stale whatever their age
             if stale:
                 self.stale_read.add(j)  # a read changes nothing outside the view: the node counts it (_count_stale)
             if not (stale and node.stale.policy == "drop"):
-                n = _Neighbor(m, t_j, m["t"], age)
+                n = _Neighbor(m.values, t_j, m.t, age)
         self._cache[key] = n
         return n
 

@@ -113,11 +113,11 @@ class Fuzzer:
     def zoo(self) -> bytes:
         r = self.r
         base = self.r.choice(self._unpacked)
-        mtype = r.choice([base["type"], *wire.SCHEMAS])
+        mtype = r.choice([base["type"], *wire.KINDS])
         m: dict[Any, Any] = {"v": wire.VERSION if r.random() < 0.9 else self.value(), "type": mtype}
         for k in ("src", "seq", "inc", "t"):
-            m[k] = base[k] if r.random() < 0.5 else self.value()
-        for k in [*wire.SCHEMAS[mtype], *(k for k in base if k not in wire.ENVELOPE)]:
+            m[k] = base.get(k, 0) if r.random() < 0.5 else self.value()
+        for k in [*wire.FIELDS[mtype], *(k for k in base if k not in wire.ENVELOPE)]:
             if r.random() < 0.7:
                 m[k] = base[k] if k in base and r.random() < 0.4 else self.value()
         if r.random() < 0.2:
@@ -204,7 +204,7 @@ def valid_for_recorder(sc: Any) -> Callable[[np.random.Generator], bytes]:
                 "truth", 0, 0, 0.0, ids=ids, R=np.stack([so3.exp(r.standard_normal(3)) for _ in ids]), p=r.standard_normal((n, 3)), w=r.standard_normal((n, 3))
             )
         if c == 3:
-            return wire.encode("est", 3, 0, 0.0, t_local=0.0, R_hat=so3.exp(r.standard_normal(3)), p_hat=r.standard_normal(3), xi={1: 0.5})
+            return wire.encode("est", 3, 0, 0.0, t_local=0.0, R_hat=so3.exp(r.standard_normal(3)), p_hat=r.standard_normal(3), edges={"xi": {1: 0.5}})
         if c == 4:
             return wire.encode("stats", 3, 0, 0.0, role="agent", counters={"steps": int(r.integers(0, 100)), "final": False})
         return wire.encode("stop", 0, 0, 1.0, reason="duration")

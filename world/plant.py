@@ -50,7 +50,7 @@ from numpy.typing import NDArray
 from world.dynamics import RigidBodies
 from zswarm.scenario.links import LinkCounter, LinkModel, LinkSpec
 from zswarm.scenario.world_config import COMMAND_POLICIES, PLANT_INPUTS, PLANTS, CommandPolicy
-from zswarm.transport import wire, wire_fast
+from zswarm.transport import wire
 
 __all__ = ["PLANTS", "PLANT_INPUTS", "COMMAND_POLICIES", "CommandPolicy", "CommandInbox", "RigidBodyPlant", "KinematicPlant"]
 
@@ -94,7 +94,7 @@ class CommandInbox:
         self.now = now
         self.policy = policy
         self.fields = dict(fields)
-        self._decode = wire_fast.decoder("cmd", {n: (tuple(shape), False) for n, shape in self.fields.items()})
+        self._decode = wire.decoder("cmd")
         self._lock = threading.Lock()
         self.links: dict[int, _CmdLink] = {}
         for i in self.ids:
@@ -124,15 +124,16 @@ class CommandInbox:
                 if i is None or i not in self.index:
                     raise wire.MessageError("key is not the command key of an agent of this scenario")
                 msg = self._decode(payload)
-                if msg["src"] != i:
-                    raise wire.MessageError(f"src {msg['src']} on agent {i}'s command key")
+                if msg.src != i:
+                    raise wire.MessageError(f"src {msg.src} on agent {i}'s command key")
+                values = msg.values
                 for name, shape in self.fields.items():
-                    v = msg.get(name)
+                    v = values.get(name)
                     if v is None:
                         raise wire.MessageError(f"field {name!r} missing")
                     if np.shape(v) != shape:
                         raise wire.MessageError(f"field {name!r}: shape {np.shape(v)}, expected {shape}")
-                u = np.concatenate([np.ravel(np.asarray(msg[name], dtype=float)) for name in self.fields]) if self.fields else np.zeros(0)
+                u = np.concatenate([np.ravel(np.asarray(values[name], dtype=float)) for name in self.fields]) if self.fields else np.zeros(0)
             except ValueError as exc:  # MessageError is a ValueError: decode never raises anything else
                 with self._lock:
                     self.malformed += 1
@@ -149,12 +150,12 @@ class CommandInbox:
                     release = link.model.admit(rx)
                     if release is None:
                         return  # lost on the emulated link (counted by the model)
-                if not link.see(msg["seq"], msg["inc"], release - msg.get("t_local", msg["t"])):
+                if not link.see(msg.seq, msg.inc, release - msg.t_local):
                     self.superseded[self.index[i]] += 1  # older than one already taken (reordered)
                     return
                 # n orders the commands of a link as they were taken (links are FIFO: release
                 # order is that order); a restarted agent's seq starts again at 0.
-                heapq.heappush(self._pending, (release, self._n, i, msg["t"], self._n, u))
+                heapq.heappush(self._pending, (release, self._n, i, msg.t, self._n, u))
                 self._n += 1
 
         return on_cmd

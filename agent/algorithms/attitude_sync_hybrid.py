@@ -172,6 +172,8 @@ SPEC = AlgorithmSpec(
     report="sync",
     params=synergistic.HybridParams,
     initial={**POSE_ESTIMATE, "xi": synergistic.XI_INITIAL},
+    estimate=synergistic.XI_ESTIMATE,
+    jumps=synergistic.XI_JUMPS,
     # Hold: ξ_k changes slowly between jumps, and a tail without its head's ξ_k
     # would otherwise drop the edge from its torque.
     stale=StalePolicy(0.2, "hold"),

@@ -281,6 +281,8 @@ SPEC = AlgorithmSpec(
         "Q": InitialField("rotation", IDENTITY, "Q_i(0), the auxiliary attitude (5.20)"),
         "zeta": InitialField("number", 0.0, "ζ_i(0) (5.22)"),
     },
+    estimate=synergistic.XI_ESTIMATE,
+    jumps={**synergistic.XI_JUMPS, **synergistic.ZETA_JUMPS},
     stale=StalePolicy(0.2, "hold"),
     batched=True,
     draw_gains=frozenset({"k_R", "k_Qt"}),  # τ = k_R σ − k_Q̃ h only (k_Q, k_ζ, k_ξ: the compiled filters take one)

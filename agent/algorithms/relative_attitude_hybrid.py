@@ -171,4 +171,6 @@ SPEC = replace(
     parts=(Part("observer", inputs, step),),
     params=synergistic.HybridParams,
     initial={**POSE_ESTIMATE, "xi": synergistic.XI_INITIAL},
+    estimate=synergistic.XI_ESTIMATE,
+    jumps=synergistic.XI_JUMPS,
 )

@@ -100,7 +100,7 @@ def summary(sc: Scenario, rec: Recording, m: SyncMetrics, agents: dict[str, Any]
         }
         if hybrid:
             js = [j for j in rec.jumps if j[0] == k]
-            xs = rec.xi.get(k, [])
+            xs = rec.edge_values.get("xi", {}).get(k, [])
             e.update(xi_owner=h, jumps=len(js), jump_log=[{"t": t, "xi_before": b, "xi_after": a} for _, t, b, a in js], xi_final=xs[-1][1] if xs else None)
         edges[str(k)] = e
     for i in sc.ids:
@@ -167,7 +167,7 @@ def write_edges_csv(path: Path, sc: Scenario, m: SyncMetrics, rec: Recording) ->
         w = csv.writer(f)
         w.writerow(["t", "edge", "head", "tail", "relative_attitude_error", "relative_position_error", "xi"])
         for k, (h, tl) in enumerate(sc.oriented, start=1):
-            xs = rec.xi.get(k, [])
+            xs = rec.edge_values.get("xi", {}).get(k, [])
             xv = _held(np.array([x[0] for x in xs]), np.array([x[1] for x in xs]), m.t) if xs else np.full(len(m.t), np.nan)
             for n, t in enumerate(m.t):
                 w.writerow([f"{t:.3f}", k, h, tl, f"{m.rel_att[k][n]:.6e}", "", "" if not np.isfinite(xv[n]) else f"{xv[n]:.6e}"])
@@ -216,7 +216,7 @@ def plot(out: Path, sc: Scenario, errs: dict[int, np.ndarray], m: SyncMetrics, r
     fig2({k: m.rel_att[k] for k in m.rel_att}, "edge {}", r"$|\bar R_k|_I$", "relative_attitude_error", "relative attitude per edge (Fig. 5.3)")
     fig2(m.omega, "agent {}", r"$\|\omega_i\|$ (rad/s)", "angular_velocity", "angular velocity per agent (Fig. 5.4)")
     fig2(m.tau_applied, "agent {}", r"$\|\tau_i\|$ applied (N m)", "torque", "torque held by the plant per agent")
-    if rec.xi:
+    if rec.edge_values.get("xi"):
         base.plot_xi(out, rec, f"{sc.name}: hybrid variables ξ_k (Fig. 5.5; x: jumps)", ncol=6)
     if m.q_tilde:
         fig2(m.q_tilde, "agent {}", r"$|\tilde Q_i|_I$", "Q_tilde", "auxiliary attitude error per agent (Fig. 5.6)")

@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, ClassVar
@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from zswarm.math.so3 import Mat3, Ra, Vec3, psi, trace
-from zswarm.scenario.algorithm import InitialField
+from zswarm.scenario.algorithm import InitialField, Jumps, Output
 
 # The thesis' parameters of the §4.5 and §5.6 hybrid schemes (zswarm generate's recipes).
 HYBRID_PARAMS_4 = {"A": [5, 8.57, 12], "u": [0, 0.6455, 0.7638], "gamma": 1.9251, "delta": 0.0030, "Xi": ["0.08*pi"]}
@@ -392,6 +392,11 @@ class VelocityFreeParams:
 # ξ_k(0) of the tree edges an agent heads ([agents.estimate] xi = {k = ξ_k(0)}; 0 unless stated):
 # every hybrid scheme's initial state besides its estimates (SPEC.initial).
 XI_INITIAL = InitialField("edges", MappingProxyType({}), "ξ_k(0) of the edges k this agent heads (Remark 4.4)", symbol="ξ")
+# What every hybrid scheme's estimate reports of ξ (SPEC.estimate) and how its steps list the
+# jumps of ξ_k, (4.26) / (5.7), and of the agent's own ζ_i, (5.12) (SPEC.jumps).
+XI_ESTIMATE: Mapping[str, Output] = MappingProxyType({"xi": Output("edges", doc="ξ_k of the edges k this agent heads")})
+XI_JUMPS: Mapping[str, Jumps] = MappingProxyType({"jumps": Jumps("xi", "edge", "ξ_k of a headed edge k, (4.26) / (5.7)")})
+ZETA_JUMPS: Mapping[str, Jumps] = MappingProxyType({"agent_jumps": Jumps("zeta", "agent", "ζ_i, (5.12)")})
 
 
 # --------------------------------------------------------------------------- zswarm design-hybrid (a command of the tree family: zswarm.families.tree)

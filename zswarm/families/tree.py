@@ -83,7 +83,7 @@ def summary(sc: Scenario, rec: Recording, tm: TreeMetrics | None, agents: dict[s
     edges: dict[str, Any] = {}
     for k, (h, tl) in enumerate(sc.oriented, start=1):
         js = [j for j in rec.jumps if j[0] == k]
-        xs = rec.xi.get(k, [])
+        xs = rec.edge_values.get("xi", {}).get(k, [])
         e: dict[str, Any] = {"head": h, "tail": tl, "xi_owner": h}
         if tm is not None:
             e["relative_attitude_error_final"] = final(tm.t, tm.rel_att[k], t_end)
@@ -127,7 +127,7 @@ def write_edges_csv(path: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -
         w = csv.writer(f)
         w.writerow(["t", "edge", "head", "tail", "relative_attitude_error", "relative_position_error", "xi"])
         for k, (h, tl) in enumerate(sc.oriented, start=1):
-            xs = rec.xi.get(k, [])
+            xs = rec.edge_values.get("xi", {}).get(k, [])
             xt = np.array([x[0] for x in xs])
             xv = np.array([x[1] for x in xs])
             idx = np.searchsorted(xt, tm.t, side="right") - 1 if len(xs) else None
@@ -176,7 +176,7 @@ def plot_tree(out: Path, sc: Scenario, tm: TreeMetrics, rec: Recording) -> None:
     if pose:
         figure(tm.rel_pos, r"$\|\tilde p_h-\tilde p_t\|$", "relative_position_error", "relative position error per edge", True)
         figure(tm.pos_common, r"$\|\tilde p_i-\mathrm{mean}\,\tilde p\|$", "position_error", "position error up to a common translation", False)
-    if rec.xi:
+    if rec.edge_values.get("xi"):
         base.plot_xi(out, rec, f"{sc.name}: hybrid variables (x: jumps)", ncol=4)
 
 

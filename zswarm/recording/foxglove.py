@@ -265,7 +265,7 @@ class Views:
                     log_time,
                 )
 
-    def _est(self, m: Mapping[str, Any], log_time: int) -> None:
+    def _est(self, m: Any, log_time: int) -> None:
         i, t = m["src"], m["t"]
         if "R_hat" in m and "p_hat" in m:
             if t >= self.next_est_tf.get(i, -math.inf):
@@ -278,13 +278,14 @@ class Views:
                 self.pending.append(item)
                 if len(self.pending) > 64 * max(1, len(self.newest)):
                     self.pending.popleft()  # no truth comes: keep the newest only
-        hybrid: dict[str, float] = {f"xi_{k}": x for k, x in m.get("xi", {}).items()}
-        hybrid |= {n: x for n, x in m.get("extra", {}).items() if isinstance(x, float)}
+        # The numbers it reports (SPEC.estimate): per-edge ones as <name>_<k>, and the jumps of its
+        # hybrid variables (SPEC.jumps).
+        hybrid: dict[str, float] = {f"{name}_{k}": x for name, per in m.edges.items() for k, x in per.items()}
+        hybrid |= {n: x for n, x in m.values.items() if isinstance(x, float)}
         if hybrid:
             self.sink.record(f"hybrid/{i}", HYBRID_SCHEMA, {"t": t, **hybrid}, log_time)
-        for var, key in (("xi", "jumps"), ("zeta", "agent_jumps")):
-            for k, tj, before, after in m.get(key, ()):
-                self.sink.record("hybrid/jumps", JUMPS_SCHEMA, {"t": tj, "agent": i, "variable": var, "index": k, "before": before, "after": after}, log_time)
+        for var, _owner, k, tj, before, after in m.jumps:
+            self.sink.record("hybrid/jumps", JUMPS_SCHEMA, {"t": tj, "agent": i, "variable": var, "index": k, "before": before, "after": after}, log_time)
 
     def _error(self, i: int, t: float, R_hat: np.ndarray, p_hat: np.ndarray, log_time: int) -> None:
         # The truth sample before t, its attitude moved on with its ω, its position

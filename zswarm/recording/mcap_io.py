@@ -260,7 +260,7 @@ class ViewerOut(_McapOut):
             self.malformed += 1
             if self.malformed <= 10 or self.malformed % 1000 == 0:
                 log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
-            size = len(payload) if isinstance(payload, bytes) else len(_dumps(payload))
+            size = len(payload) if isinstance(payload, bytes) else len(wire.encode_message(payload)) if isinstance(payload, wire.Message) else len(_dumps(payload))
             self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream[:256], "reason": str(exc)[:256], "size": size}, t)
             self.count += 1
             return None
@@ -352,7 +352,7 @@ class RawOut(_McapOut):
             import foxglove
 
             ch = self._channels[stream] = foxglove.Channel(stream, message_encoding="msgpack", schema=_raw_schema(), context=self.ctx)
-        if type(payload) is wire.Message:  # from the in-process bus
+        if isinstance(payload, wire.Message):  # from the in-process bus
             payload = wire.encode_message(payload)
         ch.log(payload if isinstance(payload, bytes) else msgpack.packb(payload), log_time=t)
         self.count += 1
@@ -496,10 +496,10 @@ def _is_truncation(exc: Exception) -> bool:
     return name in ("EndOfFile", "InvalidMagic", "RecordLengthLimitExceeded") or isinstance(exc, (EOFError, ValueError))
 
 
-def decode(message: bytes | dict[str, Any], expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
+def decode(message: bytes | dict[str, Any] | wire.Message, expect: str | tuple[str, ...] | None = None) -> wire.Message:
     """A message as :func:`read` (or an in-memory recording) gives it, decoded and validated."""
-    if type(message) is wire.Message or isinstance(message, bytes):  # validated already (sim), or a payload
-        return wire.decode(message, expect)
+    if isinstance(message, wire.Message | bytes):  # validated already (sim), or a payload (of this version or an earlier recording's)
+        return wire.decode_recorded(message, expect)
     return wire_json.from_json(message, expect)
 
 

@@ -175,7 +175,7 @@ def plot_xi(out: Path, rec: Recording, title: str, ncol: int) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 3.5))
-    for k, xs in rec.xi.items():
+    for k, xs in rec.edge_values.get("xi", {}).items():
         a = np.array(xs)
         ax.plot(a[:, 0], a[:, 1], lw=1, label=f"ξ_{k}")
     for _k, t, _b, after in rec.jumps:

@@ -46,9 +46,11 @@ class Recording:
     counts: dict[str, int] = field(default_factory=dict)
     streams: dict[str, int] = field(default_factory=dict)  # messages recorded per channel (est/3, edge/1/3, ...)
     malformed: int = 0
-    xi: dict[int, list[tuple[float, float]]] = field(default_factory=dict)  # edge k -> (t, ξ_k)
-    jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (k, t, before, after)
-    agent_jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # (agent, t, ζ before, ζ after)
+    # The per-edge values the estimates report (SPEC.estimate's "edges" outputs): name -> edge k ->
+    # (t, value) as its head reports it, e.g. edge_values["xi"][k] = [(t, ξ_k), ...].
+    edge_values: dict[str, dict[int, list[tuple[float, float]]]] = field(default_factory=dict)
+    jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # jumps of an edge's variable (SPEC.jumps): (k, t, before, after)
+    agent_jumps: list[tuple[int, float, float, float]] = field(default_factory=list)  # jumps of an agent's own: (agent, t, before, after)
     extra: dict[int, list[tuple[float, dict[str, Any]]]] = field(default_factory=dict)  # agent -> (t, named values)
     truth_tau: np.ndarray | None = None  # (T, n, 3): the torques the plant applied (rigid bodies)
     stats_by_inc: dict[tuple[str, int, int], dict[str, Any]] = field(default_factory=dict)  # (role, src, incarnation): its last stats
@@ -85,7 +87,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
     more than OUTSIDE_RUN_MARGIN_S outside ``[0, duration]`` are counted and ignored."""
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
-    xi: dict[int, list[tuple[float, float]]] = defaultdict(list)
+    edge_values: dict[str, dict[int, list[tuple[float, float]]]] = {}
     jumps: list[tuple[int, float, float, float]] = []
     agent_jumps: list[tuple[int, float, float, float]] = []
     extra: dict[int, list[tuple[float, dict[str, Any]]]] = defaultdict(list)
@@ -136,12 +138,14 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         elif m["type"] == "est" and kind == "est":
             if "R_hat" in m and "p_hat" in m:
                 est[m["src"]].append((m["t"], m["R_hat"], m["p_hat"]))
-            for k, x in m.get("xi", {}).items():
-                xi[k].append((m["t"], x))
-            jumps.extend(m.get("jumps", []))
-            agent_jumps.extend(m.get("agent_jumps", []))
-            if "extra" in m:
-                extra[m["src"]].append((m["t"], m["extra"]))
+            for name, per in m.edges.items():
+                by_k = edge_values.setdefault(name, defaultdict(list))
+                for k, x in per.items():
+                    by_k[k].append((m.t, x))
+            for _var, owner, k, t, before, after in m.jumps:
+                (jumps if owner == "edge" else agent_jumps).append((k, t, before, after))
+            if m.values:
+                extra[m.src].append((m.t, m.values))
         elif m["type"] == "stats" and kind == "stats":
             role = m["role"]
             prev = stats.get((role, m["src"]))
@@ -175,7 +179,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         counts=dict(counts),
         streams=dict(streams),
         malformed=malformed,
-        xi={k: sorted(v) for k, v in sorted(xi.items())},
+        edge_values={name: {k: sorted(v) for k, v in sorted(per.items())} for name, per in sorted(edge_values.items())},
         jumps=sorted(jumps, key=lambda j: (j[1], j[0])),
         agent_jumps=sorted(agent_jumps, key=lambda j: (j[1], j[0])),
         extra={i: sorted(v, key=lambda e: e[0]) for i, v in sorted(extra.items())},

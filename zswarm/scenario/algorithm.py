@@ -11,8 +11,8 @@ user's anywhere on the import path) that exposes
 * for each part of ``SPEC.parts``: ``inputs(view, gains) -> Inputs`` (built
   from what the runtime serves through a :class:`View`, with the timing
   library :mod:`zswarm.math.timing`) and the pure ``step(state, inputs, dt, gains)
-  -> (state, outputs)``; ``outputs.jumps`` (optional) lists hybrid jumps
-  ``(edge k, ξ before, ξ after)``;
+  -> (state, outputs)``; an attribute of ``outputs`` that ``SPEC.jumps`` names lists the
+  jumps of a hybrid variable at that step (``(edge k, before, after)`` or ``(before, after)``);
 * ``publish(state, view) -> Publish`` — the messages of this tick: one per
   out-neighbour, the estimate for the recorder, and the command to the world.
 
@@ -87,6 +87,30 @@ class Field:
     def __post_init__(self) -> None:
         if self.rotation and self.shape != (3, 3):
             raise AlgorithmError(f"a rotation field has shape (3, 3), not {self.shape}")
+
+
+@dataclass(frozen=True, slots=True)
+class Output:
+    """A named value the estimate reports besides R̂ and p̂ (``SPEC.estimate``): ``kind="value"``,
+    a number or a float64 array of ``shape`` (``()``: a number); ``kind="edges"``, a number per
+    tree edge the agent heads ({k: value}, e.g. ξ_k).  The est message carries each in its own
+    place (zswarm.transport.messages.Est: ``values`` or ``edges``)."""
+
+    kind: Literal["value", "edges"] = "value"
+    shape: tuple[int, ...] = ()
+    doc: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Jumps:
+    """The jumps of a hybrid variable, as a step's outputs list them (``SPEC.jumps``, by the
+    outputs' attribute): ``variable`` names it in the est message and the report (``"xi"``),
+    ``owner`` says whose it is — ``"edge"``: one per tree edge, each jump ``(k, before, after)``;
+    ``"agent"``: the agent's own, each jump ``(before, after)``."""
+
+    variable: str
+    owner: Literal["edge", "agent"] = "edge"
+    doc: str = ""
 
 
 Stale = Literal["hold", "drop"]
@@ -219,6 +243,11 @@ class AlgorithmSpec:
     # M values as (M, 1) broadcasts as the number does.  The others take one value per batch.
     draw_gains: frozenset[str] = frozenset()
     sensor_use: Mapping[str, str] = field(default_factory=dict)  # sensor -> what it is for (named when one is not fitted)
+    # What its publish's estimate reports besides R_hat and p_hat (see Output); a number or array
+    # it does not declare is reported as a value, a per-edge map must be declared.
+    estimate: Mapping[str, Output] = field(default_factory=dict)
+    # Its hybrid variables' jumps, by the attribute of the step's outputs that lists them (see Jumps).
+    jumps: Mapping[str, Jumps] = field(default_factory=dict)
     # The experiment family of this algorithm (zswarm.families.contract: its report, sweep, basin, batched measure):
     # a name registered in the entry-point group zswarm.families.contract.GROUP ("leader_follower", "tree",
     # "sync", "formation" are zswarm's) or a module path (mylab.my_family).
@@ -291,8 +320,8 @@ class Publish:
 
     ``edges[j]``: the fields of the message to out-neighbour j (an agent with
     nothing to say to j leaves it out).  ``estimate``: for the recorder —
-    ``R_hat``, ``p_hat`` (what the errors are computed from), ``xi`` ({k: ξ_k}),
-    and any other named arrays (plotted and recorded as extras).  ``command``:
+    ``R_hat``, ``p_hat`` (what the errors are computed from) and what ``SPEC.estimate``
+    declares: per-edge maps ({k: ξ_k}), numbers and arrays (plotted and recorded).  ``command``:
     the fields of ``cmd/<i>`` to the world (``None``: nothing).  ``t``: world
     time the content refers to (``None``: the step's end, ``view.t_world``).
     """
@@ -468,6 +497,12 @@ def check(module: ModuleType) -> AlgorithmSpec:
     if not isinstance(spec.report, str) or plugins.family_module(spec.report) is None:
         known = ", ".join(plugins.registered(plugins.FAMILY_GROUP, plugins.OWN_FAMILIES))
         raise AlgorithmError(f"module {name!r}: SPEC.report: no experiment family {spec.report!r} (registered: {known}; or a module path like mylab.my_family)")
+    for key, o in spec.estimate.items():
+        if key in RESERVED or key in ("R_hat", "p_hat") or not isinstance(o, Output) or o.kind not in ("value", "edges"):
+            raise AlgorithmError(f"module {name!r}: SPEC.estimate[{key!r}] must be a zswarm.scenario.algorithm.Output of kind 'value' or 'edges' (R_hat and p_hat are the estimate itself)")
+    for key, j in spec.jumps.items():
+        if not isinstance(j, Jumps) or j.owner not in ("edge", "agent") or not j.variable:
+            raise AlgorithmError(f"module {name!r}: SPEC.jumps[{key!r}] must be a zswarm.scenario.algorithm.Jumps (a variable name, owner 'edge' or 'agent')")
     if spec.stale.policy not in STALE_POLICIES:
         raise AlgorithmError(f"module {name!r}: SPEC.stale.policy must be one of {STALE_POLICIES}")
     if not isinstance(spec.draw_gains, frozenset) or not spec.draw_gains <= set(spec.gains):

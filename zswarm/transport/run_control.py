@@ -3,12 +3,21 @@ there is one, and checked beyond their schema on receipt (only the world control
 
 from __future__ import annotations
 
+import functools
+import typing
 from collections.abc import Mapping
 from typing import Any
 
 from zswarm.transport import keys
+from zswarm.transport.messages import ENVELOPE, KINDS, MessageError
 from zswarm.transport.wire import decode, encode
-from zswarm.transport.wire_schema import SCHEMAS, MessageError
+
+
+@functools.cache
+def _signed_fields(mtype: str) -> tuple[tuple[str, bool], ...]:
+    """The fields of a run-control kind its signature covers, sorted: (name, a float field)."""
+    hints = typing.get_type_hints(KINDS[mtype])
+    return tuple((k, hints[k] is float) for k in sorted(KINDS[mtype].__struct_fields__) if k not in ENVELOPE and k != "mac")
 
 
 def ctl_mac(secret: bytes, m: Mapping[str, Any]) -> str:
@@ -18,10 +27,9 @@ def ctl_mac(secret: bytes, m: Mapping[str, Any]) -> str:
     import hmac
 
     parts = [str(m["type"]), str(m["src"]), str(m["seq"]), str(m["inc"]), float(m["t"]).hex()]
-    for k, kind in sorted(SCHEMAS[m["type"]].items()):
-        if k != "mac":
-            v = m[k]  # a "float" field is signed as the float the receiver decodes (1 and 1.0 alike)
-            parts.append(f"{k}={float(v).hex() if kind == 'float' else v}")
+    for k, is_float in _signed_fields(str(m["type"])):
+        v = m[k]  # a float field is signed as the float the receiver decodes (1 and 1.0 alike)
+        parts.append(f"{k}={float(v).hex() if is_float else v}")
     return hmac.new(secret, "|".join(parts).encode(), hashlib.sha256).hexdigest()[:32]
 
 
@@ -34,7 +42,7 @@ def encode_ctl(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fiel
     return encode(mtype, src, seq, t, inc=inc, **fields)
 
 
-def decode_ctl(payload: bytes, expect: str) -> dict[str, Any]:
+def decode_ctl(payload: bytes, expect: str) -> Any:
     """A run-control message (``start``, ``stop`` or ``progress`` on ctl/...), decoded and
     checked beyond its schema: only the world (src 0) controls a run, a start's clock must
     make sense, and with the run's secret (keys.run_secret) it must carry its signature.
@@ -58,7 +66,7 @@ def check_signature(m: Mapping[str, Any]) -> None:
             raise MessageError(f"{m['type']}: not signed with this run's secret")
 
 
-def check_ctl(m: dict[str, Any], expect: str) -> dict[str, Any]:
+def check_ctl(m: Any, expect: str) -> Any:
     """:func:`decode_ctl`'s checks on a decoded run-control message (returns it)."""
     check_signature(m)
     if m["src"] != 0:

@@ -1,169 +1,125 @@
 """Messages as JSON, as recordings store them (Foxglove and Lichtblick decode JSON with a JSON
-schema): to_json, from_json, and the JSON schema of each message type."""
+schema): :func:`to_json`, :func:`from_json` and the JSON schema of each kind.
+
+Arrays are nested lists, maps keyed by agent or edge id have the id as a string.
+``from_json(to_json(m)) == m``, floats exactly (JSON numbers written with the shortest repr
+round-trip).  :func:`from_json` reads the JSON of version-4 recordings too
+(zswarm.transport.wire_v4).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
-import msgpack
+import msgspec
 import numpy as np
 
-from zswarm.transport.wire import _validate
-from zswarm.transport.wire_schema import _F8, ENVELOPE, OPEN, OPTIONAL, SCHEMAS, VERSION, MessageError, _counters
-
-# ---------------------------------------------------------------- JSON (recordings, viewers)
-#
-# A recording stores every message as JSON (Foxglove and Lichtblick decode JSON with
-# a JSON schema, not msgpack): arrays as nested lists, maps keyed by agent or edge id
-# with the id as a string.  from_json(to_json(decode(p))) == decode(p), floats exactly
-# (JSON numbers written with the shortest repr round-trip).
+from zswarm.transport import wire_v4
+from zswarm.transport.messages import _F8, KINDS, MAX_ARRAY, VERSION, MessageError, Msg, _array, enc_hook
+from zswarm.transport.wire import _check_expect, encode_message
 
 
-def to_json(m: Mapping[str, Any]) -> dict[str, Any]:
-    """A decoded message (:func:`decode`'s output) as a JSON-ready dict."""
-    out: dict[str, Any] = {"v": VERSION}
-    schema = SCHEMAS[m["type"]]
-    for k, v in m.items():
-        kind = schema.get(k)
-        if kind is None or kind in ("int", "float", "str", "intlist", "counters") or k in ENVELOPE:
-            out[k] = v.tolist() if isinstance(v, np.ndarray) else v
-        elif isinstance(kind, tuple):
-            out[k] = v.tolist()
-        elif kind in ("vecmap", "matmap"):
-            out[k] = {str(j): x.tolist() for j, x in v.items()}
-        elif kind == "floatmap":
-            out[k] = {str(j): x for j, x in v.items()}
-        elif kind == "fields":
-            out[k] = {n: x.tolist() if isinstance(x, np.ndarray) else x for n, x in v.items()}
-        elif kind == "jumps":
-            out[k] = [list(e) for e in v]
-        else:  # pragma: no cover - every kind is handled above
-            raise KeyError(kind)
+def _tolist(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return enc_hook(obj)
+
+
+def to_json(m: Msg) -> dict[str, Any]:
+    """A message as a JSON-ready dict (ids as strings)."""
+    out: dict[str, Any] = msgspec.to_builtins(m, enc_hook=_tolist, str_keys=True)
     return out
 
 
-def _arr_from_json(v: Any, k: str) -> list[Any]:
-    """A JSON array of numbers (nested) as the wire's ``[shape, bytes]``."""
-    try:
-        a = np.asarray(v, dtype="<f8")
-    except (TypeError, ValueError):
-        raise MessageError(f"{k}: expected a (nested) array of numbers") from None
-    if a.dtype != _F8 or a.ndim > 4 or a.size > (1 << 17):
-        raise MessageError(f"{k}: expected a (nested) array of numbers")
-    return [list(a.shape), np.ascontiguousarray(a).tobytes()]
+def _json_hook(tp: type, obj: Any) -> Any:
+    """An array field from JSON: a (nested) list of numbers."""
+    if tp is np.ndarray:
+        try:
+            a = np.asarray(obj, dtype=_F8)
+        except (TypeError, ValueError):
+            raise MessageError("expected a (nested) array of numbers") from None
+        if a.ndim > 4 or a.size > MAX_ARRAY:
+            raise MessageError("expected a (nested) array of numbers")
+        return _array(a, "array")
+    raise NotImplementedError(tp)
 
 
-def _int_keys(v: Any, k: str) -> dict[int, Any]:
-    if type(v) is not dict:
-        raise MessageError(f"{k}: expected a map keyed by id")
-    try:
-        return {int(j): x for j, x in v.items()}
-    except (TypeError, ValueError):
-        raise MessageError(f"{k}: expected a map keyed by id") from None
-
-
-def _named_from_json(v: Any, k: str) -> Any:
-    return v if type(v) in (int, float) else _arr_from_json(v, k)
-
-
-def _json_to_wire(obj: Any) -> dict[Any, Any]:
-    """A JSON message back in the form msgpack gives (arrays as ``[shape, bytes]``), unvalidated."""
-    if type(obj) is not dict:
-        raise MessageError("not a map")
-    mtype = obj.get("type")
-    schema = SCHEMAS.get(mtype) if type(mtype) is str else None
-    if schema is None:
-        raise MessageError(f"unknown type {mtype!r}")
-    m: dict[Any, Any] = {}
-    for k, v in obj.items():
-        kind = schema.get(k, "value" if mtype in OPEN and k not in ENVELOPE else None)
-        if kind == "counters":
-            m[k] = _counters(v, k)
-        elif kind is None or kind in ("int", "float", "str", "intlist"):
-            m[k] = v
-        elif isinstance(kind, tuple):
-            m[k] = _arr_from_json(v, k)
-        elif kind in ("vecmap", "matmap"):
-            m[k] = {j: _arr_from_json(x, f"{k}[{j}]") for j, x in _int_keys(v, k).items()}
-        elif kind == "floatmap":
-            m[k] = _int_keys(v, k)
-        elif kind == "fields":
-            if type(v) is not dict:
-                raise MessageError(f"{k}: expected a map of names to values")
-            m[k] = {n: _named_from_json(x, f"{k}.{n}") for n, x in v.items()}
-        elif kind == "value":
-            m[k] = _named_from_json(v, k)
-        else:  # jumps: lists as they are
-            m[k] = v
-    return m
-
-
-def from_json(obj: Any, expect: str | tuple[str, ...] | None = None) -> dict[str, Any]:
-    """A message read back from JSON, validated exactly as :func:`decode` validates.
+def from_json(obj: Any, expect: str | tuple[str, ...] | None = None) -> Msg:
+    """A message read back from JSON (this version's, or a version-4 recording's), validated
+    exactly as a decoded payload is.
 
     Raises
     ------
     MessageError
         For anything that is not a well-formed message (of type ``expect``).
     """
-    return _validate(_json_to_wire(obj), expect)
+    if type(obj) is not dict:
+        raise MessageError("not a map")
+    fields = wire_v4.upgrade(obj) if obj.get("v") == wire_v4.V4 else obj
+    m = wire_v4.convert(fields, _json_hook, strict=False)
+    _check_expect(m.type, expect)
+    return m
 
 
 def payload_from_json(obj: Any) -> bytes:
-    """The wire payload (msgpack) of a JSON message, validated first (``zswarm replay``)."""
-    m = _json_to_wire(obj)
-    _validate(m, None)
-    return bytes(msgpack.packb(m, use_bin_type=True))
+    """The wire payload of a JSON message, validated first (``zswarm replay``)."""
+    return encode_message(from_json(obj))
 
 
 _NUM = {"type": "number"}
+_INT = {"type": "integer"}
+_STR = {"type": "string"}
+_ID_KEYS = "^[0-9]+$"
+_VALUE = {"anyOf": [_NUM, {"type": "array"}]}  # a number or a (nested) array of numbers
 
 
-def _json_array(shape: tuple[int, ...]) -> dict[str, Any]:
+def _array_schema(shape: tuple[int, ...]) -> dict[str, Any]:
     node: dict[str, Any] = _NUM
     for n in reversed(shape):
         node = {"type": "array", "items": node} | ({} if n < 0 else {"minItems": n, "maxItems": n})
     return node
 
 
-_ID_KEYS = "^[0-9]+$"
-_VALUE = {"anyOf": [_NUM, {"type": "array"}]}  # a number or a (nested) array of numbers
+def _by_id(node: dict[str, Any]) -> dict[str, Any]:
+    return {"type": "object", "patternProperties": {_ID_KEYS: node}, "additionalProperties": False}
 
 
-def _json_kind(kind: Any) -> dict[str, Any]:
-    if isinstance(kind, tuple):
-        return _json_array(kind)
-    simple: dict[str, dict[str, Any]] = {"int": {"type": "integer"}, "float": _NUM, "str": {"type": "string"}, "intlist": {"type": "array", "items": {"type": "integer"}}, "counters": {"type": "object"}}
-    if kind in simple:
-        return simple[kind]
-    if kind in ("vecmap", "matmap"):
-        return {"type": "object", "patternProperties": {_ID_KEYS: _json_array((3,) if kind == "vecmap" else (3, 3))}, "additionalProperties": False}
-    if kind == "floatmap":
-        return {"type": "object", "patternProperties": {_ID_KEYS: _NUM}, "additionalProperties": False}
-    if kind == "fields":
-        return {"type": "object", "additionalProperties": _VALUE}
-    if kind == "jumps":
-        return {"type": "array", "items": {"type": "array", "items": _NUM, "minItems": 4, "maxItems": 4}}
-    raise KeyError(kind)  # pragma: no cover
+_VEC, _MAT = _array_schema((3,)), _array_schema((3, 3))
+_NAMED = {"type": "object", "additionalProperties": _VALUE}
+# Each kind's fields (beyond the envelope) as JSON schemas, and which of them it must have.
+_FIELDS: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
+    "sense": ({"gyro": _VEC, "bearings": _by_id(_VEC), "rel_att": _by_id(_MAT), "velocity": _VEC, "velocity_body": _VEC, "attitude": _MAT, "position": _VEC, "rel_pos": _by_id(_VEC)}, ()),
+    "edge": ({"t_local": _NUM, "values": _NAMED}, ("t_local",)),
+    "cmd": ({"t_local": _NUM, "values": _NAMED}, ("t_local",)),
+    "est": (
+        {
+            "t_local": _NUM,
+            "R_hat": _MAT,
+            "p_hat": _VEC,
+            "values": _NAMED,
+            "edges": {"type": "object", "additionalProperties": _by_id(_NUM)},
+            "jumps": {"type": "array", "items": {"type": "array", "prefixItems": [_STR, {"enum": ["edge", "agent"]}, _INT, _NUM, _NUM, _NUM], "minItems": 6, "maxItems": 6}},
+        },
+        ("t_local",),
+    ),
+    "truth": ({"ids": {"type": "array", "items": _INT}, "R": _array_schema((-1, 3, 3)), "p": _array_schema((-1, 3)), "w": _array_schema((-1, 3)), "tau": _array_schema((-1, 3)), "u": _array_schema((-1, 4))}, ("ids", "R", "p", "w")),
+    "stats": ({"role": _STR, "counters": {"type": "object"}}, ("role", "counters")),
+    "start": ({"epoch": _NUM, "time_scale": _NUM, "duration": _NUM, "seed": _INT, "run": _STR, "mac": _STR}, ("epoch", "time_scale", "duration", "seed", "run")),
+    "stop": ({"reason": _STR, "mac": _STR}, ("reason",)),
+    "progress": ({"duration": _NUM, "mac": _STR}, ("duration",)),
+}
+assert set(_FIELDS) == set(KINDS), "a kind without its JSON schema"
 
 
 def json_schema(mtype: str) -> dict[str, Any]:
-    """The JSON schema of a message type as :func:`to_json` writes it (titled ``zswarm.<type>``)."""
+    """The JSON schema of a message kind as :func:`to_json` writes it (titled ``zswarm.<type>``)."""
+    fields, required = _FIELDS[mtype]
     props: dict[str, Any] = {
-        "v": {"const": VERSION},
         "type": {"const": mtype},
+        "v": {"const": VERSION},
         "src": {"type": "integer", "description": "sender id (0: world or control)"},
         "seq": {"type": "integer", "minimum": 0, "description": "per-key sequence number"},
         "inc": {"type": "integer", "minimum": 0, "description": "the sender's incarnation (a restarted process gets a new one)"},
         "t": {"type": "number", "description": "world time of the content, s"},
-    }
-    props |= {k: _json_kind(kind) for k, kind in SCHEMAS[mtype].items()}
-    required = [*ENVELOPE, *(k for k in SCHEMAS[mtype] if k not in OPTIONAL.get(mtype, ()))]
-    return {
-        "title": f"zswarm.{mtype}",
-        "type": "object",
-        "properties": props,
-        "required": required,
-        "additionalProperties": _VALUE if mtype in OPEN else False,
-    }
+    } | fields
+    return {"title": f"zswarm.{mtype}", "type": "object", "properties": props, "required": ["type", "v", "src", "seq", "t", *required], "additionalProperties": False}

@@ -1,0 +1,545 @@
+"""The messages on the wire, one msgspec Struct per kind (wire version 5).
+
+Every message has the envelope of :class:`Msg`: ``type`` (the tag), ``v`` (the version),
+``src`` (the sender's id), ``seq`` (per-key sequence number), ``inc`` (the sender process's
+incarnation: a restarted process numbers its messages from 0 again under a new one) and
+``t`` (world time of its content, s).  The kinds:
+
+=========  =====================  ==========================================================
+kind       key                    fields
+=========  =====================  ==========================================================
+sense      ``sense/<i>``          what the world measures for agent i, each field named as
+                                  the sensor is (zswarm.scenario.algorithm.SENSORS)
+edge       ``edge/<j>/<i>``       ``t_local``, ``values``: what j's algorithm writes on its
+                                  out-edges (SPEC.edge_out), checked by i against SPEC.edge_in
+est        ``est/<i>``            ``t_local``, ``R_hat``, ``p_hat``, and what the algorithm
+                                  declares (SPEC.estimate, SPEC.jumps): ``values`` (numbers or
+                                  arrays), ``edges`` (per-edge numbers by name), ``jumps``
+                                  (events of its hybrid variables)
+cmd        ``cmd/<i>``            ``t_local``, ``values``: the plant's inputs (SPEC.command)
+truth      ``truth``              ``ids`` and a row per id of ``R``, ``p``, ``w`` (``tau``,
+                                  ``u``: what a rigid-body or kinematic plant applied)
+stats      ``stats/<role>/<i>``   ``role``, ``counters`` (a process's counters)
+start,     ``ctl/...``            run control (zswarm.transport.run_control)
+stop,
+progress
+=========  =====================  ==========================================================
+
+A float64 array travels as ``[shape, bytes]`` (little-endian) and arrives as a read-only
+numpy array.  Every message is validated in ``__post_init__``, which msgspec runs both when
+a payload is decoded and when a sender builds one: shapes, finite values within
+±MAX_ABS, rotations that are rotations, unit bearings, a truth row per id, bounded
+counters.  Anything else raises :class:`MessageError`.  Receivers read fields as
+attributes; each message also reads as a read-only mapping of the fields it has (an open
+kind's ``values`` among them), which is what an algorithm's ``view.sense`` is.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Mapping
+from typing import Annotated, Any, ClassVar
+
+import msgspec
+import numpy as np
+
+from zswarm.math.limits import MAX_ABS, ROT_TOL
+from zswarm.math.so3 import _rotation_ok, rotations_ok
+
+VERSION = 5  # 2: open edge messages; 3: inc, bounds; 4: sense fields named as the sensors; 5: typed Structs, est as the SPEC declares
+
+
+class MessageError(ValueError):
+    """A message that is not a valid zswarm message."""
+
+
+# Bounds on every field: a message that decodes but carries a value no experiment can produce
+# is malformed, not something for an agent's math to choke on (a gyro of 1e200 killed an agent
+# in so3.exp).
+MAX_SEQ = 1 << 53  # seq and inc are in [0, 2**53): integers JSON (and so the viewers) carry exactly
+MAX_ID = (1 << 31) - 1  # src and agent ids are in [0, 2**31)
+MAX_IDS = 4096  # entries of a map keyed by agent or edge id, of truth's ids, of a jump list
+UNIT_TOL = 1e-6  # | |b| − 1 | of every bearing
+MAX_STR = 4096
+MAX_OPEN = 64  # named values of a message (an algorithm's edge fields, command, estimate)
+MAX_NAME = 64
+MAX_VALUE_LEN = 4096  # elements of one named array
+MAX_ARRAY = 1 << 17  # elements of any array (a truth of MAX_IDS rows of 3x3 is 36 864)
+MAX_COUNTER_DEPTH = 6
+MAX_COUNTER_ITEMS = 20000
+ENVELOPE = ("type", "v", "src", "seq", "inc", "t")
+JUMP_OWNERS = ("edge", "agent")  # a hybrid variable per tree edge (ξ_k), or the agent's own (ζ_i)
+_F8 = np.dtype("<f8")
+
+
+def _fail(field: str, problem: str) -> MessageError:
+    return MessageError(f"{field}: {problem}")
+
+
+def _array(v: Any, field: str) -> np.ndarray:
+    """A float64 array as a message holds it: read-only, decoded from ``[shape, bytes]`` or
+    copied from what a sender passed (which it may change afterwards)."""
+    if type(v) is np.ndarray:
+        if v.dtype is _F8 and not v.flags.writeable:
+            return v
+        a = np.array(v, dtype=_F8)
+    elif type(v) is list and len(v) == 2 and type(v[1]) is bytes:
+        shape = v[0]
+        if type(shape) is not list or len(shape) > 4 or not all(type(d) is int and 0 <= d <= MAX_ARRAY for d in shape):
+            raise _fail(field, f"bad shape {shape!r}")
+        n = math.prod(shape)
+        if n > MAX_ARRAY or len(v[1]) != 8 * n:
+            raise _fail(field, f"{len(v[1])} bytes for shape {tuple(shape)}")
+        a = np.frombuffer(v[1], dtype=_F8)
+        return a.reshape(shape) if len(shape) != 1 else a
+    else:
+        try:
+            a = np.array(v, dtype=_F8)
+        except (TypeError, ValueError):
+            raise _fail(field, "expected [shape, bytes] or an array of numbers") from None
+    if a.ndim > 4 or a.size > MAX_ARRAY:
+        raise _fail(field, f"an array of shape {a.shape}")
+    a.flags.writeable = False
+    return a
+
+
+def _check_values(a: np.ndarray, field: str) -> None:
+    """Every number finite and within ±MAX_ABS."""
+    if a.size <= 64:
+        xs = a.ravel().tolist()
+        # NaN or inf make the sum non-finite, and so do finite values whose sum overflows (all
+        # of them beyond MAX_ABS then): the message says which.
+        if xs and not (math.isfinite(sum(xs)) and max(xs) <= MAX_ABS and min(xs) >= -MAX_ABS):
+            raise _fail(field, "non-finite values" if not all(map(math.isfinite, xs)) else f"values beyond ±{MAX_ABS:g}")
+    elif a.size and not np.abs(a).max() <= MAX_ABS:  # False for NaN too
+        raise _fail(field, "non-finite values" if not np.isfinite(a).all() else f"values beyond ±{MAX_ABS:g}")
+
+
+def _shaped(v: Any, shape: tuple[int, ...], field: str) -> np.ndarray:
+    """An array of ``shape`` (-1: any length there), its values checked."""
+    a = _array(v, field)
+    if a.shape != shape and (len(a.shape) != len(shape) or any(w != -1 and w != g for w, g in zip(shape, a.shape, strict=True))):
+        raise _fail(field, f"shape {a.shape}, expected {shape}")
+    _check_values(a, field)
+    return a
+
+
+def _rotation(a: np.ndarray, field: str) -> None:
+    ok = _rotation_ok(a.ravel().tolist(), ROT_TOL) if a.shape == (3, 3) else rotations_ok(a, ROT_TOL)
+    if not ok:
+        raise _fail(field, f"not a rotation (R^T R = I, det R = 1 within {ROT_TOL:g})")
+
+
+def _unit(a: np.ndarray, field: str) -> None:
+    x, y, z = a.tolist()
+    if not abs(x * x + y * y + z * z - 1.0) <= 2 * UNIT_TOL:  # |b|² − 1 ≈ 2(|b| − 1); False for NaN
+        raise _fail(field, f"not a unit vector (|b| = 1 within {UNIT_TOL:g})")
+
+
+def _id(j: Any) -> bool:
+    return type(j) is int and 0 <= j <= MAX_ID
+
+
+def _number(x: Any, field: str) -> float:
+    """A finite number within ±MAX_ABS (not a bool), as a float."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.floating)) or not -MAX_ABS <= x <= MAX_ABS:
+        raise _fail(field, f"expected a finite number within ±{MAX_ABS:g}")
+    return float(x)
+
+
+def _string(x: Any, field: str) -> str:
+    if type(x) is not str or len(x) > MAX_STR:
+        raise _fail(field, f"expected a string of at most {MAX_STR} characters")
+    return x
+
+
+def _id_map(v: Any, field: str, shape: tuple[int, ...], check: Any = None) -> dict[int, np.ndarray]:
+    """{id: array of ``shape``}; ``check(array, field)`` on each (a rotation, a unit vector)."""
+    if type(v) is not dict or len(v) > MAX_IDS or not all(map(_id, v)):
+        raise _fail(field, f"expected a map of at most {MAX_IDS} ids to arrays of shape {shape}")
+    out = {}
+    for j, x in v.items():
+        a = out[j] = _shaped(x, shape, f"{field}[{j}]")
+        if check is not None:
+            check(a, f"{field}[{j}]")
+    return out
+
+
+def _named(v: Any, field: str) -> dict[str, float | np.ndarray]:
+    """Named values: each a finite number or a float64 array of at most 4 dimensions and
+    MAX_VALUE_LEN elements."""
+    if type(v) is not dict or len(v) > MAX_OPEN or not all(type(n) is str and 0 < len(n) <= MAX_NAME and n not in ENVELOPE for n in v):
+        raise _fail(field, f"expected a map of at most {MAX_OPEN} names (of at most {MAX_NAME} characters, not {', '.join(ENVELOPE)}) to values")
+    out: dict[str, float | np.ndarray] = {}
+    for n, x in v.items():
+        if isinstance(x, (int, float, np.floating)) and not isinstance(x, bool):
+            out[n] = _number(x, f"{field}.{n}")
+        else:
+            a = _array(x, f"{field}.{n}")
+            if a.size > MAX_VALUE_LEN:
+                raise _fail(f"{field}.{n}", f"more than {MAX_VALUE_LEN} elements")
+            _check_values(a, f"{field}.{n}")
+            out[n] = a
+    return out
+
+
+def _counters(v: Any, field: str) -> dict[str, Any]:
+    """A process's counters: names to numbers, strings, booleans, None, lists and maps of those,
+    bounded (``counters = 5`` used to pass and make the report raise after the run)."""
+    if type(v) is not dict:
+        raise _fail(field, "expected a map of names to counters")
+    left = [MAX_COUNTER_ITEMS]
+
+    def check(x: Any, where: str, depth: int) -> None:
+        left[0] -= 1
+        if left[0] < 0:
+            raise _fail(field, f"more than {MAX_COUNTER_ITEMS} entries")
+        if depth > MAX_COUNTER_DEPTH:
+            raise MessageError(f"{where}: nested deeper than {MAX_COUNTER_DEPTH}")
+        t = type(x)
+        if t is dict:
+            for n, y in x.items():
+                if type(n) is not str or len(n) > 256:
+                    raise MessageError(f"{where}: keys must be names (strings of at most 256 characters)")
+                check(y, f"{where}.{n}", depth + 1)
+        elif t is list or t is tuple:
+            for i, y in enumerate(x):
+                check(y, f"{where}[{i}]", depth + 1)
+        elif x is not None and t not in (int, float, str, bool):
+            raise MessageError(f"{where}: expected a number, a string, a list or a map")
+        elif t is str and len(x) > MAX_STR:
+            raise MessageError(f"{where}: a string of more than {MAX_STR} characters")
+        elif t is float and not math.isfinite(x):
+            raise MessageError(f"{where}: not finite")
+
+    check(v, field, 0)
+    return v
+
+
+# Container types bounded at their msgpack header (a map of 100 000 bearings took 0.28 s to build
+# before its first check; refused at the header: 80 µs).
+IdMap = Annotated[dict[int, np.ndarray], msgspec.Meta(max_length=MAX_IDS)]
+Named = Annotated[dict[str, Any], msgspec.Meta(max_length=MAX_OPEN)]
+Str = Annotated[str, msgspec.Meta(max_length=MAX_STR)]
+
+
+class Msg(msgspec.Struct, kw_only=True, tag_field="type", omit_defaults=True, dict=True, forbid_unknown_fields=True):
+    """The envelope of every message (see the module docstring).  ``dict=True``: a receiver
+    may note what it knows of a copy of a message (its arrival time) as an attribute that is
+    not sent.  A field the kind does not have is refused (a sender's typo, or another version)."""
+
+    v: int
+    src: int
+    seq: int
+    inc: int = 0
+    t: float
+
+    OPEN: ClassVar[bool] = False  # an open kind: its ``values`` read as its fields
+
+    def __post_init__(self) -> None:
+        if self.v != VERSION:
+            raise MessageError(f"schema version {self.v!r}, expected {VERSION}")
+        if not _id(self.src):
+            raise _fail("src", f"expected an integer in [0, {MAX_ID}]")
+        if type(self.seq) is not int or not 0 <= self.seq < MAX_SEQ:
+            raise _fail("seq", "expected an integer in [0, 2**53)")
+        if type(self.inc) is not int or not 0 <= self.inc < MAX_SEQ:
+            raise _fail("inc", "expected an integer in [0, 2**53)")
+        self.t = _number(self.t, "t")
+        self._check()
+
+    def _check(self) -> None:
+        """The kind's own fields (raises MessageError)."""
+
+    @property
+    def type(self) -> str:
+        tag: str = self.__struct_config__.tag  # type: ignore[assignment]
+        return tag
+
+    # -- a read-only mapping of the fields it has (None and empty: absent)
+
+    def _fields(self) -> Iterator[tuple[str, Any]]:
+        yield "type", self.type
+        for k in self.__struct_fields__:
+            v = getattr(self, k)
+            if k == "values" and self.OPEN:
+                yield from v.items()
+            elif v is not None and not (k in _EMPTY_ABSENT and not v):
+                yield k, v
+
+    def __getitem__(self, k: str) -> Any:
+        if k == "type":
+            return self.type
+        if k in self.__struct_fields__ and not (k == "values" and self.OPEN):
+            v = getattr(self, k)
+            if v is not None and not (k in _EMPTY_ABSENT and not v):
+                return v
+        elif self.OPEN and k in self.values:  # type: ignore[attr-defined]
+            return self.values[k]  # type: ignore[attr-defined]
+        raise KeyError(k)
+
+    def get(self, k: str, default: Any = None) -> Any:
+        try:
+            return self[k]
+        except KeyError:
+            return default
+
+    def __contains__(self, k: object) -> bool:
+        return isinstance(k, str) and self.get(k, _ABSENT) is not _ABSENT
+
+    def keys(self) -> list[str]:
+        return [k for k, _ in self._fields()]
+
+    def items(self) -> list[tuple[str, Any]]:
+        return list(self._fields())
+
+    def __iter__(self) -> Iterator[str]:  # type: ignore[override]
+        return iter(self.keys())
+
+    def __len__(self) -> int:
+        return len(self.keys())
+
+
+_ABSENT = object()
+_EMPTY_ABSENT = frozenset({"values", "edges", "jumps"})  # fields whose empty default means "none" (a sensor's empty map does not)
+Mapping.register(Msg)
+
+
+class Sense(Msg, tag="sense"):
+    """world -> agent i: gyro, body-frame bearings b_ij^i, relative attitudes R_ij, inertial
+    velocity v_i, body-frame velocity v_i^i, own attitude R_i and position p_i, body-frame
+    relative positions ⁱp_ij (De Carli et al. (2)); only what agent i's algorithm declares."""
+
+    gyro: np.ndarray | None = None
+    bearings: IdMap | None = None
+    rel_att: IdMap | None = None
+    velocity: np.ndarray | None = None
+    velocity_body: np.ndarray | None = None
+    attitude: np.ndarray | None = None
+    position: np.ndarray | None = None
+    rel_pos: IdMap | None = None
+
+    def _check(self) -> None:
+        for k in ("gyro", "velocity", "velocity_body", "position"):
+            v = getattr(self, k)
+            if v is not None:
+                setattr(self, k, _shaped(v, (3,), k))
+        if self.attitude is not None:
+            self.attitude = _shaped(self.attitude, (3, 3), "attitude")
+            _rotation(self.attitude, "attitude")
+        if self.bearings is not None:
+            self.bearings = _id_map(self.bearings, "bearings", (3,), _unit)
+        if self.rel_att is not None:
+            self.rel_att = _id_map(self.rel_att, "rel_att", (3, 3), _rotation)
+        if self.rel_pos is not None:
+            self.rel_pos = _id_map(self.rel_pos, "rel_pos", (3,))
+
+
+class Edge(Msg, tag="edge"):
+    """agent j -> agent i along edge j->i: the sender's clock and the values its algorithm
+    writes on out-edges (SPEC.edge_out), which i checks against its SPEC.edge_in."""
+
+    t_local: float
+    values: Named = {}
+
+    OPEN: ClassVar[bool] = True
+
+    def _check(self) -> None:
+        self.t_local = _number(self.t_local, "t_local")
+        self.values = _named(self.values, "values")
+
+
+class Cmd(Edge, tag="cmd"):
+    """agent i -> world on cmd/<i>: the sender's clock and the plant's inputs its algorithm
+    sends (SPEC.command: a torque ``tau`` for the rigid bodies of (5.1)), which the world
+    checks against the plant's inputs."""
+
+
+# A jump of a hybrid variable: (its name, "edge" | "agent", its owner: the edge k or the agent,
+# the time, the value before, after), as the algorithm's SPEC.jumps declares it.
+Jump = tuple[str, str, int, float, float, float]
+
+
+class Est(Msg, tag="est"):
+    """agent i -> recorder: its estimate R̂_i, p̂_i (what the errors are computed from) and what
+    its algorithm declares (zswarm.scenario.algorithm: SPEC.estimate, SPEC.jumps): named
+    ``values`` (σ_i, Ω̂_i, ...), named per-edge numbers ``edges`` ({name: {k: value}}, e.g. the
+    ξ_k of the edges it heads) and the ``jumps`` of its hybrid variables since its last estimate."""
+
+    t_local: float
+    R_hat: np.ndarray | None = None
+    p_hat: np.ndarray | None = None
+    values: Named = {}
+    edges: Annotated[dict[str, Annotated[dict[int, float], msgspec.Meta(max_length=MAX_IDS)]], msgspec.Meta(max_length=MAX_OPEN)] = {}
+    jumps: Annotated[list[Jump], msgspec.Meta(max_length=MAX_IDS)] = []
+
+    def _check(self) -> None:
+        self.t_local = _number(self.t_local, "t_local")
+        if self.R_hat is not None:
+            self.R_hat = _shaped(self.R_hat, (3, 3), "R_hat")
+            _rotation(self.R_hat, "R_hat")
+        if self.p_hat is not None:
+            self.p_hat = _shaped(self.p_hat, (3,), "p_hat")
+        if self.values:
+            self.values = _named(self.values, "values")
+        if self.edges:
+            e = self.edges
+            if type(e) is not dict or len(e) > MAX_OPEN or not all(type(n) is str and 0 < len(n) <= MAX_NAME for n in e):
+                raise _fail("edges", f"expected a map of at most {MAX_OPEN} names to maps of edge ids to numbers")
+            out = {}
+            for n, m in e.items():
+                if type(m) is not dict or len(m) > MAX_IDS or not all(map(_id, m)):
+                    raise _fail(f"edges.{n}", f"expected a map of at most {MAX_IDS} edge ids to numbers")
+                out[n] = {k: _number(x, f"edges.{n}[{k}]") for k, x in m.items()}
+            self.edges = out
+        if self.jumps:
+            js = self.jumps
+            if type(js) is not list or len(js) > MAX_IDS:
+                raise _fail("jumps", f"expected a list of at most {MAX_IDS} [name, owner kind, owner, t, before, after]")
+            out_j = []
+            for q, e in enumerate(js):
+                if not (type(e) in (tuple, list) and len(e) == 6 and type(e[0]) is str and 0 < len(e[0]) <= MAX_NAME and e[1] in JUMP_OWNERS and _id(e[2])):
+                    raise _fail(f"jumps[{q}]", "expected [name, 'edge' | 'agent', owner id, t, before, after]")
+                out_j.append((e[0], e[1], e[2], _number(e[3], f"jumps[{q}]"), _number(e[4], f"jumps[{q}]"), _number(e[5], f"jumps[{q}]")))
+            self.jumps = out_j
+
+
+class Truth(Msg, tag="truth"):
+    """world -> recorder: ``ids[k]`` has attitude ``R[k]``, position ``p[k]``, true angular
+    velocity ``w[k]`` (a rigid body: the torque ``tau[k]`` applied over the last world step; a
+    kinematic vehicle: ``u[k]`` = [v (body frame), yaw rate] applied)."""
+
+    ids: Annotated[list[int], msgspec.Meta(max_length=MAX_IDS)]
+    R: np.ndarray
+    p: np.ndarray
+    w: np.ndarray
+    tau: np.ndarray | None = None
+    u: np.ndarray | None = None
+
+    def _check(self) -> None:
+        ids = self.ids
+        if type(ids) is not list or len(ids) > MAX_IDS or not all(map(_id, ids)):
+            if type(ids) is tuple and len(ids) <= MAX_IDS and all(map(_id, ids)):
+                ids = self.ids = list(ids)
+            else:
+                raise _fail("ids", f"expected a list of at most {MAX_IDS} ids")
+        if len(set(ids)) != len(ids):
+            raise _fail("ids", "repeated")
+        n = len(ids)
+        for k, shape in (("R", (n, 3, 3)), ("p", (n, 3)), ("w", (n, 3)), ("tau", (n, 3)), ("u", (n, 4))):
+            v = getattr(self, k)
+            if v is not None:
+                a = _array(v, k)
+                if a.shape[:1] != (n,) and a.ndim == len(shape):
+                    raise _fail(k, f"{a.shape[0]} rows for {n} ids")
+                setattr(self, k, _shaped(a, shape, k))
+        _rotation(self.R, "R")
+
+
+class Stats(Msg, tag="stats"):
+    """A process's counters (``role``: "agent", "world", "recorder", ...)."""
+
+    role: Str
+    counters: Annotated[dict[str, Any], msgspec.Meta(max_length=MAX_COUNTER_ITEMS)]
+
+    def _check(self) -> None:
+        _string(self.role, "role")
+        _counters(self.counters, "counters")
+
+
+class Start(Msg, tag="start"):
+    """The world starts the run: its epoch (wall clock), time scale, duration, seed and run id;
+    ``mac``: signed with the run's secret when there is one (zswarm.transport.run_control)."""
+
+    epoch: float
+    time_scale: float
+    duration: float
+    seed: int
+    run: Str
+    mac: Str | None = None
+
+    def _check(self) -> None:
+        for k in ("epoch", "time_scale", "duration"):
+            setattr(self, k, _number(getattr(self, k), k))
+        if type(self.seed) is not int or isinstance(self.seed, bool):
+            raise _fail("seed", "expected an integer")
+        _string(self.run, "run")
+        if self.mac is not None:
+            _string(self.mac, "mac")
+
+
+class Stop(Msg, tag="stop"):
+    """The run stops (``reason``)."""
+
+    reason: Str
+    mac: Str | None = None
+
+    def _check(self) -> None:
+        _string(self.reason, "reason")
+        if self.mac is not None:
+            _string(self.mac, "mac")
+
+
+class Progress(Msg, tag="progress"):
+    """The world's progress: the run's duration (a run extended by a fault plan)."""
+
+    duration: float
+    mac: Str | None = None
+
+    def _check(self) -> None:
+        self.duration = _number(self.duration, "duration")
+        if self.mac is not None:
+            _string(self.mac, "mac")
+
+
+def enc_hook(obj: Any) -> Any:
+    """How msgspec writes what it does not know: a numpy array as ``[shape, bytes]``."""
+    if isinstance(obj, np.ndarray):
+        return [list(obj.shape), np.ascontiguousarray(obj, dtype=_F8).tobytes()]
+    if isinstance(obj, np.floating | np.integer):
+        return obj.item()
+    raise NotImplementedError(f"{type(obj).__name__} on the wire")
+
+
+def dec_hook(tp: type, obj: Any) -> Any:
+    """How msgspec reads an array field (``[shape, bytes]``; its values are checked by the kind)."""
+    if tp is np.ndarray:
+        return _array(obj, "array")
+    raise NotImplementedError(tp)
+
+
+def readable(text: str) -> str:
+    """msgspec's ``problem - at `$.field``` as the ``field: problem`` every error here reads."""
+    problem, sep, where = text.rpartition(" - at `")
+    if not sep:
+        if text.startswith("Object missing required field"):
+            return f"{text.split('`')[1]}: missing"
+        if text.startswith("Expected `object`, got"):
+            return f"not a map (a msgpack {text.rpartition('`')[0].rpartition('`')[2]})"
+        return text
+    path = where.rstrip("`").rpartition("`$")[2].removeprefix("$").removeprefix(".").replace("[...]", "")
+    if path == "type" and problem.startswith("Invalid value"):
+        return f"unknown type {problem.removeprefix('Invalid value ')}"
+    if problem.startswith("Object missing required field"):
+        return f"{problem.split('`')[1]}: missing"
+    return f"{path}: {problem}" if path and not problem.startswith(path + ":") else problem
+
+
+class _Version(msgspec.Struct):
+    v: Any = None
+
+
+_VERSION_OF = msgspec.msgpack.Decoder(_Version)
+
+
+def version_of(payload: bytes) -> Any:
+    """The ``v`` of a payload that is a msgpack map (None: none, or not a map)."""
+    try:
+        return _VERSION_OF.decode(payload).v
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
+
+
+KINDS: Mapping[str, type[Msg]] = {c.__struct_config__.tag: c for c in (Sense, Edge, Est, Cmd, Truth, Stats, Start, Stop, Progress)}  # type: ignore[misc]
+# Each kind's fields beyond the envelope, in order.
+FIELDS: Mapping[str, tuple[str, ...]] = {t: tuple(f for f in c.__struct_fields__ if f not in ENVELOPE) for t, c in KINDS.items()}
