@@ -84,7 +84,9 @@ def replay(
             continue
         if bus is not None and run is not None:
             try:
-                data = payload if isinstance(payload, bytes) else wire_json.payload_from_json(payload)
+                # Sent as this version's payload (an earlier recording's message upgraded: a live
+                # receiver refuses another version).
+                data = (payload if wire.version_of(payload) == wire.VERSION else wire.encode_message(wire.decode_recorded(payload))) if isinstance(payload, bytes) else wire_json.payload_from_json(payload)
             except wire.MessageError:
                 sent["malformed_skipped"] += 1
                 continue

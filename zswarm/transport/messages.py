@@ -124,6 +124,27 @@ def _shaped(v: Any, shape: tuple[int, ...], field: str) -> np.ndarray:
     return a
 
 
+def _fixed(v: Any, shape: tuple[int, ...], field: str) -> np.ndarray:
+    """:func:`_shaped` for a fixed shape, its values left to :func:`_values_ok` (one check for
+    every array of a message: most are 3-vectors and 3x3 matrices, where each call costs)."""
+    if type(v) is np.ndarray and v.dtype is _F8 and not v.flags.writeable and v.shape == shape:
+        return v  # decoded: a read-only view of the payload's bytes
+    a = _array(v, field)
+    if a.shape != shape:
+        raise _fail(field, f"shape {a.shape}, expected {shape}")
+    return a
+
+
+def _values_ok(arrays: list[np.ndarray]) -> list[float] | None:
+    """Every number of ``arrays`` (all small) as one list, or None when some is not finite or
+    beyond ±MAX_ABS (then :func:`_check_values` on each names it).  NaN or inf make the sum
+    non-finite, and so do finite values whose sum overflows (beyond MAX_ABS every one)."""
+    xs: list[float] = []
+    for a in arrays:
+        xs += a.tolist() if a.ndim == 1 else a.ravel().tolist()
+    return xs if not xs or (math.isfinite(sum(xs)) and max(xs) <= MAX_ABS and min(xs) >= -MAX_ABS) else None
+
+
 def _rotation(a: np.ndarray, field: str) -> None:
     ok = _rotation_ok(a.ravel().tolist(), ROT_TOL) if a.shape == (3, 3) else rotations_ok(a, ROT_TOL)
     if not ok:
@@ -154,14 +175,35 @@ def _string(x: Any, field: str) -> str:
 
 
 def _id_map(v: Any, field: str, shape: tuple[int, ...], check: Any = None) -> dict[int, np.ndarray]:
-    """{id: array of ``shape``}; ``check(array, field)`` on each (a rotation, a unit vector)."""
+    """{id: array of ``shape``}; ``check`` on each: ``_unit`` (a unit vector) or ``_rotation``."""
     if type(v) is not dict or len(v) > MAX_IDS or not all(map(_id, v)):
         raise _fail(field, f"expected a map of at most {MAX_IDS} ids to arrays of shape {shape}")
-    out = {}
-    for j, x in v.items():
-        a = out[j] = _shaped(x, shape, f"{field}[{j}]")
-        if check is not None:
-            check(a, f"{field}[{j}]")
+    vals = list(v.values())
+    if vals and all(type(x) is np.ndarray and x.dtype is _F8 and x.shape == shape and x.flags.writeable for x in vals):
+        # A sender's arrays: copied at once into one read-only stack, its rows the entries.
+        stack = np.array(vals)
+        stack.flags.writeable = False
+        out = dict(zip(v, stack, strict=True))
+        xs = stack.ravel().tolist()
+        if not (math.isfinite(sum(xs)) and max(xs) <= MAX_ABS and min(xs) >= -MAX_ABS):
+            xs = None
+    else:
+        out = {}
+        for j, x in v.items():  # decoded: read-only views of the payload (_fixed inlined: most maps are of these)
+            out[j] = x if type(x) is np.ndarray and x.shape == shape and x.dtype is _F8 and not x.flags.writeable else _fixed(x, shape, f"{field}[{j}]")
+        xs = _values_ok(list(out.values()))
+    if xs is None:
+        for j, a in out.items():
+            _check_values(a, f"{field}[{j}]")
+    elif check is _unit:
+        for q, j in enumerate(out):
+            x, y, z = xs[3 * q : 3 * q + 3]
+            if not abs(x * x + y * y + z * z - 1.0) <= 2 * UNIT_TOL:  # |b|² − 1 ≈ 2(|b| − 1)
+                raise _fail(f"{field}[{j}]", f"not a unit vector (|b| = 1 within {UNIT_TOL:g})")
+    elif check is _rotation:
+        for q, j in enumerate(out):
+            if not _rotation_ok(xs[9 * q : 9 * q + 9], ROT_TOL):
+                raise _fail(f"{field}[{j}]", f"not a rotation (R^T R = I, det R = 1 within {ROT_TOL:g})")
     return out
 
 
@@ -171,15 +213,34 @@ def _named(v: Any, field: str) -> dict[str, float | np.ndarray]:
     if type(v) is not dict or len(v) > MAX_OPEN or not all(type(n) is str and 0 < len(n) <= MAX_NAME and n not in ENVELOPE for n in v):
         raise _fail(field, f"expected a map of at most {MAX_OPEN} names (of at most {MAX_NAME} characters, not {', '.join(ENVELOPE)}) to values")
     out: dict[str, float | np.ndarray] = {}
+    small: list[np.ndarray] = []  # checked at once (_values_ok)
     for n, x in v.items():
-        if isinstance(x, (int, float, np.floating)) and not isinstance(x, bool):
+        t = type(x)
+        if t is float:
+            if not -MAX_ABS <= x <= MAX_ABS:  # False for NaN
+                raise _fail(f"{field}.{n}", f"expected a finite number within ±{MAX_ABS:g}")
+            out[n] = x
+        elif isinstance(x, (int, float, np.floating)) and t is not bool:
             out[n] = _number(x, f"{field}.{n}")
         else:
-            a = _array(x, f"{field}.{n}")
-            if a.size > MAX_VALUE_LEN:
-                raise _fail(f"{field}.{n}", f"more than {MAX_VALUE_LEN} elements")
-            _check_values(a, f"{field}.{n}")
+            if t is np.ndarray and x.dtype is _F8 and x.ndim <= 4 and x.size <= 64:
+                a = x
+                if a.flags.writeable:  # a sender's: copied (it may change it afterwards)
+                    a = a.copy()
+                    a.flags.writeable = False
+            else:
+                a = _array(x, f"{field}.{n}")
+                if a.size > MAX_VALUE_LEN:
+                    raise _fail(f"{field}.{n}", f"more than {MAX_VALUE_LEN} elements")
             out[n] = a
+            if a.size <= 64:
+                small.append(a)
+            else:
+                _check_values(a, f"{field}.{n}")
+    if _values_ok(small) is None:
+        for n, a in out.items():
+            if type(a) is np.ndarray:
+                _check_values(a, f"{field}.{n}")
     return out
 
 
@@ -320,12 +381,21 @@ class Sense(Msg, tag="sense"):
     rel_pos: IdMap | None = None
 
     def _check(self) -> None:
+        arrays = []
         for k in ("gyro", "velocity", "velocity_body", "position"):
             v = getattr(self, k)
             if v is not None:
-                setattr(self, k, _shaped(v, (3,), k))
+                v = _fixed(v, (3,), k)
+                setattr(self, k, v)
+                arrays.append(v)
         if self.attitude is not None:
-            self.attitude = _shaped(self.attitude, (3, 3), "attitude")
+            self.attitude = _fixed(self.attitude, (3, 3), "attitude")
+            arrays.append(self.attitude)
+        if _values_ok(arrays) is None:
+            for k in ("gyro", "velocity", "velocity_body", "position", "attitude"):
+                if getattr(self, k) is not None:
+                    _check_values(getattr(self, k), k)
+        if self.attitude is not None:
             _rotation(self.attitude, "attitude")
         if self.bearings is not None:
             self.bearings = _id_map(self.bearings, "bearings", (3,), _unit)
@@ -347,6 +417,8 @@ class Edge(Msg, tag="edge"):
     def _check(self) -> None:
         self.t_local = _number(self.t_local, "t_local")
         self.values = _named(self.values, "values")
+        if "t_local" in self.values or "values" in self.values:  # they would shadow its own fields (JSON writes its values beside them)
+            raise _fail("values", "a value named t_local or values")
 
 
 class Cmd(Edge, tag="cmd"):
@@ -376,10 +448,12 @@ class Est(Msg, tag="est"):
     def _check(self) -> None:
         self.t_local = _number(self.t_local, "t_local")
         if self.R_hat is not None:
-            self.R_hat = _shaped(self.R_hat, (3, 3), "R_hat")
+            self.R_hat = _fixed(self.R_hat, (3, 3), "R_hat")
+            _check_values(self.R_hat, "R_hat")
             _rotation(self.R_hat, "R_hat")
         if self.p_hat is not None:
-            self.p_hat = _shaped(self.p_hat, (3,), "p_hat")
+            self.p_hat = _fixed(self.p_hat, (3,), "p_hat")
+            _check_values(self.p_hat, "p_hat")
         if self.values:
             self.values = _named(self.values, "values")
         if self.edges:
@@ -504,8 +578,17 @@ def enc_hook(obj: Any) -> Any:
 def dec_hook(tp: type, obj: Any) -> Any:
     """How msgspec reads an array field (``[shape, bytes]``; its values are checked by the kind)."""
     if tp is np.ndarray:
+        if type(obj) is list and len(obj) == 2 and type(obj[1]) is bytes:  # the usual: a 3-vector, a 3x3 matrix
+            shape, data = obj
+            if shape == _VEC and len(data) == 24:
+                return np.frombuffer(data, dtype=_F8)
+            if shape == _MAT and len(data) == 72:
+                return np.frombuffer(data, dtype=_F8).reshape(3, 3)
         return _array(obj, "array")
     raise NotImplementedError(tp)
+
+
+_VEC, _MAT = [3], [3, 3]
 
 
 def readable(text: str) -> str:

@@ -73,6 +73,7 @@ __all__ = [
     "encode",
     "encode_message",
     "message",
+    "version_of",
 ]
 
 

@@ -26,8 +26,11 @@ def _tolist(obj: Any) -> Any:
 
 
 def to_json(m: Msg) -> dict[str, Any]:
-    """A message as a JSON-ready dict (ids as strings)."""
+    """A message as a JSON-ready dict (ids as strings).  An open kind's (edge, cmd) values are
+    written beside its fields, where a viewer plots them as they are named (``/cmd/4.tau[0]``)."""
     out: dict[str, Any] = msgspec.to_builtins(m, enc_hook=_tolist, str_keys=True)
+    if m.OPEN:
+        out |= out.pop("values", {})
     return out
 
 
@@ -55,7 +58,12 @@ def from_json(obj: Any, expect: str | tuple[str, ...] | None = None) -> Msg:
     """
     if type(obj) is not dict:
         raise MessageError("not a map")
-    fields = wire_v4.upgrade(obj) if obj.get("v") == wire_v4.V4 else obj
+    if obj.get("v") == wire_v4.V4:
+        fields = wire_v4.upgrade(obj)
+    elif obj.get("type") in _OPEN_KINDS and "values" not in obj:  # to_json's open kind: its values beside its fields
+        fields = {k: x for k, x in obj.items() if k in _OPEN_FIELDS} | {"values": {k: x for k, x in obj.items() if k not in _OPEN_FIELDS}}
+    else:
+        fields = obj
     m = wire_v4.convert(fields, _json_hook, strict=False)
     _check_expect(m.type, expect)
     return m
@@ -65,6 +73,9 @@ def payload_from_json(obj: Any) -> bytes:
     """The wire payload of a JSON message, validated first (``zswarm replay``)."""
     return encode_message(from_json(obj))
 
+
+_OPEN_KINDS = frozenset(k for k, c in KINDS.items() if c.OPEN)
+_OPEN_FIELDS = frozenset({"type", "v", "src", "seq", "inc", "t", "t_local"})
 
 _NUM = {"type": "number"}
 _INT = {"type": "integer"}
@@ -89,8 +100,8 @@ _NAMED = {"type": "object", "additionalProperties": _VALUE}
 # Each kind's fields (beyond the envelope) as JSON schemas, and which of them it must have.
 _FIELDS: dict[str, tuple[dict[str, Any], tuple[str, ...]]] = {
     "sense": ({"gyro": _VEC, "bearings": _by_id(_VEC), "rel_att": _by_id(_MAT), "velocity": _VEC, "velocity_body": _VEC, "attitude": _MAT, "position": _VEC, "rel_pos": _by_id(_VEC)}, ()),
-    "edge": ({"t_local": _NUM, "values": _NAMED}, ("t_local",)),
-    "cmd": ({"t_local": _NUM, "values": _NAMED}, ("t_local",)),
+    "edge": ({"t_local": _NUM}, ("t_local",)),  # and its values beside (additionalProperties)
+    "cmd": ({"t_local": _NUM}, ("t_local",)),
     "est": (
         {
             "t_local": _NUM,
@@ -122,4 +133,5 @@ def json_schema(mtype: str) -> dict[str, Any]:
         "inc": {"type": "integer", "minimum": 0, "description": "the sender's incarnation (a restarted process gets a new one)"},
         "t": {"type": "number", "description": "world time of the content, s"},
     } | fields
-    return {"title": f"zswarm.{mtype}", "type": "object", "properties": props, "required": ["type", "v", "src", "seq", "t", *required], "additionalProperties": False}
+    extra: Any = _VALUE if KINDS[mtype].OPEN else False
+    return {"title": f"zswarm.{mtype}", "type": "object", "properties": props, "required": ["type", "v", "src", "seq", "t", *required], "additionalProperties": extra}
