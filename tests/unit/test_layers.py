@@ -188,7 +188,7 @@ def test_the_family_name_check_finds_a_family_name():
 LAYERS = {
     "util": "small helpers every layer uses: quoting, whole files, plugins by entry point",
     "math": "SO(3), its compiled loops, bit-stable trigonometry, the timing library, the bounds",
-    "scenario": "what an experiment is: the typed scenario file, graph, clocks, links, faults, the algorithm contract, each process's program",
+    "scenario": "what an experiment is: the typed file, graph, clocks, links, faults, the algorithm contract, programs",
     "transport": "talking over Zenoh and being a process: messages, keys, the Bus, TLS, process helpers",
     "recording": "MCAP recordings and the viewers: writing, reading, Foxglove messages, Rerun",
     "report": "the building blocks of a report: the decoded recording, series, the table, fault costs, defaults",

@@ -9,7 +9,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from zswarm.transport import keys
-from zswarm.transport.messages import ENVELOPE, KINDS, MessageError
+from zswarm.transport.message_checks import ENVELOPE, MessageError
+from zswarm.transport.messages import KINDS
 from zswarm.transport.wire import decode, encode
 
 

@@ -16,10 +16,8 @@ from typing import Any, Union
 import msgspec
 
 from zswarm.transport import keys, wire_v4
-from zswarm.transport.messages import (  # the types and bounds, which users read as wire.X
+from zswarm.transport.message_checks import (  # the bounds and the error, which users read as wire.X
     ENVELOPE,
-    FIELDS,
-    KINDS,
     MAX_COUNTER_ITEMS,
     MAX_ID,
     MAX_IDS,
@@ -28,10 +26,14 @@ from zswarm.transport.messages import (  # the types and bounds, which users rea
     MAX_VALUE_LEN,
     UNIT_TOL,
     VERSION,
+    MessageError,
+)
+from zswarm.transport.messages import (  # the types
+    FIELDS,
+    KINDS,
     Cmd,
     Edge,
     Est,
-    MessageError,
     Msg,
     Sense,
     Stats,

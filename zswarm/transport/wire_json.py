@@ -15,7 +15,8 @@ import msgspec
 import numpy as np
 
 from zswarm.transport import wire_v4
-from zswarm.transport.messages import _F8, KINDS, MAX_ARRAY, VERSION, MessageError, Msg, _array, enc_hook
+from zswarm.transport.message_checks import _F8, MAX_ARRAY, VERSION, MessageError, _array
+from zswarm.transport.messages import KINDS, Msg, enc_hook
 from zswarm.transport.wire import _check_expect, encode_message
 
 

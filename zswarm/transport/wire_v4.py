@@ -20,7 +20,8 @@ from typing import Any, Union
 import msgpack
 import msgspec
 
-from zswarm.transport.messages import ENVELOPE, FIELDS, KINDS, MAX_COUNTER_ITEMS, VERSION, MessageError, Msg, dec_hook, readable
+from zswarm.transport.message_checks import ENVELOPE, MAX_COUNTER_ITEMS, VERSION, MessageError
+from zswarm.transport.messages import FIELDS, KINDS, Msg, dec_hook, readable
 
 V4 = 4
 _OPEN = ("edge", "cmd")
