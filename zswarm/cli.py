@@ -58,11 +58,75 @@ def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+# Every subcommand's --help ends with examples and its exit codes (issue 48).  1 is what each
+# command means by a failure; 2 and 130 mean the same everywhere (EXIT_USAGE, main's Ctrl-C).
+T32 = "topologies/thesis-3.2-fixed8.toml"
+T56 = "topologies/thesis-5.6-hybrid7.toml"
+EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
+    "run": ((f"zswarm run {T32} --duration 20", f"zswarm run {T32} --set links.delay_ms=50 --live"), "the run did not complete (a process died or the recording is cut short)"),
+    "sim": ((f"zswarm sim {T32} --duration 40", f"zswarm sim {T32} --fault kill,agent=5,at=10"), "the run did not complete"),
+    "sweep": ((f"zswarm sweep {T32} --vary links.delay_ms=0,50,100 --repeats 3 --duration 20",), "a run of the sweep failed (the others are in sweep.csv)"),
+    "basin": ((f"zswarm basin {T56} --draws 1000 --duration 20",), "a draw failed (the others are in basin.csv)"),
+    "basin-compare": (("zswarm basin-compare basins/a basins/b",), "a file could not be written"),
+    "router": (("zswarm router --listen tcp/127.0.0.1:7447",), "a file could not be written"),
+    "certs": ((f"zswarm certs certs/ {T32} --host 127.0.0.1",), "a file could not be written"),
+    "compose": ((f"zswarm compose {T32} -o compose.yml",), "a file could not be written"),
+    "record": ((f"zswarm record {T32} --connect tcp/127.0.0.1:7447 --run-id demo",), "a results file could not be written"),
+    "replay": (("zswarm replay runs/thesis-3.2-fixed8 --live",), "a file could not be read or written"),
+    "view": (("zswarm view runs/thesis-3.2-fixed8", "zswarm view runs/thesis-3.2-fixed8 --save run.rrd"), "the viewer failed"),
+    "report": (("zswarm report runs/thesis-3.2-fixed8",), "a results file could not be written"),
+    "generate": (("zswarm generate --list", "zswarm generate attitude-sync-hybrid -n 7 --seed 3 -o my.toml"), "a file could not be written"),
+}
+
+
+def _epilog(examples: tuple[str, ...], failure: str) -> str:
+    lines = ["examples:", *(f"  {e}" for e in examples), "", "exit codes:", "  0    done", f"  1    {failure}", "  2    bad arguments or a bad scenario file (one line on stderr: file: field: problem)", "  130  interrupted (Ctrl-C)"]
+    return "\n".join(lines)
+
+
+class _Formatter(argparse.HelpFormatter):
+    """Descriptions wrapped as argparse wraps them; an epilog of several lines kept as written."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return text if "\n" in text else super()._fill_text(text, width, indent)
+
+
+def _explain(sub: Any) -> None:
+    """Examples and exit codes at the end of every subcommand's --help (a family's command: its
+    own examples, or its --help)."""
+    own = family.commands()
+    for name, parser in sub.choices.items():
+        if name in EXAMPLES:
+            examples, failure = EXAMPLES[name]
+        else:
+            examples, failure = own[name].examples or (f"zswarm {name} --help",), "the command failed"
+        parser.epilog = _epilog(examples, failure)
+        parser.formatter_class = _Formatter
+
+
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml's, when installed from this checkout)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("zswarm")
+    except PackageNotFoundError:  # run from a checkout that is not installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = procutil.ArgumentParser(prog="zswarm", description="Multi-agent distributed estimation over Zenoh: one process per agent.")
+    p.add_argument("--version", action="version", version=f"zswarm {_version()}", help="print zswarm's version and exit")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
-    r = sub.add_parser("run", help="run a scenario over real processes (router, world, agents, recorder)")
+    r = sub.add_parser(
+        "run",
+        help="run a scenario over real processes (router, world, agents, recorder)",
+        description="Opens a Zenoh router in this process on a free localhost port and starts the recorder, the world and "
+        "one process per agent; "
+        "the world starts the run once every process is up, and the recorder writes RESULTS/recording.mcap.  At the end "
+        "the report is written (summary.json, errors.csv, plots) and its table printed.",
+    )
     _common_run_args(r)
     r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
@@ -77,7 +141,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="mutual TLS and access control: certificates made for the run in DIR (default: the results folder's secure/); each process may publish only its own keys",
     )
 
-    s = sub.add_parser("sim", help="run the same world and agents in one process on a virtual clock")
+    s = sub.add_parser(
+        "sim",
+        help="run the same world and agents in one process on a virtual clock",
+        description="Hosts the same World and AgentNode objects as zswarm run in one process, stepping each on its own "
+        "clock in world time as fast as the machine allows (link delays, jitter, loss and faults emulated as in a run); "
+        "writes the same results folder.",
+    )
     _common_run_args(s)
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     s.add_argument("--lean", action="store_true", help="leave sensor and edge messages out of the recording (a quarter of the size)")
@@ -177,7 +247,13 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("dirs", nargs="+", type=Path, help="folders written by zswarm basin")
     bc.add_argument("--out", type=Path, default=Path("basin-compare.png"), help="the figure (default basin-compare.png)")
 
-    ro = sub.add_parser("router", help="run a Zenoh router for processes started by hand")
+    ro = sub.add_parser(
+        "router",
+        help="run a Zenoh router for processes started by hand",
+        description="Runs a Zenoh router on the --listen endpoints until Ctrl-C (or, with --exit-after-run, until the "
+        "recorder of that run has come and gone), for a world, agents and a recorder started by hand or by compose.  "
+        "With --secure DIR: mutual TLS on tls/ endpoints, each process allowed to put only its own keys.",
+    )
     procutil.add_zenoh_args(ro, default_mode="router")
     ro.add_argument("--exit-after-run", metavar="RUN_ID", default=None, help="exit once the recorder of this run has come and gone (compose: the run ends by itself)")
     ro.add_argument(
@@ -221,7 +297,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help="override a scenario field; the scenario as run is written beside the compose file"
     )
 
-    rec = sub.add_parser("record", help="record a run (started by hand) into a results folder")
+    rec = sub.add_parser(
+        "record",
+        help="record a run (started by hand) into a results folder",
+        description="Subscribes to every key of the run (--run-id) and writes the payloads as they come to "
+        "RESULTS/recording.raw.mcap; when the world stops the run, transcodes it into recording.mcap and writes the "
+        "report (unless --no-report).",
+    )
     rec.add_argument("topology", help="scenario TOML file")
     rec.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
     rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end (the recording stays as recording.raw.mcap, payloads as they came, until zswarm report transcodes it)")
@@ -258,7 +340,13 @@ def build_parser() -> argparse.ArgumentParser:
     vw.add_argument("--save", type=Path, default=None, metavar="FILE.rrd", help="write the Rerun recording to FILE.rrd and exit")
     vw.add_argument("--web", nargs="?", const="127.0.0.1:9090", default=None, metavar="HOST:PORT", help="serve the web viewer on HOST:PORT (default 127.0.0.1:9090) until Ctrl-C")
 
-    rep = sub.add_parser("report", help="(re)compute summary.json, errors.csv and plots of a results folder")
+    rep = sub.add_parser(
+        "report",
+        help="(re)compute summary.json, errors.csv and plots of a results folder",
+        description="Reads RESULTS/recording.mcap (or transcodes recording.raw.mcap first) with RESULTS/scenario.toml, "
+        "writes summary.json, errors.csv, the experiment family's files and plots, and prints the table.  Recordings of "
+        "earlier wire versions are read too.",
+    )
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
 
     g = sub.add_parser(
@@ -283,6 +371,7 @@ def build_parser() -> argparse.ArgumentParser:
     # The experiment families' own commands (zswarm.families.contract.Command), e.g. design-hybrid.
     for c in family.commands().values():
         c.arguments(sub.add_parser(c.name, help=c.help, description=c.description))
+    _explain(sub)
     return p
 
 
@@ -318,6 +407,9 @@ def main(argv: list[str] | None = None) -> int:
     run = cmds.get(args.cmd) or family.commands()[args.cmd].run
     try:
         return run(args)
+    except KeyboardInterrupt:  # Ctrl-C where the command does not stop on it by itself (sim writes what it simulated first)
+        print(f"zswarm {args.cmd}: interrupted", file=sys.stderr)
+        return 130
     except Exception as exc:
         problem = procutil.write_problem(exc)
         if problem is None:

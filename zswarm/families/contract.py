@@ -175,6 +175,7 @@ class Command:
     description: str
     arguments: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
+    examples: tuple[str, ...] = ()  # command lines shown at the end of its --help
 
 
 @dataclass(frozen=True)

@@ -295,6 +295,7 @@ DESIGN_COMMAND = Command(
     "points.  Without --gamma/--delta, both are taken at 95 % of their bounds (the thesis' choice).",
     design_arguments,
     design_command,
+    examples=("zswarm design-hybrid --A 5,8.57,12 --xi 0.08pi", "zswarm design-hybrid --A 5,8.57,12 --xi 0.5,0.9pi --json"),
 )
 
 FAMILY = Family(
