@@ -75,7 +75,7 @@ EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
     "replay": (("zswarm replay runs/thesis-3.2-fixed8 --live",), "a file could not be read or written"),
     "view": (("zswarm view runs/thesis-3.2-fixed8", "zswarm view runs/thesis-3.2-fixed8 --save run.rrd"), "the viewer failed"),
     "report": (("zswarm report runs/thesis-3.2-fixed8",), "a results file could not be written"),
-    "generate": (("zswarm generate --list", "zswarm generate attitude-sync-hybrid -n 7 --seed 3 -o my.toml"), "a file could not be written"),
+    "generate": (("zswarm generate --list", "zswarm generate bearing-fixed -n 8 --seed 3 -o my.toml"), "a file could not be written"),
 }
 
 
