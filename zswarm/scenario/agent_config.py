@@ -36,8 +36,27 @@ class Estimate:
         return self.values.get(name, default)
 
 
+class StartPose:
+    """``R_matrix`` and ``omega0`` of what has a start attitude ``R`` (row-major 3×3) and rate
+    expressions ``omega``: an agent's entry (:class:`AgentSpec`) and the world's body of it
+    (zswarm.scenario.programs.Body)."""
+
+    __slots__ = ()
+    R: tuple[float, ...]
+    omega: tuple[Expr, Expr, Expr]
+
+    @property
+    def R_matrix(self) -> np.ndarray:
+        return np.array(self.R, dtype=float).reshape(3, 3)
+
+    @property
+    def omega0(self) -> np.ndarray:
+        """ω_i(0): the rigid body's initial rate (its ``omega`` expressions at t = 0)."""
+        return np.array([float(e(0.0)) for e in self.omega])
+
+
 @dataclass(frozen=True, slots=True)
-class AgentSpec:
+class AgentSpec(StartPose):
     id: int
     role: str  # "leader" | "follower"
     p: tuple[float, float, float]  # inertial position at t = 0 (fixed in §3.2)
@@ -52,15 +71,6 @@ class AgentSpec:
     gains: Mapping[str, float] = field(default_factory=dict)  # the algorithm's gains for this agent
     J: tuple[float, ...] | None = None  # inertia, row-major 3×3 (rigid_body plant)
     senses: tuple[int, ...] = ()  # a "sensing" graph's robots this agent senses (then neighbors: both ways)
-
-    @property
-    def R_matrix(self) -> np.ndarray:
-        return np.array(self.R, dtype=float).reshape(3, 3)
-
-    @property
-    def omega0(self) -> np.ndarray:
-        """ω_i(0): the rigid body's initial rate (its ``omega`` expressions at t = 0)."""
-        return np.array([float(e(0.0)) for e in self.omega])
 
 
 def _agent(c: _Ctx, d: Any, f: str, default_clock: ClockSpec, info: AlgorithmSpec, gains: Mapping[str, float], leaders: bool, plant: str = "prescribed") -> AgentSpec:

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from zswarm.scenario.agent_config import StartPose
 from zswarm.scenario.algorithm import AlgorithmSpec, Initial, StalePolicy, initial_value, make_gains
 from zswarm.scenario.clock import ClockSpec
 from zswarm.scenario.expr import Expr
@@ -70,7 +71,7 @@ class AgentProgram:
 
 
 @dataclass(frozen=True, slots=True)
-class Body:
+class Body(StartPose):
     """One agent's body as the world moves and measures it."""
 
     id: int
@@ -83,15 +84,6 @@ class Body:
     sensors: frozenset[str] = frozenset()  # what the world measures for it (zswarm.scenario.algorithm.SENSORS)
     bearing_to: tuple[int, ...] = ()  # bearings and relative attitudes toward these (its in- and out-neighbours)
     senses: tuple[int, ...] = ()  # relative positions toward these
-
-    @property
-    def R_matrix(self) -> np.ndarray:
-        return np.array(self.R, dtype=float).reshape(3, 3)
-
-    @property
-    def omega0(self) -> np.ndarray:
-        """ω_i(0): the rigid body's initial rate."""
-        return np.array([float(e(0.0)) for e in self.omega])
 
 
 @dataclass(frozen=True, slots=True)

@@ -93,10 +93,7 @@ def build(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: A
     if cls.OPEN and "values" not in fields:
         t_local = fields.pop("t_local", None)
         fields = {"values": fields} if t_local is None else {"t_local": t_local, "values": fields}
-    try:
-        return cls(v=VERSION, src=src, seq=seq, t=t, inc=inc, **fields)
-    except msgspec.ValidationError as exc:  # pragma: no cover - __post_init__ raises MessageError
-        raise MessageError(str(exc)) from None
+    return cls(v=VERSION, src=src, seq=seq, t=t, inc=inc, **fields)  # __post_init__ raises MessageError
 
 
 def encode(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> bytes:

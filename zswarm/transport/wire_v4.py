@@ -28,15 +28,6 @@ _OPEN = ("edge", "cmd")
 _CONVERTER = Union[tuple(KINDS.values())]  # noqa: UP007 - a runtime union of the kinds
 
 
-def is_v4(payload: bytes) -> bool:
-    """A msgpack map with ``v = 4``."""
-    try:
-        m = _unpack(payload)
-    except MessageError:
-        return False
-    return type(m) is dict and m.get("v") == V4
-
-
 def _unpack(payload: bytes) -> Any:
     try:
         return msgpack.unpackb(payload, raw=False, strict_map_key=False, max_bin_len=1 << 20, max_str_len=1 << 16, max_array_len=MAX_COUNTER_ITEMS, max_map_len=MAX_COUNTER_ITEMS)
