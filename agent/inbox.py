@@ -129,7 +129,8 @@ class Inbox:
                 self._logged.add(key)
                 self._log.warning("dropped malformed message on %s: %s (logged once per key)", key, exc)
             return
-        msg = copy.copy(msg)  # the in-process bus shares one validated message among its receivers
+        if msg is payload:  # the in-process bus shares one validated message among its receivers
+            msg = copy.copy(msg)
         msg.rx_net = rx  # off the network, before any emulated delay (not sent: Msg's dict)
         if self._held:
             # Held messages due by now go first: a message released on arrival
