@@ -48,15 +48,17 @@ def test_overridden_scenario_text_loads_back_to_the_same_scenario():
 @pytest.mark.parametrize(
     ("setting", "message"),
     [
-        ("links.dealy_ms=5", "--set links.dealy_ms=5: links.dealy_ms: unknown key"),
+        ("links.dealy_ms=5", "--set links.dealy_ms=5: links.dealy_ms: unknown key; did you mean 'delay_ms'? (allowed: "),
+        ("links.jitter=normall", "links.jitter: must be one of normal, exponential; did you mean 'normal'? (got 'normall')"),
         ("links.delay_ms=-5", "--set links.delay_ms=-5: links.delay_ms: must be >= 0"),
         ("links.drop=1.5", "--set links.drop=1.5: links.drop: must be a probability in [0, 1]"),
         ("links.sensors.ge_p_gb=-0.1", "links.sensors.ge_p_gb: must be a probability"),
         ('links.per_link."9->3".drop=0.1', '--set links.per_link."9->3".drop=0.1: links.per_link."9->3": unknown key'),
         ("agents[20].p=[1,2,3]", "agents[20]: no such element (the array has 8)"),
-        ("nosuch.x=1", "--set nosuch.x=1: nosuch: unknown key"),
+        ("nosuch.x=1", "--set nosuch.x=1: nosuch: unknown key (allowed: "),  # nothing close: no guess
         ("clock.rate=0", "--set clock.rate=0: clock.rate: must be > 0"),
-        ("algorithm.stale.policy=forget", "algorithm.stale.policy: must be one of hold, drop"),
+        ("algorithm.stale.policy=forget", "algorithm.stale.policy: must be one of hold, drop (got"),
+        ("algorithm.stale.policy=holds", "algorithm.stale.policy: must be one of hold, drop; did you mean 'hold'?"),
         ("links.delay_ms", "expected FIELD=VALUE"),
         ("=3", "expected FIELD=VALUE"),
     ],

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from zswarm.util.quoting import did_you_mean
+
 Number = float | np.ndarray
 Fn = Callable[[Number], Number]
 
@@ -168,7 +170,7 @@ class _Parser:
                 self.expect(")")
                 return (lambda t, fn=fn, f=f: fn(f(t))), c
             allowed = ", ".join(["t", *CONSTANTS, *FUNCTIONS])
-            raise ExprError(f"unknown name {text!r} (allowed: {allowed})")
+            raise ExprError(f"unknown name {text!r}{did_you_mean(text, ['t', *CONSTANTS, *FUNCTIONS])} (allowed: {allowed})")
         if text == "(":
             f, c = self.parse_expr()
             self.expect(")")

@@ -10,7 +10,7 @@ from typing import Any
 
 from zswarm.scenario.overrides import Override, parse_value
 from zswarm.scenario.reading import ScenarioError, _Ctx
-from zswarm.util.quoting import shown
+from zswarm.util.quoting import did_you_mean, shown
 
 APPEND_FAULT: tuple[str | int, ...] = ("faults", -1)  # an Override's keys: append to [[faults]]
 
@@ -87,7 +87,7 @@ def _faults(c: _Ctx, d: Any, duration: float, ids: set[int], link_names: set[str
             raise c.err(f, "must be a table", raw)
         kind = c.string(raw.get("kind"), f"{f}.kind") if "kind" in raw else None
         if kind not in FAULT_KINDS:
-            raise c.err(f"{f}.kind", f"must be one of {', '.join(FAULT_KINDS)}", kind) if kind is not None else c.err(f"{f}.kind", "missing")
+            raise c.err(f"{f}.kind", f"must be one of {', '.join(FAULT_KINDS)}{did_you_mean(kind, FAULT_KINDS)}", kind) if kind is not None else c.err(f"{f}.kind", "missing")
         extra = _FAULT_FIELDS[kind]
         t = c.table(raw, f, {"kind", "at"} | extra, {"kind", "at"} | (extra - {"restart_at"}))
         at = c.num(t["at"], f"{f}.at", nonneg=True)

@@ -41,6 +41,7 @@ import numpy as np
 
 from zswarm.scenario.reading import _Ctx
 from zswarm.scenario.schema import Table, bounds
+from zswarm.util.quoting import did_you_mean
 
 JITTER_KINDS = ("normal", "exponential")
 _PROBABILITY = bounds(minv=0.0, maxv=1.0, problem_text="must be a probability in [0, 1]", got_float=True)
@@ -88,7 +89,7 @@ class LinkSpec:
         if self.ge_p_gb > 0 and self.ge_p_bg == 0:
             out.append(("ge_p_bg", "must be > 0 when ge_p_gb > 0, or the channel never leaves the bad state (got 0)"))
         if self.jitter not in JITTER_KINDS:
-            out.append(("jitter", f"must be one of {', '.join(JITTER_KINDS)} (got {self.jitter!r})"))
+            out.append(("jitter", f"must be one of {', '.join(JITTER_KINDS)}{did_you_mean(self.jitter, JITTER_KINDS)} (got {self.jitter!r})"))
         return out
 
 

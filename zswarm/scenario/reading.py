@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from zswarm.math import so3
 from zswarm.scenario.expr import Expr, ExprError, parse
 from zswarm.scenario.schema import Bounds, convert
-from zswarm.util.quoting import shown, toml_key
+from zswarm.util.quoting import did_you_mean, shown, toml_key
 
 T = TypeVar("T")
 
@@ -56,7 +56,7 @@ class _Ctx:
         for k in d:
             if k not in allowed:
                 key = toml_key(k)
-                raise self.err(f"{fld}.{key}" if fld else key, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+                raise self.err(f"{fld}.{key}" if fld else key, f"unknown key{did_you_mean(k, allowed)} (allowed: {', '.join(sorted(allowed))})")
         for k in sorted(required):
             if k not in d:
                 raise self.err(f"{fld}.{k}" if fld else k, "missing")

@@ -30,6 +30,8 @@ from typing import Annotated, Any, Literal, TypeVar, Union
 
 import msgspec
 
+from zswarm.util.quoting import did_you_mean
+
 if typing.TYPE_CHECKING:
     from zswarm.scenario.reading import ScenarioError, _Ctx
 
@@ -142,7 +144,7 @@ def _translate(c: _Ctx, d: Any, fld: str, typ: Any, message: str) -> ScenarioErr
         if u := _UNKNOWN.match(head):
             if not (isinstance(value, dict) and u["name"] in value and u["name"] not in _fields(typ_)):
                 continue
-            return c.err(_join(name, toml_key(u["name"])), f"unknown key (allowed: {', '.join(sorted(_fields(typ_)))})")
+            return c.err(_join(name, toml_key(u["name"])), f"unknown key{did_you_mean(u['name'], _fields(typ_))} (allowed: {', '.join(sorted(_fields(typ_)))})")
         if u := _MISSING.match(head):
             return c.err(_join(name, u["name"]), "missing")
         problem, bounds = _problem(typ_, value)
@@ -213,7 +215,7 @@ def _problem(typ: Any, v: Any) -> tuple[str | None, Bounds | None]:
     if (isinstance(t, type) and issubclass(t, msgspec.Struct)) or typing.get_origin(t) is dict:
         return "must be a table", None
     if typing.get_origin(t) is Literal:
-        return ("must be a string" if not isinstance(v, str) else f"must be one of {', '.join(typing.get_args(t))}"), None
+        return ("must be a string" if not isinstance(v, str) else f"must be one of {', '.join(typing.get_args(t))}{did_you_mean(v, typing.get_args(t))}"), None
     if t is bool:
         return "must be true or false", None
     if t is int:

@@ -46,3 +46,15 @@ def one_line(message: str) -> str:
     """``message`` with every non-printable character escaped in place: the guard at the
     exits (``error: …`` on stderr), for text that reached a message unquoted."""
     return message if message.isprintable() else "".join(c if c.isprintable() else _escape(c) for c in message)
+
+
+def did_you_mean(word: object, choices: object) -> str:
+    """``"; did you mean 'delay_ms'?"`` when one of ``choices`` is close to what the user wrote
+    (difflib's ratio ≥ 0.7, the closest: "sinn" finds "sin", "inf" does not), else "": the tail of an "unknown key" or "must be one
+    of" message (``links.dealy_ms``)."""
+    import difflib
+
+    if not isinstance(word, str):
+        return ""
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1, cutoff=0.7)  # type: ignore[attr-defined]
+    return f"; did you mean {close[0]!r}?" if close and close[0] != word else ""
