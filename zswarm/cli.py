@@ -75,6 +75,8 @@ EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
     "replay": (("zswarm replay runs/thesis-3.2-fixed8 --live",), "a file could not be read or written"),
     "view": (("zswarm view runs/thesis-3.2-fixed8", "zswarm view runs/thesis-3.2-fixed8 --save run.rrd"), "the viewer failed"),
     "report": (("zswarm report runs/thesis-3.2-fixed8",), "a results file could not be written"),
+    "info": (("zswarm info runs/thesis-3.2-fixed8", "zswarm info runs/thesis-3.2-fixed8/recording.mcap --json"), "the path could not be read"),
+    "runs": (("zswarm runs", "zswarm runs results/ --json"), "the directory could not be read"),
     "generate": (("zswarm generate --list", "zswarm generate bearing-fixed -n 8 --seed 3 -o my.toml"), "a file could not be written"),
 }
 
@@ -349,6 +351,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rep.add_argument("results", type=Path, help="results folder holding recording.mcap and scenario.toml")
 
+    inf = sub.add_parser(
+        "info",
+        help="what a results folder or a recording holds: scenario, engine, status, each channel's count, rate and span, the links",
+        description="Prints what RESULTS/summary.json says of the run (scenario, engine, duration, seed, completed or why "
+        "not, whether it kept up, what the recording lacks) and, from the MCAP recording, every channel's message count, "
+        "rate and first and last log time (s from the recording's first message), then each link's counters.  PATH may "
+        "also be a recording file (.mcap) alone.  Nothing is recomputed (zswarm report does that).",
+    )
+    inf.add_argument("path", type=Path, help="a results folder, or a recording (.mcap)")
+    inf.add_argument("--json", action="store_true", help="print the same as one JSON object")
+
+    rns = sub.add_parser(
+        "runs",
+        help="list the results folders under a directory: when, engine, duration, status, scenario",
+        description="One line per results folder directly under DIR (default runs/, where run and sim write), oldest "
+        "first: when its summary was written, run or sweep or basin, the engine, the duration, its status (completed, "
+        "NOT COMPLETED, interrupted, no summary yet) and the scenario.",
+    )
+    rns.add_argument("dir", type=Path, nargs="?", default=Path("runs"), help="the directory to list (default runs/)")
+    rns.add_argument("--json", action="store_true", help="print the same as a JSON list")
+
     g = sub.add_parser(
         "generate",
         help="write an N-agent scenario of an experiment family's recipe (graph, positions, motions, initial errors from a seed)",
@@ -403,6 +426,8 @@ def main(argv: list[str] | None = None) -> int:
         "report": cmd_report,
         "generate": _lazy("zswarm.studies.generate", "command"),
         "certs": cmd_certs,
+        "info": cmd_info,
+        "runs": cmd_runs,
     }
     run = cmds.get(args.cmd) or family.commands()[args.cmd].run
     try:
@@ -410,6 +435,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C where the command does not stop on it by itself (sim writes what it simulated first)
         print(f"zswarm {args.cmd}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # its output piped into `head`, which has read enough: not a failure
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the interpreter's final flush goes nowhere
+        return 0
     except Exception as exc:
         problem = procutil.write_problem(exc)
         if problem is None:
@@ -502,6 +532,27 @@ def cmd_report(args: argparse.Namespace) -> int:
     seed = int(prev.get("seed", start["seed"] if start else sc.seed))
     summary = results.make_report(args.results, sc, engine, duration, scale, seed, not_recorded=prev.get("recording", {}).get("not_recorded", ()))
     print(results.table(summary))
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from zswarm.results import catalog
+
+    try:
+        d = catalog.info(args.path)
+    except catalog.NotOurs as exc:
+        procutil.fail_usage(str(exc))
+    print(json.dumps(d, indent=1) if args.json else catalog.format_info(d))
+    return 0
+
+
+def cmd_runs(args: argparse.Namespace) -> int:
+    from zswarm.results import catalog
+
+    if not args.dir.is_dir():
+        procutil.fail_usage(f"{args.dir}: no such directory")
+    rows = catalog.runs(args.dir)
+    print(json.dumps(rows, indent=1) if args.json else catalog.format_runs(rows) if rows else f"{args.dir}: no results folders")
     return 0
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import time
 
 import pytest
@@ -103,6 +104,15 @@ def test_killed_agent_others_continue(procs, tmp_path):
     start_epoch = rec.start["epoch"]
     assert abs((start_epoch + last8) - t_kill) < 0.5
     assert any(keys.parse_alive(e["key"]) == ("agent", 8) and not e["alive"] for e in rec.alive_events)  # its token, tagged
+    # zswarm info on the run's recording: each agent's estimates as the recording holds them, agent 8's
+    # ending at its death, and log times on the recorder's wall clock.
+    p = subprocess.run(zswarm("info", str(out), "--json"), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    ch = d["recording"]["channels"]
+    assert ch["est/1"]["count"] == len(rec.est[1]) and ch["est/8"]["count"] == len(rec.est[8])
+    assert ch["est/8"]["last_s"] < ch["est/1"]["last_s"] - 3.0  # killed ~3 s into an 8 s run
+    assert d["recording"]["start_utc"] is not None and d["summary"]["engine"] == "run"
 
 
 def test_ctrl_c_stops_everything_and_writes_results(procs, tmp_path):
