@@ -13,6 +13,7 @@ from typing import Any
 
 from zswarm.families import contract as family
 from zswarm.transport import keys, procutil
+from zswarm.transport.probe import add_args as probe_args
 from zswarm.util.quoting import one_line
 
 
@@ -77,6 +78,8 @@ EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
     "report": (("zswarm report runs/thesis-3.2-fixed8",), "a results file could not be written"),
     "info": (("zswarm info runs/thesis-3.2-fixed8", "zswarm info runs/thesis-3.2-fixed8/recording.mcap --json"), "the path could not be read"),
     "runs": (("zswarm runs", "zswarm runs results/ --json"), "the directory could not be read"),
+    "echo": (("zswarm echo est/3 --results runs/thesis-3.2-fixed8", "zswarm echo 'edge/*/3' --connect tcp/127.0.0.1:7447 --run-id demo --count 5"), "the Zenoh session failed"),
+    "hz": (("zswarm hz 'sense/*' --results runs/thesis-3.2-fixed8", "zswarm hz '**' --connect tcp/127.0.0.1:7447 --run-id demo --duration 10"), "the Zenoh session failed"),
     "generate": (("zswarm generate --list", "zswarm generate bearing-fixed -n 8 --seed 3 -o my.toml"), "a file could not be written"),
 }
 
@@ -372,6 +375,27 @@ def build_parser() -> argparse.ArgumentParser:
     rns.add_argument("dir", type=Path, nargs="?", default=Path("runs"), help="the directory to list (default runs/)")
     rns.add_argument("--json", action="store_true", help="print the same as a JSON list")
 
+    ec = sub.add_parser(
+        "echo",
+        help="print the messages of a live run's key, decoded, one JSON line each",
+        description="Joins a live run's Zenoh network (a zswarm run through --results DIR, or processes started by hand "
+        "through --connect and --run-id) and prints each message on STREAM as a JSON line {\"key\", \"message\"}, "
+        "decoded and checked as every receiver checks it; a payload that does not decode is named on stderr and dropped.  "
+        "Under --secure it uses the run's recorder certificate.",
+    )
+    probe_args(ec)
+    ec.add_argument("--count", type=int, default=None, metavar="N", help="stop after N messages")
+
+    hz = sub.add_parser(
+        "hz",
+        help="the rate and gaps of each key of a live run, every second",
+        description="Joins a live run's Zenoh network as echo does and prints, every --window seconds, each key's message "
+        "count, rate (1 / mean gap) and mean, shortest and longest gap between arrivals, and the payloads that did not decode.",
+    )
+    probe_args(hz)
+    hz.add_argument("--window", type=procutil.positive_float, default=1.0, metavar="S", help="seconds per report (default 1)")
+    hz.add_argument("--json", action="store_true", help="one JSON object per window")
+
     g = sub.add_parser(
         "generate",
         help="write an N-agent scenario of an experiment family's recipe (graph, positions, motions, initial errors from a seed)",
@@ -428,6 +452,8 @@ def main(argv: list[str] | None = None) -> int:
         "certs": cmd_certs,
         "info": cmd_info,
         "runs": cmd_runs,
+        "echo": _lazy("zswarm.transport.probe", "echo"),
+        "hz": _lazy("zswarm.transport.probe", "hz"),
     }
     run = cmds.get(args.cmd) or family.commands()[args.cmd].run
     try:

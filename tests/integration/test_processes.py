@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import signal
+import subprocess
 import sys
 import time
 
@@ -47,7 +48,14 @@ def test_manual_launch_signals_and_malformed_messages(procs, tmp_path):
             [sys.executable, "-m", "world", "--topology", TOPOLOGY, "--duration", "6", "--time-scale", "0.5", "--wait-for-recorder", *common], log=tmp_path / "world.log"
         )
         wait_for(lambda: "start:" in (tmp_path / "world.log").read_text(), 60, "world start")
-        time.sleep(1.0)
+        # zswarm hz and echo on processes started by hand (--connect, --run-id), hz across the garbage below.
+        hz = procs.start(zswarm("hz", "sense/3", "--connect", ep, "--run-id", run, "--duration", "3", "--json"), log=tmp_path / "hz.log")
+        echo = subprocess.run(zswarm("echo", "est/3", "--connect", ep, "--run-id", run, "--count", "3"), capture_output=True, text=True, timeout=60)
+        assert echo.returncode == 0, echo.stderr
+        ests = [json.loads(line) for line in echo.stdout.splitlines()]
+        assert len(ests) == 3 and all(e["key"] == keys.est(run, 3) and e["message"]["type"] == "est" and e["message"]["src"] == 3 for e in ests)
+        assert [e["message"]["seq"] for e in ests] == sorted(e["message"]["seq"] for e in ests)
+        time.sleep(0.5)
         # Garbage and foreign messages on zswarm keys: counted, logged once, dropped.
         pub_sense = bus.publisher(keys.sense(run, 3))
         pub_edge = bus.publisher(keys.edge(run, 1, 3))
@@ -63,6 +71,15 @@ def test_manual_launch_signals_and_malformed_messages(procs, tmp_path):
         for i, a in agents.items():
             assert a.wait(10) == 0, i
         assert rec.wait(60) == 0
+        assert hz.wait(30) == 0
+    # Each window: sense/3's messages and rate (200 Hz at time scale 0.5: 100 Hz of wall time, the
+    # gaps a loaded machine leaves aside), and the garbage put on its key counted as malformed
+    # (Zenoh may drop some of the 5 under congestion control DROP, never add any).
+    windows = [json.loads(line) for line in (tmp_path / "hz.log").read_text().splitlines() if line.startswith("{")]
+    assert len(windows) == 3, windows
+    f = [w["keys"][keys.sense(run, 3)] for w in windows if keys.sense(run, 3) in w["keys"]]
+    assert sum(x["messages"] for x in f) > 100 and 1 <= sum(x["malformed"] for x in f) <= 5, f
+    assert all(x["gap_min_ms"] <= x["gap_mean_ms"] <= x["gap_max_ms"] for x in f if x["gap_mean_ms"] is not None)
     out = tmp_path / "out"
     s = json.loads((out / "summary.json").read_text())
     assert s["agents"]["3"]["malformed_received"] >= 10

@@ -7,6 +7,7 @@ without a certificate, or with one from another CA, cannot connect."""
 from __future__ import annotations
 
 import json
+import subprocess
 import time
 
 import msgpack
@@ -68,6 +69,14 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
                 for key, payload in forged:
                     s.put(key, payload)
             time.sleep(0.005)
+    # zswarm echo and hz on the secured run through its results folder (the recorder's certificate).
+    echo = subprocess.run(zswarm("echo", "est/5", "--results", str(out), "--count", "2"), capture_output=True, text=True, timeout=60)
+    assert echo.returncode == 0, echo.stderr
+    assert [json.loads(line)["message"]["src"] for line in echo.stdout.splitlines()] == [5, 5]
+    hz = subprocess.run(zswarm("hz", "est/*", "--results", str(out), "--duration", "1", "--json"), capture_output=True, text=True, timeout=60)
+    assert hz.returncode == 0, hz.stderr
+    seen = set(json.loads(hz.stdout.splitlines()[-1])["keys"])
+    assert {keys.est(run, i) for i in range(1, 9)} <= seen, seen
     assert p.wait(120) == 0, (tmp_path / "launcher.log").read_text()[-2000:]
     s = json.loads((out / "summary.json").read_text())
     # None of it was filed under agent 3 or the world: each is counted malformed (12 sent).
