@@ -297,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     co.add_argument("--duration", type=procutil.positive_float, default=None, help="world seconds (default: the scenario's)")
     co.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     co.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
-    co.add_argument("--live", type=int, default=None, metavar="PORT", help="serve the run on a Foxglove WebSocket server, published on 127.0.0.1:PORT")
+    _live_arg(co, "serve the run on a Foxglove WebSocket server in the recorder's container, published on the host at HOST:PORT")
     co.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help="override a scenario field; the scenario as run is written beside the compose file"
     )
@@ -312,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
     rec.add_argument("topology", help="scenario TOML file")
     rec.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>/)")
     rec.add_argument("--no-report", action="store_true", help="do not write summary/plots at the end (the recording stays as recording.raw.mcap, payloads as they came, until zswarm report transcodes it)")
-    rec.add_argument("--live", type=procutil.host_port, default=None, metavar="HOST:PORT", help="also serve the channels on a Foxglove WebSocket server")
+    _live_arg(rec, "also serve the channels on a Foxglove WebSocket server")
     _rerun_arg(rec, "also stream the run to a Rerun viewer")
     procutil.add_run_args(rec)
     procutil.add_zenoh_args(rec)

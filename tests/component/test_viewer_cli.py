@@ -25,6 +25,9 @@ def zswarm(*args: str, cwd=ROOT) -> subprocess.CompletedProcess[str]:
         (["compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--network", "mesh"], "invalid choice: 'mesh'"),
         (["compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--set", "links.drop=1.5", "-o", "/tmp/x.yml"], "links.drop: must be a probability"),
         (["run", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "8765"], "expected HOST:PORT"),
+        (["compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "8765"], "expected HOST:PORT"),  # one spelling of --live everywhere
+        (["compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "127.0.0.1:0"], "a port for Docker to publish"),
+        (["record", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "8765"], "expected HOST:PORT"),
         (["replay", str(ROOT / "topologies")], "no recording there"),
         (["replay", "--speed", "0", str(ROOT)], "must be > 0"),
     ],
@@ -60,3 +63,13 @@ def test_compose_to_stdout_names_every_process():
         assert f"\n  {name}:\n" in r.stdout, name
     assert "build:" not in r.stdout and r.stdout.count('image: "zswarm:test"') == 12
     assert r.stdout.count("internal: true") == 2
+
+
+def test_compose_live_publishes_the_given_host_and_port():
+    """``--live [HOST:PORT]`` as run and record spell it: the recorder listens in its container,
+    Docker publishes HOST:PORT (the default 127.0.0.1:8765 without a value)."""
+    r = zswarm("compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--no-build", "--image", "zswarm:test", "--live", "0.0.0.0:9000")
+    assert r.returncode == 0, r.stderr
+    assert 'ports: ["0.0.0.0:9000:9000"]' in r.stdout and '"--live", "0.0.0.0:9000"]' in r.stdout
+    d = zswarm("compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--no-build", "--image", "zswarm:test", "--live")
+    assert d.returncode == 0 and 'ports: ["127.0.0.1:8765:8765"]' in d.stdout

@@ -142,7 +142,7 @@ def test_compose_file_of_every_shipped_scenario_passes_config(compose_cli, tmp_p
     assert len(names) >= 10
     for name in names:
         out = tmp_path / f"{name}.yml"
-        r = _run([sys.executable, "-m", "zswarm", "compose", str(TOPO / f"{name}.toml"), "-o", str(out), "--network", network, "--live", "8765"], 60, cwd=ROOT)
+        r = _run([sys.executable, "-m", "zswarm", "compose", str(TOPO / f"{name}.toml"), "-o", str(out), "--network", network, "--live", "127.0.0.1:8765"], 60, cwd=ROOT)
         assert r.returncode == 0, r.stderr
         r = _run([compose_cli, "-f", str(out), "config", "-q"], 60, cwd=tmp_path)
         assert r.returncode == 0, f"{name}: {r.stderr}"

@@ -48,7 +48,7 @@ def services(
     duration: float | None = None,
     time_scale: float = 1.0,
     seed: int | None = None,
-    live_port: int | None = None,
+    live: tuple[str, int] | None = None,
 ) -> dict[str, Any]:
     """The compose document (a dict; :func:`to_yaml` writes it)."""
     if network not in ("flat", "routed"):
@@ -84,10 +84,10 @@ def services(
     rec_cmd = ["zswarm", "record", topo, "--out", f"/results/{sc.name}", "--connect", f"tcp/router:{PORT}", *common]
     rec_extra: dict[str, Any] = {"volumes": [vol_scenario, f"{results}:/results"], "depends_on": ["router"]}
     rec_nets = [core]
-    if live_port is not None:
-        rec_cmd += ["--live", f"0.0.0.0:{live_port}"]
+    if live is not None:  # the recorder listens in its container; the host publishes HOST:PORT
+        rec_cmd += ["--live", f"0.0.0.0:{live[1]}"]
         rec_nets.append("view")
-        rec_extra["ports"] = [f"127.0.0.1:{live_port}:{live_port}"]
+        rec_extra["ports"] = [f"{live[0]}:{live[1]}:{live[1]}"]
     out["recorder"] = svc(rec_cmd, rec_nets, **rec_extra)
     world_cmd = ["python", "-m", "world", "--topology", topo, "--wait-for-recorder", "--connect", f"tcp/router:{PORT}", "--time-scale", f"{time_scale:g}", *common]
     if duration is not None:
@@ -103,7 +103,7 @@ def services(
     nets: dict[str, Any] = {core: {"internal": True}}
     if network == "routed":
         nets[edge_net] = {"internal": True}
-    if live_port is not None:
+    if live is not None:
         nets["view"] = {}  # the one network with a way out: the viewer's port on the host
     return {"services": out, "networks": nets}
 
@@ -154,7 +154,7 @@ def write(
     duration: float | None,
     time_scale: float,
     seed: int | None,
-    live_port: int | None,
+    live: tuple[str, int] | None,
     argv: Sequence[str] = (),
 ) -> str:
     """The compose file's text; paths in it are relative to ``out``'s folder (or the current one)."""
@@ -165,7 +165,7 @@ def write(
         build = {"context": _rel(build_context.resolve(), where)}
         if base is not None:
             build["args"] = {"BASE": base}
-    doc = services(sc, topology.name, scen_dir, image, build, run_id, results, network, duration, time_scale, seed, live_port)
+    doc = services(sc, topology.name, scen_dir, image, build, run_id, results, network, duration, time_scale, seed, live)
     head = [
         f"# {sc.name}: {len(sc.ids)} agents, one container per process ({network} network).",
         f"# Made by: zswarm compose {' '.join(argv)}".rstrip(),
@@ -186,6 +186,8 @@ def _rel(p: Path, base: Path) -> str:
 def command(args: argparse.Namespace) -> int:
     from zswarm.engines import compose
 
+    if args.live is not None and args.live[1] == 0:
+        procutil.fail_usage("compose --live HOST:PORT: a port for Docker to publish (0, a free port of a process, has no meaning there)")
     sc = procutil.load_args(args)
     undone = [f.describe() for f in sc.faults if f.kind != "cut"]
     if undone:
