@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import heapq
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -20,6 +19,7 @@ from zswarm.scenario.programs import agent_program, world_program
 from zswarm.transport import keys, procutil, run_control
 from zswarm.transport.bus import MemoryBus
 from zswarm.util import plugins
+from zswarm.util.progress import Progress
 
 LEAN_SKIP = ("sense/", "edge/", "cmd/")
 # Messages the recorder of a sim holds to write the viewer file after the run (Recorder's
@@ -202,19 +202,19 @@ def command(args: argparse.Namespace) -> int:
     seed = sc.seed if args.seed is None else args.seed
     out = results_dir(args.out, sc.name)
     (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
-    tty = sys.stderr.isatty()
+    bar = Progress(duration, "s of world time")
 
     def progress(t: float) -> None:
-        if tty:
-            print(f"\rt = {t:6.1f} / {duration:g} s", end="", file=sys.stderr, flush=True)
+        bar.update(t)
 
     t0 = time.perf_counter()
     kept: list[tuple[str, bytes, int]] = []
     times: dict[str, float] = {}
-    recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times, rerun=args.rerun)
+    try:
+        recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times, rerun=args.rerun)
+    finally:
+        bar.close()  # the next line (the table, or "interrupted") on its own
     wall = time.perf_counter() - t0
-    if tty and not args.quiet:
-        print(file=sys.stderr)
     messages = recorded if isinstance(recorded, list) else (kept or None)
     summary = results.make_report(out, sc, "sim", duration, 0.0, seed, plots=not args.no_plots, messages=messages, not_recorded=LEAN_SKIP if args.lean else ())
     summary["wall_time_s"] = wall

@@ -54,6 +54,7 @@ from zswarm.report.series import leave_time, settle_time
 from zswarm.scenario import Override, Scenario, load, loads, parse_override, with_rotations
 from zswarm.studies.sweep import _fmt  # the same CSV cells as sweep.csv
 from zswarm.transport import procutil
+from zswarm.util.progress import Progress
 
 # Draws stepped together at most (a chunk: one task of the pool; resume reruns a whole chunk).
 # Past ~1000 the per-call cost of numpy is paid off (agent/batched.py's benchmark).
@@ -254,6 +255,7 @@ def run_basin(
     chunk: int | None = None,
     cluster: str | None = None,
     text: str | None = None,
+    advance: Callable[[int], None] | None = None,
 ) -> tuple[list[dict[str, str]], bool]:
     """Run the draws not yet in ``out/basin.csv``, ``jobs`` at a time; return every row and
     whether it was interrupted.  ``batched``: in chunks of ``chunk`` draws on the batched engine
@@ -262,6 +264,7 @@ def run_basin(
     Dask cluster whose scheduler is there (zswarm.engines.cluster), as many at a time as it has worker
     threads; the same rows as locally (the draws are seeded by their number).  ``text``: the
     scenario's TOML to run instead of the file's (the file with ``--set`` overrides applied).
+    ``advance``: told the number of draws done (this run's and a resumed one's) as each finishes.
     basin.csv's third column is the family's verdict (Basin.verdict: its word for a draw that settles)."""
     path = out / "basin.csv"
     done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
@@ -284,6 +287,7 @@ def run_basin(
             source: Source = topology if cluster is None and text is None else (text or Path(topology).read_text(encoding="utf-8"), topology)
             progress(f"running on {runner.where}")
             pending: dict[Any, list[int]] = {}
+            finished_n = 0
             size = 1
             if batched:
                 size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / jobs)))
@@ -314,6 +318,9 @@ def run_basin(
                     for row in rows_:
                         w.writerow({k: _fmt(row.get(k)) for k in cols})
                     f.flush()
+                    finished_n += len(rows_)
+                    if advance is not None:
+                        advance(len(done) + finished_n)
                     if len(rows_) == 1:
                         row = rows_[0]
                         progress(f"draw {row['draw']}: {row.get('status')}, settles at {_fmt(row.get('settle_s')) or 'never'} ({row.get('wall_s')} s)")
@@ -497,14 +504,18 @@ def command(args: argparse.Namespace) -> int:
     how = "on the batched engine (draws stepped together)" if batched else "on sim" + (f" (not batched: {why})" if args.engine == "auto" else "")
     print(f"basin of {sc.name}: {args.draws} draws ({duration:g} s each) {how}" + ("" if args.cluster else f", {jobs} at a time") + f"; {out}", file=sys.stderr)
     t0 = time.monotonic()
+    already = sum(1 for r in basin.read_rows(out / "basin.csv") if r["status"] == "ok")
+    bar = Progress(args.draws, "draws", already)
     try:
         rows, interrupted = basin.run_basin(
-            str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, lambda m: print(m, file=sys.stderr, flush=True), args.near,
-            batched=batched, chunk=args.chunk, cluster=args.cluster, text=sc.text if args.overrides else None,
+            str(args.topology), args.draws, args.seed, duration, args.threshold, out, jobs, stop.is_set, bar.line, args.near,
+            batched=batched, chunk=args.chunk, cluster=args.cluster, text=sc.text if args.overrides else None, advance=bar.update,
         )
     except zswarm_cluster.ClusterError as exc:
+        bar.close()
         print(f"zswarm basin: {exc}", file=sys.stderr)
         return 1
+    bar.close()
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
         return 130

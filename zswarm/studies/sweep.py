@@ -40,7 +40,7 @@ from zswarm import report, results
 from zswarm.families import contract as family
 from zswarm.scenario import Override, Scenario, ScenarioError, load, loads, parse_field, parse_override
 from zswarm.transport import procutil
-from zswarm.util import files
+from zswarm.util import files, progress
 from zswarm.util.quoting import shown
 
 COLUMNS_RESULT = (
@@ -226,39 +226,17 @@ def _series(folder: Path, sc: Scenario, duration: float) -> tuple[np.ndarray, np
     return family.of(sc).series_from_files(folder, sc, duration)
 
 
-class Progress:
-    """A one-line progress bar on a terminal; a line per finished run otherwise."""
+class Progress(progress.Progress):
+    """The sweep's progress (zswarm.util.progress): runs done and failed; in a log, a line per
+    finished run."""
 
-    def __init__(self, total: int, already: int, stream: Any = sys.stderr) -> None:
-        self.total, self.done, self.failed = total, already, 0
-        self.start_done = already
-        self.t0 = time.monotonic()
-        self.stream = stream
-        self.tty = stream.isatty()
+    def __init__(self, total: int, already: int, stream: Any = None) -> None:
+        super().__init__(total, "runs", already, stream)
+        self.failed = 0
 
-    def update(self, job: Job | None = None, status: str = "") -> None:
-        el = time.monotonic() - self.t0
-        new = self.done - self.start_done
-        eta = el / new * (self.total - self.done) if new else float("nan")
-        width = 30
-        fill = int(width * self.done / self.total) if self.total else width
-        bar = "#" * fill + "-" * (width - fill)
-        text = f"[{bar}] {self.done}/{self.total} runs, {self.failed} failed, {_hms(el)} elapsed" + (f", ~{_hms(eta)} left" if new else "")
-        if self.tty:
-            print("\r" + text, end="", file=self.stream, flush=True)
-        elif job is not None:
-            print(f"{text}  ({job.run_id}: {status})", file=self.stream, flush=True)
-
-    def close(self) -> None:
-        if self.tty:
-            print(file=self.stream, flush=True)
-
-
-def _hms(s: float) -> str:
-    if not math.isfinite(s):
-        return "?"
-    n = round(s)
-    return f"{n // 60}:{n % 60:02d}"
+    def update(self, job: Job | None = None, status: str = "") -> None:  # type: ignore[override]
+        note = f"{job.run_id}: {status}" if job is not None and not self.tty else None
+        super().update(self.done, extra=f"{self.failed} failed", note=note)
 
 
 def _cmd(engine: str, topology: str, job: Job, folder: Path, duration: float, keep_recordings: bool) -> list[str]:
