@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import itertools
 import json
 import math
 import re
@@ -119,6 +120,9 @@ def compare_table(entries: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+SCENARIO_CMAPS = ("Blues", "Oranges", "Greens", "Purples", "Reds", "Greys")  # a hue per scenario of a comparison
+
+
 def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
     """Left: each folder's settle times (below its threshold) as a distribution; right (when
     some folders start near the scenario's start): settle time against the distance ε."""
@@ -128,22 +132,31 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     near = [s for s in entries if s["start"] == "near"]
-    fig, axes = plt.subplots(1, 2 if near else 1, figsize=(11 if near else 6.5, 4), squeeze=False)
+    names = list(dict.fromkeys(s["scenario"] for s in entries))
+    fig, axes = plt.subplots(1, 2 if near else 1, figsize=(14 if near else 9, 4.6), squeeze=False)
     a1 = axes[0][0]
-    for s in entries:
+    # One hue per scenario, and within it a shade per folder (darkest: the smallest ε), so no two
+    # curves share a colour however many folders there are (a 10-colour cycle repeated at 11).
+    shades: dict[int, Any] = {}
+    for name, cmap in zip(names, itertools.cycle(SCENARIO_CMAPS)):
+        mine = [n for n, s in enumerate(entries) if s["scenario"] == name]
+        mine.sort(key=lambda n: entries[n].get("near_rad") or math.inf)
+        for k, n in enumerate(mine):
+            shades[n] = plt.get_cmap(cmap)(0.95 - 0.6 * k / max(1, len(mine) - 1)) if len(mine) > 1 else plt.get_cmap(cmap)(0.8)
+    for n, s in enumerate(entries):
         v = np.sort([_f(r["settle_s"]) for r in s["_rows"] if r[s["verdict"]] == "True"])
         label = f"{s['name']}, " + ("uniform" if s["start"] == "uniform" else f"ε = {s['near_rad']:g}") + f" ({s[s['verdict']]}/{s['drawn']})"
-        (ln,) = a1.step(np.r_[0.0, v], np.r_[0.0, np.arange(1, len(v) + 1)] / max(1, s["drawn"]), where="post", label=label)
+        a1.step(np.r_[0.0, v], np.r_[0.0, np.arange(1, len(v) + 1)] / max(1, s["drawn"]), where="post", label=label, color=shades[n])
         own = _f((s["scenario_start"] or {}).get("settle_s", ""))
         if math.isfinite(own):
-            a1.axvline(own, color=ln.get_color(), ls=":", lw=1)
+            a1.axvline(own, color=shades[n], ls=":", lw=1)
     a1.set_xlabel("settle time below the threshold (s); dotted: the scenario's own start")
     verdicts = {s["verdict"] for s in entries}
     a1.set_ylabel(f"fraction of the draws {verdicts.pop() if len(verdicts) == 1 else 'settled'}")
     a1.set_xlim(0, max(s["horizon_s"] for s in entries))
     a1.set_ylim(0, 1.02)
     a1.grid(alpha=0.3)
-    a1.legend(fontsize=7)
+    a1.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     if near:
         # Right: how long each start took to leave the undesired set (the measure < 0.9) against
         # ε, which is what ε changes (a saddle's escape grows like ln 1/ε); the settle times are left.
@@ -152,15 +165,18 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
         def band(ss: list[dict[str, Any]], key: str) -> tuple[np.ndarray, ...]:
             return tuple(np.array([math.nan if s.get(key) is None else s[key][k] for s in ss]) for k in ("median", "min", "max"))
 
-        for name in dict.fromkeys(s["scenario"] for s in near):
+        for (name, cmap), marker in zip(zip(names, itertools.cycle(SCENARIO_CMAPS)), itertools.cycle("osD^v")):
             ss = sorted((s for s in near if s["scenario"] == name), key=lambda s: s["near_rad"])
+            if not ss:
+                continue
+            color = plt.get_cmap(cmap)(0.8)
             eps = np.array([s["near_rad"] for s in ss])
             med, lo, hi = band(ss, "left_s")
-            (ln,) = a2.plot(eps, med, "o-", label=f"{name} (median, min–max)")
-            a2.fill_between(eps, lo, hi, color=ln.get_color(), alpha=0.2)
+            a2.plot(eps, med, marker=marker, ls="-", color=color, label=f"{name} (median, min–max)")
+            a2.fill_between(eps, lo, hi, color=color, alpha=0.2)
             own = _f((ss[0]["scenario_start"] or {}).get("left_s", ""))
             if math.isfinite(own):
-                a2.axhline(own, color=ln.get_color(), ls="-.", lw=1, label=f"{name}: its own start, {own:g} s")
+                a2.axhline(own, color=color, ls="-.", lw=1, label=f"{name}: its own start, {own:g} s")
         a2.set_xscale("log")
         a2.set_xlabel("ε: distance of the start from the scenario's own (rad)")
         measures = {s["measure"] for s in near}
@@ -168,6 +184,8 @@ def plot_compare(entries: list[dict[str, Any]], path: Path) -> Path:
         a2.set_ylim(bottom=0)
         a2.grid(alpha=0.3, which="both")
         a2.legend(fontsize=7)
+    what = "settle times" + (" and the time to leave the start against its distance ε" if near else "")
+    fig.suptitle(f"{', '.join(names)}: {what}", fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
