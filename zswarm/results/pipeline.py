@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from zswarm.families import contract as family
+from zswarm.recording.layout import write_layout
 from zswarm.recording.mcap_io import ensure_recording
 from zswarm.report import fault_costs as faults
 from zswarm.report import table as text
@@ -320,6 +321,9 @@ def make_report_parts(
     write_errors_csv(out_dir / "errors.csv", errs)
     fam.write(out_dir, sc, rec, m)
     write_summary(out_dir / "summary.json", summary)
+    if (out_dir / "recording.mcap").exists():  # the Foxglove layout of its channels beside it
+        extent = max((math.hypot(*a.p) for a in sc.agents), default=1.0)
+        write_layout(out_dir / "recording.mcap", out_dir / "foxglove-layout.json", extent, sc.name)
     if plots:
         fam.plot(out_dir / "plots", sc, errs, m, rec)
     return ReportParts(summary, rec, errs, m)
