@@ -200,16 +200,19 @@ def blueprint(sc: Scenario | None, sync: bool) -> Any:
         views = [series("errors/edge/attitude", "relative attitude error per edge"), series("errors/edge/position", "relative position error per edge (m)")]
     else:
         views = [series("errors/attitude", "attitude error |R̃_i|_I"), series("errors/position", "position error (m)")]
-    if sc is not None and getattr(sc.params, "Xi", ()):
-        views.append(series("hybrid", "hybrid variables ξ_k, ζ_i"))
-    tab_views = [series("commands", "commands")] if sc is not None and sc.plant != "prescribed" else []
-    tabs = rrb.Tabs(*tab_views, series("links", "links"), rrb.TextLogView(origin="/", name="jumps, faults, processes"))
+    # Two series on the right, each half the window high (a legend of 8 fits); the rest in tabs.
+    tab_views = [series("hybrid", "hybrid variables ξ_k, ζ_i")] if sc is not None and getattr(sc.params, "Xi", ()) else []
+    tab_views += [series("commands", "commands")] if sc is not None and sc.plant != "prescribed" else []
+    # The links' counters, one series per link and counter (66 on §3.2): no legend could fit them
+    # all; hovering a line names it.
+    links = rrb.TimeSeriesView(origin="links", name="links", time_ranges=whole, axis_x=from_zero, plot_legend=rrb.PlotLegend(visible=False))
+    tabs = rrb.Tabs(*tab_views, links, rrb.TextLogView(origin="/", name="jumps, faults, processes"))
     title = "bodies: true (blue) and estimated (orange)" if not sync else "bodies (true attitudes)"
     # The series on the right have the whole column (the tabs under the scene): a legend of 8
-    # agents fits a view a third of the window high (it was cut at 5 with three views stacked).
+    # agents fits a view half the window high (it was cut at 5 with three views stacked).
     scene = rrb.Spatial3DView(origin="world", name=title, eye_controls=_eye(sc))
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Vertical(scene, tabs, row_shares=[3, 1]), rrb.Vertical(*views), column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Vertical(scene, tabs, row_shares=[3, 2]), rrb.Vertical(*views), column_shares=[3, 2]),
         rrb.TimePanel(timeline="world_time"),
         collapse_panels=True,
     )
@@ -217,15 +220,16 @@ def blueprint(sc: Scenario | None, sync: bool) -> Any:
 
 def _eye(sc: Scenario | None) -> Any:
     """A camera that takes in every body at the start: looking at the bodies' centre from a
-    corner, 2.5 times their spread away (the viewer's own framing cut off the highest and lowest
-    §3.2 agents); None without a scenario (the viewer frames the scene itself)."""
+    corner, 2.5 times their spread (a body's length included) away (the viewer's own framing cut
+    off the highest and lowest §3.2 agents); None without a scenario (the viewer frames it itself)."""
     import rerun.blueprint as rrb
 
     if sc is None or not sc.agents:
         return None
-    ps = np.array([a.p for a in sc.agents], dtype=float)
+    drawn = layout(sc)  # where the bodies are drawn (the Chapter 5 laws' on a circle)
+    ps = np.array([np.asarray(a.p, dtype=float) + drawn.get(a.id, 0.0) for a in sc.agents])
     centre = ps.mean(axis=0)
-    spread = max(1.0, float(np.linalg.norm(ps - centre, axis=1).max()))
+    spread = float(np.linalg.norm(ps - centre, axis=1).max()) + 1.5  # and a body's length (1) and its axes beyond it
     way = np.array([1.0, -1.2, 0.8]) / np.linalg.norm([1.0, -1.2, 0.8])
     return rrb.EyeControls3D(position=tuple(centre + 2.5 * spread * way), look_target=tuple(centre), eye_up=(0.0, 0.0, 1.0))
 
