@@ -210,23 +210,24 @@ def view_screenshot(run_dir: Path, ready: Callable[[bytes], bool], settle: float
         shutil.rmtree(log.parent, ignore_errors=True)
 
 
-# The share of the 3-D view (the left half of a 1600x1000 page below its top bar, ~5.5e5
-# pixels) in the bodies' blue that says they are drawn: 0.002 is ~1100 pixels, one §3.2 body
-# seen whole; measured 0.0 before the data arrives, 0.007 (§3.2's eight small bodies) to 0.09
-# (§5.6's seven) once drawn.
+# The share of the 3-D view (the left half of a 1600x1000 page from its top bar to half its
+# height, ~3.5e5 pixels) in the bodies' blue that says they are drawn: 0.002 is ~700 pixels, a
+# §3.2 body or two seen whole; measured 0.0 before the data arrives, 0.0035 (§3.2's eight small
+# bodies from zswarm's camera, 2.5 spreads away) to 0.025 (§5.6's seven) once drawn.
 BODIES_DRAWN = 0.002
 
 
 def body_pixels(png: bytes) -> tuple[float, float]:
     """(share of the 3-D view's pixels in the true bodies' blue, std of the whole image): the
-    3-D view is the left half below the top bar (zswarm's blueprint, side panels collapsed)."""
+    3-D view is the left half below the top bar, its upper two thirds above the tabs (zswarm's
+    blueprint, side panels collapsed): measured from the bar to half the page's height."""
     import io
 
     import numpy as np
     from PIL import Image
 
     img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
-    left = img[60 : img.shape[0] * 3 // 4, : img.shape[1] // 2]
+    left = img[60 : img.shape[0] // 2, : img.shape[1] // 2]
     r, g, b = left[..., 0], left[..., 1], left[..., 2]
     blue = (b > r + 60) & (b > g + 25) & (b > 80)
     return float(blue.mean()), float(img.std())

@@ -209,10 +209,11 @@ def blueprint(sc: Scenario | None, sync: bool) -> Any:
     tabs = rrb.Tabs(*tab_views, links, rrb.TextLogView(origin="/", name="jumps, faults, processes"))
     title = "bodies: true (blue) and estimated (orange)" if not sync else "bodies (true attitudes)"
     # The series on the right have the whole column (the tabs under the scene): a legend of 8
-    # agents fits a view half the window high (it was cut at 5 with three views stacked).
+    # agents fits a view half the window high (it was cut at 5 with three views stacked).  Tabs
+    # with series of their own (hybrid variables, commands) get two fifths of the left column.
     scene = rrb.Spatial3DView(origin="world", name=title, eye_controls=_eye(sc))
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Vertical(scene, tabs, row_shares=[3, 2]), rrb.Vertical(*views), column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Vertical(scene, tabs, row_shares=[3, 2] if tab_views else [2, 1]), rrb.Vertical(*views), column_shares=[3, 2]),
         rrb.TimePanel(timeline="world_time"),
         collapse_panels=True,
     )
@@ -220,8 +221,8 @@ def blueprint(sc: Scenario | None, sync: bool) -> Any:
 
 def _eye(sc: Scenario | None) -> Any:
     """A camera that takes in every body at the start: looking at the bodies' centre from a
-    corner, 2.5 times their spread (a body's length included) away (the viewer's own framing cut
-    off the highest and lowest §3.2 agents); None without a scenario (the viewer frames it itself)."""
+    corner, 2.5 times their spread (at least 3 m) away (the viewer's own framing cut off the
+    highest and lowest §3.2 agents); None without a scenario (the viewer frames it itself)."""
     import rerun.blueprint as rrb
 
     if sc is None or not sc.agents:
@@ -229,7 +230,8 @@ def _eye(sc: Scenario | None) -> Any:
     drawn = layout(sc)  # where the bodies are drawn (the Chapter 5 laws' on a circle)
     ps = np.array([np.asarray(a.p, dtype=float) + drawn.get(a.id, 0.0) for a in sc.agents])
     centre = ps.mean(axis=0)
-    spread = float(np.linalg.norm(ps - centre, axis=1).max()) + 1.5  # and a body's length (1) and its axes beyond it
+    # At least 3 m: the Chapter 5 laws' circle (2.2 m) of bodies drawn 1 m long with their axes.
+    spread = max(3.0, float(np.linalg.norm(ps - centre, axis=1).max()))
     way = np.array([1.0, -1.2, 0.8]) / np.linalg.norm([1.0, -1.2, 0.8])
     return rrb.EyeControls3D(position=tuple(centre + 2.5 * spread * way), look_target=tuple(centre), eye_up=(0.0, 0.0, 1.0))
 
