@@ -28,6 +28,11 @@ def zswarm(*args: str, cwd=ROOT) -> subprocess.CompletedProcess[str]:
         (["compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "8765"], "expected HOST:PORT"),  # one spelling of --live everywhere
         (["compose", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "127.0.0.1:0"], "a port for Docker to publish"),
         (["record", str(TOPO / "thesis-3.2-fixed8.toml"), "--live", "8765"], "expected HOST:PORT"),
+        (["echo", "est//3", "--connect", "tcp/127.0.0.1:9"], "est//3: not a key expression"),
+        (["hz", "est/3/", "--connect", "tcp/127.0.0.1:9"], "est/3/: not a key expression"),
+        (["echo", "est/3", "--run-id", "bad id!", "--connect", "tcp/127.0.0.1:9"], "--run-id: run id must match"),
+        (["hz", "est/3", "--results", "/nonexistent"], "no running zswarm run there"),
+        (["echo", "est/3"], "a client needs --connect"),
         (["replay", str(ROOT / "topologies")], "no recording there"),
         (["replay", "--speed", "0", str(ROOT)], "must be > 0"),
     ],

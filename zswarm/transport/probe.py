@@ -57,8 +57,17 @@ def _target(args: argparse.Namespace) -> tuple[Any, str]:
         key_expr = args.stream
     else:
         if run is not None and run != "*":
-            keys.check_run_id(run)
+            try:
+                keys.check_run_id(run)
+            except ValueError as exc:
+                procutil.fail_usage(f"--run-id: {exc}")
         key_expr = keys.stream_key(run or "*", args.stream.lstrip("/"))
+    import zenoh
+
+    try:
+        zenoh.KeyExpr(key_expr)
+    except zenoh.ZError:
+        procutil.fail_usage(f"{args.stream}: not a key expression (empty chunks, e.g. a//b, and a trailing / are not allowed)")
     return procutil.zenoh_conf(args, READER), key_expr
 
 
