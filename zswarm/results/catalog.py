@@ -139,8 +139,8 @@ def format_info(d: dict[str, Any]) -> str:
         else:
             lines.append(f"scenario:   {s.get('scenario')} ({s.get('algorithm')}, family {s.get('report_family')})")
             scale = s.get("time_scale")
-            pace = "as fast as it computes" if not scale else f"at time scale {scale:g}"
-            lines.append(f"engine:     {s.get('engine')}, {s.get('duration_s'):g} s of world time {pace}, seed {s.get('seed')}")
+            pace = "as fast as it computes" if not scale else f"at time scale {_g(scale)}"
+            lines.append(f"engine:     {s.get('engine')}, {_g(s.get('duration_s'))} s of world time {pace}, seed {s.get('seed')}")
             lines.append(f"status:     {_status(s)}")
             for p in s.get("problems") or []:
                 lines.append(f"  problem:  {p}")
@@ -178,6 +178,11 @@ def format_info(d: dict[str, Any]) -> str:
             p50, p99 = (_ms(c.get(f"latency_{q}_ms")) for q in ("p50", "p99"))
             lines.append(f"  {link:<12} {c.get('sent', 0):>8} {c.get('delivered', 0):>10} {c.get('dropped', 0):>8} {c.get('reordered', 0):>9} {p50:>8} {p99:>8}")
     return "\n".join(lines)
+
+
+def _g(x: Any) -> str:
+    """A number as ``:g`` writes it; anything else (a summary from elsewhere) as it is."""
+    return format(x, "g") if isinstance(x, int | float) else str(x)
 
 
 def _ms(x: Any) -> str:
