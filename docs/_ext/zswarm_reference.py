@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import inspect
+import textwrap
 import typing
 from typing import Any
 
@@ -39,12 +40,12 @@ def _tables() -> list[tuple[str, type, str]]:
 def _comments(cls: type) -> dict[str, str]:
     """The comment written after each field of ``cls`` (its unit or meaning), by field name."""
     try:
-        src = inspect.getsource(cls)
+        src = textwrap.dedent(inspect.getsource(cls))
     except (OSError, TypeError):
         return {}
     lines = src.splitlines()
     out = {}
-    for node in ast.walk(ast.parse(inspect.cleandoc("\n" + src) if src[0].isspace() else src)):
+    for node in ast.walk(ast.parse(src)):
         if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
             line = lines[node.lineno - 1]
             if "#" in line:

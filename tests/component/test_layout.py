@@ -38,7 +38,9 @@ def test_the_layout_plots_fields_the_recording_has(tmp_path, name):
         for series in q["config"]["paths"]:
             topic, _, field = series["value"].partition(".")
             assert topic in fields and field in fields[topic], (series, sorted(fields.get(topic, ())))
-    # The 3-D panel renders on the frame /tf is rooted at, from far enough back to take in every body.
+    # The 3-D panel renders on the frame /tf is rooted at, from far enough back to take in every body:
+    # at twice the bodies' extent from the origin they lie within ±atan(1/2) = ±27° of the view's
+    # axis, inside a 3-D panel's usual 60° field of view (the layout puts the camera at 2.5).
     (three_d,) = [q for q in panels if q["panelType"] == "ThreeDee"]
     assert three_d["config"]["followTf"] == "world"
     extent = max(math.hypot(*a.p) for a in load(TOPO / f"{name}.toml").agents)

@@ -12,22 +12,17 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import re
 from pathlib import Path
 from typing import Any
 
+from zswarm.transport import keys
+
 RECORDINGS = ("recording.mcap", "recording.raw.mcap")
 _WALL_CLOCK_NS = 10**17  # log times after 1973: a wall clock's, not world time
-_NUM = re.compile(r"(\d+)")
 
 
 class NotOurs(ValueError):
     """A path that is neither a results folder nor an MCAP recording."""
-
-
-def _natural(topic: str) -> list[Any]:
-    """``edge/2/10`` after ``edge/2/9``: numbers in a topic compared as numbers."""
-    return [int(p) if p.isdigit() else p for p in _NUM.split(topic)]
 
 
 def recording_info(path: Path) -> dict[str, Any]:
@@ -66,7 +61,7 @@ def recording_info(path: Path) -> dict[str, Any]:
     t0 = min(first.values(), default=0)
     t1 = max(last.values(), default=0)
     channels = {}
-    for topic in sorted(first, key=_natural):
+    for topic in sorted(first, key=keys.natural):
         span = (last[topic] - first[topic]) / 1e9
         channels[topic] = {
             "count": count[topic],
@@ -173,7 +168,7 @@ def format_info(d: dict[str, Any]) -> str:
     if s.get("links"):
         lines.append("")
         lines.append(f"  {'link':<12} {'sent':>8} {'delivered':>10} {'dropped':>8} {'reordered':>9} {'p50 ms':>8} {'p99 ms':>8}")
-        for link in sorted(s["links"], key=_natural):
+        for link in sorted(s["links"], key=keys.natural):
             c = s["links"][link]
             p50, p99 = (_ms(c.get(f"latency_{q}_ms")) for q in ("p50", "p99"))
             lines.append(f"  {link:<12} {c.get('sent', 0):>8} {c.get('delivered', 0):>10} {c.get('dropped', 0):>8} {c.get('reordered', 0):>9} {p50:>8} {p99:>8}")

@@ -220,3 +220,12 @@ def stream_of(run: str, key: str) -> str:
 def stream_key(run: str, stream: str) -> str:
     """The key (or key prefix) of a recording channel: the inverse of :func:`stream_of`."""
     return f"{ROOT}/{run}/{stream}"
+
+
+_DIGITS = re.compile(r"(\d+)")
+
+
+def natural(key: str) -> list[int | str]:
+    """The sort key of a key, stream or link name with its numbers compared as numbers
+    (``edge/2/10`` after ``edge/2/9``, ``10->3`` after ``9->3``)."""
+    return [int(p) if p.isdigit() else p for p in _DIGITS.split(key)]

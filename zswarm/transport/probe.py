@@ -135,7 +135,7 @@ class Rates:
             gaps, count, bad = self.gaps, self.count, self.bad
             self.gaps, self.count, self.bad = {}, {}, {}
         out = {}
-        for key in sorted(set(count) | set(bad), key=_natural):
+        for key in sorted(set(count) | set(bad), key=keys.natural):
             g = gaps.get(key, [])
             mean = sum(g) / len(g) if g else None
             out[key] = {
@@ -147,12 +147,6 @@ class Rates:
                 "malformed": bad.get(key, 0),
             }
         return out
-
-
-def _natural(key: str) -> list[Any]:
-    import re
-
-    return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", key)]
 
 
 def _stream(key: str) -> str:
