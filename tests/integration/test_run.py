@@ -154,7 +154,9 @@ def test_a_run_that_cannot_keep_up_says_so(procs, tmp_path):
     # and the world 0-30 % of its samples, by CPU and load); what the code must do is say so,
     # naming exactly the figures over the threshold.
     over = [i for i, pct in ov["agents_missed_pct"].items() if pct > ov["threshold_pct"]]
-    assert any(r.startswith(f"{len(over)} of ") for r in ov["reasons"]) == bool(over), ov
+    assert any(r.startswith(f"{len(over)} of {len(s['agents'])} agents missed") for r in ov["reasons"]) == bool(over), ov
+    starved = [i for i, pct in ov["agents_idle_pct"].items() if pct > ov["threshold_pct"]]
+    assert any(r.startswith(f"{len(starved)} of {len(s['agents'])} agents found no new sensor packet") for r in ov["reasons"]) == bool(starved), ov
     assert any(r.startswith("the world skipped") for r in ov["reasons"]) == (ov["world_skipped_pct"] > ov["threshold_pct"]), ov
     assert "OVERLOADED: " in log and all(r in log for r in ov["reasons"])
 

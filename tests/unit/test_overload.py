@@ -30,3 +30,33 @@ def test_the_table_says_so():
     assert "OVERLOADED: 1 of 1 agents missed more than 2 % of their ticks (worst: agent 1, 10.0 %)" in table(base)
     base["overload"] = overload(agents(0), {})
     assert "OVERLOADED" not in table(base)
+
+
+def test_idle_ticks_flag_the_run_only_where_they_can_only_mean_late_packets():
+    # 60 idle ticks of 1000 scheduled (940 steps) = 6 %: over the threshold, for a watched agent only.
+    ov = overload(agents(0, 0, steps=940, idle=60), {"samples": 2000, "late": 0}, watch_idle=("2",))
+    assert ov["agents_idle_pct"] == {"2": 6.0}
+    assert ov["overloaded"] and ov["reasons"] == [
+        f"1 of 2 agents found no new sensor packet at more than {OVERLOAD_PCT:g} % of their ticks (worst: agent 2, 6.0 %): the world's packets came late"
+    ]
+    assert not overload(agents(0, 0, steps=940, idle=60), {"samples": 2000, "late": 0})["overloaded"]  # nobody watched
+    assert not overload(agents(0, idle=20), {}, watch_idle=("1",))["overloaded"]  # 20 of 1000: at the threshold, not over it
+
+
+def test_which_agents_idle_ticks_mean_late_packets(tmp_path):
+    from tests.conftest import TOPO
+    from zswarm.results.pipeline import idle_means_late
+    from zswarm.scenario import load
+
+    sc = load(TOPO / "thesis-3.2-fixed8.toml")  # 200 Hz sensors, 100 Hz agents, clean links, no faults
+    assert idle_means_late(sc) == [str(a.id) for a in sc.agents]
+    text = (TOPO / "thesis-3.2-fixed8.toml").read_text()
+    for extra, why in (
+        ("\n[links.sensors]\ndelay_ms = 3.0\n", "a delayed sensor link"),
+        ('\n[[faults]]\nkind = "kill"\nagent = 5\nat = 2.0\n', "a fault"),
+    ):
+        f = tmp_path / "s.toml"
+        f.write_text(text + extra)
+        assert idle_means_late(load(f)) == [], why
+    f.write_text(text.replace("sensor_rate = 200.0", "sensor_rate = 150.0"))
+    assert idle_means_late(load(f)) == [], "fewer than two samples a tick"
