@@ -725,6 +725,128 @@ static PyObject *py_flow_aux(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
     Py_RETURN_NONE;
 }
 
+/* ---- The wire's checks of a decoded message (zswarm/transport/message_checks.py), for the arrays a
+ * decoded payload holds: exact numpy arrays (the type given to set_ndarray), read-only, C-contiguous
+ * float64 of the shape.  The verdict of each is the Python's: every number finite and within
+ * +-max_abs (comparisons that NaN fails), a unit vector's | (x x + y y) + z z - 1 | <= 2 tol and a
+ * rotation's sums as so3._rotation_ok writes them, each operation in the same order and rounded
+ * (-ffp-contract=off).  True or False only: on False the Python runs and names the problem; an
+ * array of any other kind (a sender's, writable; a list) is False here and checked there. */
+static PyObject *ndarray_type = NULL;
+
+enum { CHECK_NONE = 0, CHECK_UNIT = 1, CHECK_ROTATION = 2 };
+
+/* 1: o is a decoded float64 array of n (3 or 9) values, shape (3,) or (3, 3), all within +-max_abs
+ * and passing `check`; 0: not (or not such an array); -1: an error. */
+static int f8_check(PyObject *o, int n, int check, double max_abs, double tol)
+{
+    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
+        return 0;
+    Py_buffer b;
+    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = b.format ? b.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    int ok = b.readonly && b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && b.len == 8 * n && PyBuffer_IsContiguous(&b, 'C') &&
+             (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
+    if (ok) {
+        const double *x = (const double *)b.buf;
+        for (int k = 0; k < n; k++)
+            if (!(fabs(x[k]) <= max_abs))
+                ok = 0;
+        if (ok && check == CHECK_UNIT && n == 3)
+            ok = fabs(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] - 1.0) <= 2 * tol;
+        else if (ok && check == CHECK_ROTATION && n == 9) {
+            const double a = x[0], bb = x[1], c = x[2], d = x[3], e = x[4], ff = x[5], g = x[6], h = x[7], i = x[8];
+            ok = fabs(a * a + d * d + g * g - 1.0) <= tol && fabs(bb * bb + e * e + h * h - 1.0) <= tol && fabs(c * c + ff * ff + i * i - 1.0) <= tol &&
+                 fabs(a * bb + d * e + g * h) <= tol && fabs(a * c + d * ff + g * i) <= tol && fabs(bb * c + e * ff + h * i) <= tol &&
+                 fabs(a * (e * i - ff * h) - bb * (d * i - ff * g) + c * (d * h - e * g) - 1.0) <= tol;
+        } else if (ok && check != CHECK_NONE)
+            ok = 0;
+    }
+    PyBuffer_Release(&b);
+    return ok;
+}
+
+static int parse_check_args(PyObject *const *a, int *n, int *check, double *max_abs, double *tol)
+{
+    *n = (int)PyLong_AsLong(a[1]);
+    *check = (int)PyLong_AsLong(a[2]);
+    *max_abs = PyFloat_AsDouble(a[3]);
+    *tol = PyFloat_AsDouble(a[4]);
+    if (PyErr_Occurred())
+        return -1;
+    if (*n != 3 && *n != 9) {
+        PyErr_SetString(PyExc_ValueError, "n: 3 or 9");
+        return -1;
+    }
+    return 0;
+}
+
+/* f8_ok(a, n, check, max_abs, tol) -> bool */
+static PyObject *py_f8_ok(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    int n, check;
+    double max_abs, tol;
+    if (want_nargs(nargs, 5, "f8_ok") < 0 || parse_check_args(a, &n, &check, &max_abs, &tol) < 0)
+        return NULL;
+    const int r = f8_check(a[0], n, check, max_abs, tol);
+    if (r < 0)
+        return NULL;
+    return PyBool_FromLong(r);
+}
+
+/* idmap_ok(d, n, check, max_abs, tol, max_id, max_ids) -> bool: d an exact dict of at most max_ids
+ * entries, each key an exact int in [0, max_id], each value f8_check's. */
+static PyObject *py_idmap_ok(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    int n, check;
+    double max_abs, tol;
+    if (want_nargs(nargs, 7, "idmap_ok") < 0 || parse_check_args(a, &n, &check, &max_abs, &tol) < 0)
+        return NULL;
+    const long long max_id = PyLong_AsLongLong(a[5]);
+    const Py_ssize_t max_ids = PyLong_AsSsize_t(a[6]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *d = a[0];
+    if (!PyDict_CheckExact(d) || PyDict_GET_SIZE(d) > max_ids)
+        Py_RETURN_FALSE;
+    Py_ssize_t pos = 0;
+    PyObject *k, *v;
+    while (PyDict_Next(d, &pos, &k, &v)) {
+        if (!PyLong_CheckExact(k))
+            Py_RETURN_FALSE;
+        int overflow = 0;
+        const long long j = PyLong_AsLongLongAndOverflow(k, &overflow);
+        if (overflow || j < 0 || j > max_id)
+            Py_RETURN_FALSE;
+        const int r = f8_check(v, n, check, max_abs, tol);
+        if (r < 0)
+            return NULL;
+        if (!r)
+            Py_RETURN_FALSE;
+    }
+    Py_RETURN_TRUE;
+}
+
+/* set_ndarray(numpy.ndarray): the one type of array the checks above accept. */
+static PyObject *py_set_ndarray(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 1, "set_ndarray") < 0)
+        return NULL;
+    if (!PyType_Check(a[0])) {
+        PyErr_SetString(PyExc_TypeError, "set_ndarray: a type expected");
+        return NULL;
+    }
+    Py_XDECREF(ndarray_type);
+    Py_INCREF(a[0]);
+    ndarray_type = a[0];
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -736,6 +858,9 @@ static PyMethodDef methods[] = {
     {"flow_xi", (PyCFunction)(void (*)(void))py_flow_xi, METH_FASTCALL, "flow_xi(a0, b0, q0, a1, b1, q1, x, dt, k_xi, gamma, n): Heun sub-steps of (5.21) for M draws, x in place."},
     {"flow_xi_one", (PyCFunction)(void (*)(void))py_flow_xi_one, METH_FASTCALL, "flow_xi_one(a0, b0, q0, a1, b1, q1, xi, dt, k_xi, gamma, n) -> xi: flow_xi of one draw."},
     {"flow_aux", (PyCFunction)(void (*)(void))py_flow_aux, METH_FASTCALL, "flow_aux(Qt, zeta, table, rows, h, A, K, K2, u2, k_Q, k_zeta, gamma): the velocity-free filter, Qt and zeta in place."},
+    {"f8_ok", (PyCFunction)(void (*)(void))py_f8_ok, METH_FASTCALL, "f8_ok(a, n, check, max_abs, tol) -> bool: a decoded (3,) or (3, 3) float64 array passes the wire's checks (zswarm/transport/message_checks.py)."},
+    {"idmap_ok", (PyCFunction)(void (*)(void))py_idmap_ok, METH_FASTCALL, "idmap_ok(d, n, check, max_abs, tol, max_id, max_ids) -> bool: a decoded id map passes the wire's checks."},
+    {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -61,6 +61,10 @@ flow_aux: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
 predict: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None
 log_stack: Callable[[np.ndarray], np.ndarray] | None = None
 terms: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+# The wire's checks of a decoded message's arrays (zswarm/transport/message_checks.py): True when
+# they pass, False to have the Python check them and name the problem.
+f8_ok: Callable[[Any, int, int, float, float], bool] | None = None
+idmap_ok: Callable[[Any, int, int, float, float, int, int], bool] | None = None
 
 if _lib is not None:
     lib: Any = _lib
@@ -124,3 +128,5 @@ if _lib is not None:
         return out
 
     exp_batch, rigid_step, flow_xi, flow_aux, predict, terms, log_stack = _exp_batch, _rigid_step, _flow_xi, _flow_aux, _predict, _terms, _log_stack
+    lib.set_ndarray(np.ndarray)
+    f8_ok, idmap_ok = lib.f8_ok, lib.idmap_ok

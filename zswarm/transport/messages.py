@@ -42,8 +42,10 @@ from typing import Annotated, Any, ClassVar
 import msgspec
 import numpy as np
 
+from zswarm.math.kernels import f8_ok
 from zswarm.transport.message_checks import (  # re-exported: the bounds and errors users read here
     _F8,
+    CHECK_ROTATION,
     ENVELOPE,
     JUMP_OWNERS,
     MAX_COUNTER_ITEMS,
@@ -69,6 +71,7 @@ from zswarm.transport.message_checks import (  # re-exported: the bounds and err
     _string,
     _unit,
     _values_ok,
+    decoded_ok,
 )
 
 # Container types bounded at their msgpack header (a map of 100 000 bearings took 0.28 s to build
@@ -175,6 +178,18 @@ class Sense(Msg, tag="sense"):
     rel_pos: IdMap | None = None
 
     def _check(self) -> None:
+        if (
+            (self.gyro is None or decoded_ok(self.gyro, 3))
+            and (self.velocity is None or decoded_ok(self.velocity, 3))
+            and (self.velocity_body is None or decoded_ok(self.velocity_body, 3))
+            and (self.position is None or decoded_ok(self.position, 3))
+            and (self.attitude is None or decoded_ok(self.attitude, 9, CHECK_ROTATION))
+            and f8_ok is not None
+        ):  # a decoded packet's arrays, checked in C; its maps too, by _id_map
+            for k, shape, check in (("bearings", (3,), _unit), ("rel_att", (3, 3), _rotation), ("rel_pos", (3,), None)):
+                if getattr(self, k) is not None:
+                    setattr(self, k, _id_map(getattr(self, k), k, shape, check))
+            return
         arrays = []
         for k in ("gyro", "velocity", "velocity_body", "position"):
             v = getattr(self, k)
