@@ -138,10 +138,36 @@ def test_a_message_decodes_the_same_with_and_without_the_c_checks(kind, monkeypa
 
     with_c = outcomes()
     monkeypatch.setattr(mc, "f8_ok", None)
-    monkeypatch.setattr(mc, "idmap_ok", None)
-    import zswarm.transport.messages as messages
-
-    monkeypatch.setattr(messages, "f8_ok", None)
+    monkeypatch.setattr(mc, "idmap_ok", None)  # decoded_ok and _id_map then check in Python
     without = outcomes()
     assert with_c == without
+    assert {o for o, _ in with_c} == {"ok", "refused"}
+
+
+def test_a_sender_builds_the_same_message_with_and_without_the_c_checks(monkeypatch):
+    """A sender's arrays (writable, copied by the checks) of every kind an agent sends: the same
+    message, or the same refusal, either way."""
+    rng = np.random.default_rng(5)
+    cases = []
+    for a in near_unit(rng, 30) + specials((3,)):
+        cases.append(("sense", dict(gyro=np.array(a), bearings={2: np.array(a), 3: np.array([0.0, 0.0, 1.0])})))
+        cases.append(("edge", dict(t_local=0.5, b=np.array(a), k=1.5)))
+        cases.append(("est", dict(t_local=0.5, p_hat=np.array(a), values={"sigma": np.array(a)})))
+    for R in near_rotation(rng, 30) + specials((3, 3)):
+        cases.append(("sense", dict(attitude=np.array(R), rel_att={4: np.array(R)})))
+        cases.append(("est", dict(t_local=0.5, R_hat=np.array(R))))
+
+    def outcomes():
+        out = []
+        for kind, fields in cases:
+            try:
+                out.append(("ok", wire.encode_message(wire.build(kind, 2, 1, 0.5, **fields))))
+            except wire.MessageError as exc:
+                out.append(("refused", str(exc)))
+        return out
+
+    with_c = outcomes()
+    monkeypatch.setattr(mc, "f8_ok", None)
+    monkeypatch.setattr(mc, "idmap_ok", None)
+    assert with_c == outcomes()
     assert {o for o, _ in with_c} == {"ok", "refused"}

@@ -152,10 +152,10 @@ def _string(x: Any, field: str) -> str:
 
 def _id_map(v: Any, field: str, shape: tuple[int, ...], check: Any = None) -> dict[int, np.ndarray]:
     """{id: array of ``shape``}; ``check`` on each: ``_unit`` (a unit vector) or ``_rotation``."""
+    c, tol = (CHECK_UNIT, UNIT_TOL) if check is _unit else (CHECK_ROTATION, ROT_TOL) if check is _rotation else (CHECK_NONE, 0.0)
     if idmap_ok is not None and (shape == (3,) or shape == (3, 3)):
         # A decoded map, checked in C with the verdicts below (zswarm/math/_kernels.c): a sense
         # packet's 17.8 -> 9 µs hot (2026-12-06).  False: anything else, checked below.
-        c, tol = (CHECK_UNIT, UNIT_TOL) if check is _unit else (CHECK_ROTATION, ROT_TOL) if check is _rotation else (CHECK_NONE, 0.0)
         if idmap_ok(v, 3 if shape == (3,) else 9, c, MAX_ABS, tol, MAX_ID, MAX_IDS):
             return dict(v)
     if type(v) is not dict or len(v) > MAX_IDS or not all(map(_id, v)):
@@ -166,6 +166,8 @@ def _id_map(v: Any, field: str, shape: tuple[int, ...], check: Any = None) -> di
         stack = np.array(vals)
         stack.flags.writeable = False
         out = dict(zip(v, stack, strict=True))
+        if idmap_ok is not None and (shape == (3,) or shape == (3, 3)) and idmap_ok(out, 3 if shape == (3,) else 9, c, MAX_ABS, tol, MAX_ID, MAX_IDS):
+            return out  # its rows: read-only views, checked in C as a decoded map's
         xs = stack.ravel().tolist()
         if not (math.isfinite(sum(xs)) and max(xs) <= MAX_ABS and min(xs) >= -MAX_ABS):
             xs = None
@@ -233,6 +235,8 @@ def _named(v: Any, field: str) -> dict[str, float | np.ndarray]:
                 small.append(a)
             else:
                 _check_values(a, f"{field}.{n}")
+    if small and f8_ok is not None:  # the 3-vectors and 3x3 matrices (read-only now) in C
+        small = [a for a in small if not (a.shape == (3,) and f8_ok(a, 3, CHECK_NONE, MAX_ABS, 0.0) or a.shape == (3, 3) and f8_ok(a, 9, CHECK_NONE, MAX_ABS, 0.0))]
     if _values_ok(small) is None:
         for n, a in out.items():
             if type(a) is np.ndarray:
