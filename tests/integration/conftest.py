@@ -306,7 +306,8 @@ def downgrade(request):
     from tests.conftest import DOWNGRADED
 
     def note(what: str, s: dict) -> None:
-        request.node.user_properties.append((DOWNGRADED, f"{what} ({'; '.join(s['overload']['reasons'])})"))
+        ov = s["overload"]
+        request.node.user_properties.append((DOWNGRADED, f"{what} ({'; '.join(ov['reasons'] + ov.get('late', []))})"))
 
     return note
 

@@ -43,12 +43,14 @@ def test_run_converges_and_agrees_with_sim(procs, sim_reference, downgrade, tmp_
     assert s["engine"] == "run" and s["completed"]
     assert not (why := not_alive(out, s)), why
     assert not unconfirmed(out)  # every agent and the world had the recorder's word before closing
-    if s["overload"]["overloaded"]:
+    kept_up = not s["overload"]["overloaded"] and not s["overload"]["late"]
+    if not kept_up:
         downgrade("the agents' step rates", s)
     for i, a in s["agents"].items():
-        if not s["overload"]["overloaded"]:
-            # A run that kept up (≤ 2 % missed ticks and skipped samples) publishes at the
-            # configured rate less its missed and idle ticks: 99.4–99.9 Hz measured quietly.
+        if kept_up:
+            # A run that kept up (≤ 2 % missed ticks and skipped samples) and whose sensor
+            # packets came in time (≤ 2 % idle ticks) publishes at the configured rate less its
+            # missed and idle ticks: 97-99.9 Hz measured.
             assert a["step_rate_hz"] == pytest.approx(a["configured_rate_hz"], rel=0.05), i
         if a["role"] == "follower":
             assert a["attitude_error_final"] < 1e-2, (i, a)
@@ -156,7 +158,7 @@ def test_a_run_that_cannot_keep_up_says_so(procs, tmp_path):
     over = [i for i, pct in ov["agents_missed_pct"].items() if pct > ov["threshold_pct"]]
     assert any(r.startswith(f"{len(over)} of {len(s['agents'])} agents missed") for r in ov["reasons"]) == bool(over), ov
     starved = [i for i, pct in ov["agents_idle_pct"].items() if pct > ov["threshold_pct"]]
-    assert any(r.startswith(f"{len(starved)} of {len(s['agents'])} agents found no new sensor packet") for r in ov["reasons"]) == bool(starved), ov
+    assert any(r.startswith(f"{len(starved)} of {len(s['agents'])} agents found no new sensor packet") for r in ov["late"]) == bool(starved), ov
     assert any(r.startswith("the world skipped") for r in ov["reasons"]) == (ov["world_skipped_pct"] > ov["threshold_pct"]), ov
     assert "OVERLOADED: " in log and all(r in log for r in ov["reasons"])
 

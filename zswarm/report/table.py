@@ -57,6 +57,8 @@ def footer_lines(summary: dict[str, Any]) -> list[str]:
         )
     if summary.get("problems"):
         lines.append("NOT COMPLETED: " + "; ".join(summary["problems"]))
+    if ov.get("late"):
+        lines.append(f"LATE SENSOR DATA: {'; '.join(ov['late'])}: these agents published at less than their rate (they caught up at the next tick)")
     if not ov.get("overloaded"):
         return lines
     return lines + [

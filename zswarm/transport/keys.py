@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import hmac
 import os
@@ -157,9 +158,12 @@ def _id(s: str) -> int | None:
     return int(s) if s.isascii() and s.isdigit() and len(s) <= 10 and (s == "0" or s[0] != "0") else None
 
 
+@functools.lru_cache(maxsize=4096)
 def parse_stream(stream: str, run: str = "") -> Key | None:
     """A stream (a key without its ``zswarm/<run>/`` prefix) taken apart, or None if it is
-    not one of zswarm's."""
+    not one of zswarm's.  Cached (a run has a few hundred streams; the recorder parses every
+    message's: 10 µs each, a third of sim's recording time, 2026-12-06); bounded, so junk
+    keys cost only their parse."""
     p = stream.split("/")
     kind, n = p[0], len(p)
     if kind == "edge" and n == 3:
