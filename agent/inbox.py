@@ -17,7 +17,7 @@ import numpy as np
 
 from zswarm.scenario.links import LinkCounter, LinkModel
 from zswarm.transport import wire
-from zswarm.transport.messages import Msg
+from zswarm.transport.messages import Msg, Sense
 
 log = logging.getLogger("zswarm.agent")
 
@@ -30,6 +30,7 @@ MAX_LOGGED_KEYS = 16  # keys whose malformed messages are logged (once each); th
 # sensors and 100 Hz neighbours), a 1 s stall ~400.  Past this many, an arrival is dropped and
 # counted (inbox_overflow): a flood of junk grew the queue without bound (+26 MB).
 MAX_PENDING = 4096
+_SENSE_FIELDS = frozenset(Sense.__struct_fields__) - frozenset(wire.ENVELOPE)  # what a sensor packet holds besides its envelope
 SERIES = ("gyro", "velocity", "velocity_body", "attitude", "position")  # the sense packet's arrays, kept as time series
 
 
@@ -227,6 +228,13 @@ class Inbox:
         if j is None:
             series = self._series.get(name)
             return list(series) if series is not None else []
+        if name in _SENSE_FIELDS:  # a field of the packets' Struct: read as attributes, not through the Mapping view (378 calls a tick on §4.5)
+            out = []
+            for p in self.packets:
+                m = getattr(p, name)
+                if m is not None and j in m:
+                    out.append((p.t, m[j]))
+            return out
         return [(p.t, p[name][j]) for p in self.packets if j in p.get(name, ())]
 
     def vectors(self, key: int | str) -> list[tuple[float, np.ndarray, np.ndarray]]:
@@ -234,6 +242,8 @@ class Inbox:
         bearing toward agent ``key`` (int) or the packet field ``key`` ("velocity_body")."""
         if isinstance(key, int):
             return [(p.t, p.bearings[key], p.gyro) for p in self.packets if p.bearings is not None and key in p.bearings]
+        if key in _SENSE_FIELDS:
+            return [(p.t, v, p.gyro) for p in self.packets if (v := getattr(p, key)) is not None]
         return [(p.t, p[key], p.gyro) for p in self.packets if key in p]
 
     def counters(self) -> dict[str, Any]:

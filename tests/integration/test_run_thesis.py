@@ -79,14 +79,20 @@ def test_moving5_run(procs, sim_reference, tmp_path):
     assert_run_matches_sim(s, ss, ("mean_attitude_error_final", "mean_position_error_final"), tmp_path / "launcher.log")
 
 
-@pytest.mark.parametrize("name", ["thesis-4.5-hybrid5", "thesis-4.5-hybrid-pose5"])
-def test_hybrid_run(procs, sim_reference, tmp_path, name):
-    # Time scale 1.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's cheaper ticks)
-    # the agents keep up (≤ 0.13 % missed ticks); the world skipped 0.5-1.9 % of its samples
-    # over three runs of each while it skipped every sample it woke a period late, near the
-    # 2 % where a run is overloaded; it now takes them late, up to 0.1 s (test_run.py).
+@pytest.mark.parametrize(("name", "time_scale"), [("thesis-4.5-hybrid5", 1.0), ("thesis-4.5-hybrid-pose5", 0.5)])
+def test_hybrid_run(procs, sim_reference, tmp_path, name, time_scale):
+    # Time scale 1 for §4.5 hybrid.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's
+    # cheaper ticks) the agents keep up (≤ 0.13 % missed ticks); the world skipped 0.5-1.9 % of
+    # its samples over three runs of each while it skipped every sample it woke a period late,
+    # near the 2 % where a run is overloaded; it now takes them late, up to 0.1 s (test_run.py).
     # Before issue 28 the agents missed 15-22 % at 1 and the settle times moved by +45 %.
-    sc, out, s, sim_out, ss = run(procs, sim_reference, tmp_path, name, time_scale=1.0)
+    # The hybrid pose observer at 0.5: its ticks are the dearest of the shipped schemes (5 agents
+    # and the world took 76 % of the two cores at 1 on a quiet machine, 2026-12-06), and in CI,
+    # beside the background layer, its agents missed 2.3-5.8 % of their ticks (overloaded, so
+    # the test failed: fail_if_overloaded).  At 0.5 the same processes and links run at half
+    # the load; what the test checks (jumps, settle times, final errors against sim) is in
+    # world time, which the time scale does not change.
+    sc, out, s, sim_out, ss = run(procs, sim_reference, tmp_path, name, time_scale=time_scale)
     for k, e in s["edges"].items():
         first = e["jump_log"][0]
         assert first["t"] < 0.1 and first["xi_before"] == 0.0 and first["xi_after"] == pytest.approx(0.08 * math.pi), (k, e["jump_log"])
