@@ -204,6 +204,56 @@ def test_log_is_the_numpy_log(monkeypatch):
     assert np.allclose(exp_batch(fast[:-3]), R[:-3], atol=1e-12) and np.allclose(exp_batch(fast[-3:]), R[-3:], atol=3e-9)
 
 
+def _gyro_histories(rng: np.random.Generator) -> list[list[tuple[float, np.ndarray]]]:
+    """Sample histories as an agent's inbox holds them: 5 ms apart with jitter, a repeated time
+    (a gap of 0, so no extrapolation slope), a late last sample, two samples only, a long one."""
+    out = []
+    for n in (2, 3, 8, 64):
+        ts = np.cumsum(rng.uniform(0.002, 0.008, n)) + 1.0
+        out.append([(float(t), rng.normal(size=3) * 3.0) for t in ts])
+    h = out[2]
+    out.append(h[:-1] + [(h[-2][0], h[-1][1])])  # the newest two at one time
+    out.append(h[:4] + [(h[3][0] + 0.03, h[4][1])])  # the newest 30 ms after the one before
+    return out
+
+
+def test_rate_integral_is_the_python_loop(monkeypatch):
+    """The gyro's pre-integration (timing._integrate) in C against the Python, bit for bit, for
+    intervals before, across, at and past the samples (the linear extrapolation and its cap)."""
+    from zswarm.math import timing
+
+    assert kernels.rate_integral is not None, NEEDED
+    rng = np.random.default_rng(11)
+    cases = 0
+    for h in _gyro_histories(rng):
+        ts = [t for t, _ in h]
+        gap = ts[-1] - ts[-2]
+        points = [ts[0] - 0.01, ts[0], *ts[1:-1:3], ts[-2], ts[-1], ts[-1] + 0.5 * gap, ts[-1] + gap, ts[-1] + 3 * max(gap, 0.001)]
+        points += [float(x) for x in rng.uniform(ts[0] - 0.005, ts[-1] + 0.02, 6)]
+        for t0 in points:
+            for t1 in points:
+                if not t0 < t1:
+                    continue
+                for magnus in (False, True):
+                    fast = np.empty(3)
+                    assert kernels.rate_integral(h, t0, t1, magnus, fast)  # taken in C, not left to the Python
+                    assert timing._integrate(h, t0, t1, magnus).tobytes() == fast.tobytes()
+                    monkeypatch.setattr(timing, "rate_integral", None)
+                    slow = timing._integrate(h, t0, t1, magnus)
+                    monkeypatch.undo()
+                    assert fast.tobytes() == slow.tobytes(), (len(h), t0, t1, magnus, fast, slow)
+                    cases += 1
+    assert cases > 1000
+    # What it does not take goes to the Python: a stack of draws, a tuple of samples, a bad out.
+    stack = [(1.0, np.zeros((4, 3))), (1.005, np.ones((4, 3)))]
+    assert not kernels.rate_integral(stack, 1.0, 1.005, True, np.empty(3))
+    assert not kernels.rate_integral(tuple(_gyro_histories(rng)[1]), 1.0, 1.1, True, np.empty(3))
+    assert not kernels.rate_integral([(1, np.zeros(3)), (2, np.zeros(3))], 1.0, 1.5, True, np.empty(3))  # int times
+    with pytest.raises(ValueError):
+        kernels.rate_integral(_gyro_histories(rng)[1], 0.0, 2.0, True, np.empty(4))
+    assert timing._integrate(stack, 1.0, 1.005, True).shape == (4, 3)
+
+
 def test_the_default_build_gives_the_same_numbers(tmp_path):
     """A CPU without AVX2 and FMA runs the default clones (SSE2, fma() the C library's): built
     alone here (-DZSWARM_DEFAULT_ONLY) and loaded in another interpreter (ZSWARM_KERNELS_FILE),

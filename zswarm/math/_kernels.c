@@ -32,6 +32,7 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 /* The loops come in two builds chosen at load time (GCC's target_clones): with the AVX2 instructions
  * where the CPU has them, and a default one (SSE2: a vector of four is two instructions).  Every
@@ -847,6 +848,161 @@ static PyObject *py_set_ndarray(PyObject *Py_UNUSED(self), PyObject *const *a, P
     Py_RETURN_NONE;
 }
 
+/* ---- the gyro's pre-integration on one agent (zswarm/math/timing.py _integrate, a single rate
+ * vector per sample): the same operations in the same order as the Python, so the same bits.  The
+ * Python did it in ~20 us a step (a tenth of a §3.2 agent's tick, 2026-12-06); here ~1 us. */
+
+#define RATE_MAX 256 /* samples read at most (an agent keeps 64; more go to the Python) */
+
+/* The sample times' insertion point after x (Python's bisect.bisect_right on ts[0..n)). */
+static Py_ssize_t bisect_right(const double *ts, Py_ssize_t n, double x)
+{
+    Py_ssize_t lo = 0, hi = n;
+    while (lo < hi) {
+        const Py_ssize_t mid = (lo + hi) / 2;
+        if (x < ts[mid])
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return lo;
+}
+
+static inline double py_max(double a, double b) { return b > a ? b : a; } /* Python's max(a, b) */
+static inline double py_min(double a, double b) { return b < a ? b : a; } /* Python's min(a, b) */
+
+/* 1: o is a float64 array of 3 contiguous values, copied into w; 0: not. */
+static int vec3_of(PyObject *o, double w[3])
+{
+    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
+        return 0;
+    Py_buffer b;
+    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = b.format ? b.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    const int ok = b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && b.len == 24 && b.ndim == 1 && PyBuffer_IsContiguous(&b, 'C');
+    if (ok)
+        memcpy(w, b.buf, 24);
+    PyBuffer_Release(&b);
+    return ok;
+}
+
+/* rate_integral(samples, t0, t1, magnus, out (3) out) -> bool: timing._integrate of samples, a list
+ * of at least 2 (time, float64 (3,) array) tuples, for t0 < t1, into out; False (out untouched): the
+ * samples are not such (a stack of draws, another type), for the Python to do. */
+static PyObject *py_rate_integral(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double tt[2];
+    if (want_nargs(nargs, 5, "rate_integral") < 0 || doubles(a, 1, 2, tt) < 0)
+        return NULL;
+    const double t0 = tt[0], t1 = tt[1];
+    const int magnus = PyObject_IsTrue(a[3]);
+    if (magnus < 0)
+        return NULL;
+    PyObject *samples = a[0];
+    if (!PyList_CheckExact(samples))
+        Py_RETURN_FALSE;
+    const Py_ssize_t n = PyList_GET_SIZE(samples);
+    if (n < 2 || n > RATE_MAX || !(t0 < t1))
+        Py_RETURN_FALSE;
+    double ts_all[RATE_MAX];
+    for (Py_ssize_t k = 0; k < n; k++) {
+        PyObject *s = PyList_GET_ITEM(samples, k);
+        if (!PyTuple_CheckExact(s) || PyTuple_GET_SIZE(s) != 2 || !PyFloat_CheckExact(PyTuple_GET_ITEM(s, 0)))
+            Py_RETURN_FALSE;
+        ts_all[k] = PyFloat_AS_DOUBLE(PyTuple_GET_ITEM(s, 0));
+    }
+    Py_ssize_t first = bisect_right(ts_all, n, t0) - 1;
+    if (first > n - 2)
+        first = n - 2;
+    if (first < 0)
+        first = 0;
+    const Py_ssize_t m = n - first; /* ts = ts_all[first:], W its rates */
+    const double *ts = ts_all + first;
+    double W[RATE_MAX][3];
+    for (Py_ssize_t k = 0; k < m; k++)
+        if (!vec3_of(PyTuple_GET_ITEM(PyList_GET_ITEM(samples, first + k), 1), W[k]))
+            Py_RETURN_FALSE;
+    const double gap = ts_all[n - 1] - ts_all[n - 2];
+    const double *Wl = W[m - 1], *Wp = W[m - 2];
+    double slope[3];
+    for (int c = 0; c < 3; c++)
+        slope[c] = gap > 0 ? (Wl[c] - Wp[c]) / gap : 0.0 * Wl[c];
+    const double t_last = ts_all[n - 1];
+    const double t_cap = t_last + py_max(gap, 0.0);
+    /* The grid: t0, t1 and the sample times and t_cap strictly between them, sorted, each once. */
+    double grid[RATE_MAX + 3];
+    Py_ssize_t g = 0;
+    grid[g++] = t0;
+    grid[g++] = t1;
+    for (Py_ssize_t k = 0; k <= m; k++) {
+        const double t = k < m ? ts[k] : t_cap;
+        if (t0 < t && t < t1)
+            grid[g++] = t;
+    }
+    for (Py_ssize_t i = 1; i < g; i++) /* insertion sort: a few values, nearly sorted */
+        for (Py_ssize_t j = i; j > 0 && grid[j] < grid[j - 1]; j--) {
+            const double x = grid[j];
+            grid[j] = grid[j - 1];
+            grid[j - 1] = x;
+        }
+    Py_ssize_t u = 0;
+    for (Py_ssize_t i = 0; i < g; i++)
+        if (u == 0 || grid[i] != grid[u - 1])
+            grid[u++] = grid[i];
+    double acc[3] = {0.0, 0.0, 0.0}, lo[3], hi[3];
+    for (Py_ssize_t i = 0; i < u; i++) {
+        /* The rate at grid[i] (timing._integrate's value). */
+        const double t = grid[i];
+        const Py_ssize_t k = bisect_right(ts, m, t) - 1;
+        double *v = i == 0 ? lo : hi;
+        if (k < 0) {
+            memcpy(v, W[0], 24);
+        } else if (k >= m - 1) {
+            const double tau = py_min(py_max(t - t_last, 0.0), t_cap - t_last);
+            for (int c = 0; c < 3; c++)
+                v[c] = W[m - 1][c] + tau * slope[c];
+        } else {
+            const double ta = ts[k], tb = ts[k + 1];
+            const double s = tb > ta ? (t - ta) / (tb - ta) : 1.0;
+            for (int c = 0; c < 3; c++)
+                v[c] = W[k][c] + s * (W[k + 1][c] - W[k][c]);
+        }
+        if (i == 0)
+            continue;
+        const double h = grid[i] - grid[i - 1];
+        const double p[3] = {0.5 * (lo[0] + hi[0]) * h, 0.5 * (lo[1] + hi[1]) * h, 0.5 * (lo[2] + hi[2]) * h};
+        if (magnus) {
+            const double c = h * h / 12.0;
+            const double x = 0.5 * (acc[1] * p[2] - acc[2] * p[1]) + c * (lo[1] * hi[2] - lo[2] * hi[1]);
+            const double y = 0.5 * (acc[2] * p[0] - acc[0] * p[2]) + c * (lo[2] * hi[0] - lo[0] * hi[2]);
+            const double z = 0.5 * (acc[0] * p[1] - acc[1] * p[0]) + c * (lo[0] * hi[1] - lo[1] * hi[0]);
+            acc[0] += p[0] + x;
+            acc[1] += p[1] + y;
+            acc[2] += p[2] + z;
+        } else {
+            acc[0] += p[0];
+            acc[1] += p[1];
+            acc[2] += p[2];
+        }
+        memcpy(lo, hi, 24);
+    }
+    Bufs B = {.n = 0};
+    if (take(&B, a[4], F64, 1, "out") < 0 || want_items(&B.b[0], 3, "out") < 0) {
+        release_all(&B);
+        return NULL;
+    }
+    const double span = t1 - t0;
+    for (int c = 0; c < 3; c++)
+        D(0)[c] = acc[c] / span;
+    release_all(&B);
+    Py_RETURN_TRUE;
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -860,6 +1016,7 @@ static PyMethodDef methods[] = {
     {"flow_aux", (PyCFunction)(void (*)(void))py_flow_aux, METH_FASTCALL, "flow_aux(Qt, zeta, table, rows, h, A, K, K2, u2, k_Q, k_zeta, gamma): the velocity-free filter, Qt and zeta in place."},
     {"f8_ok", (PyCFunction)(void (*)(void))py_f8_ok, METH_FASTCALL, "f8_ok(a, n, check, max_abs, tol) -> bool: a decoded (3,) or (3, 3) float64 array passes the wire's checks (zswarm/transport/message_checks.py)."},
     {"idmap_ok", (PyCFunction)(void (*)(void))py_idmap_ok, METH_FASTCALL, "idmap_ok(d, n, check, max_abs, tol, max_id, max_ids) -> bool: a decoded id map passes the wire's checks."},
+    {"rate_integral", (PyCFunction)(void (*)(void))py_rate_integral, METH_FASTCALL, "rate_integral(samples, t0, t1, magnus, out) -> bool: timing._integrate of one rate vector a sample into out (False: not such samples)."},
     {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };

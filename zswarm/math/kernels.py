@@ -65,6 +65,9 @@ terms: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | 
 # they pass, False to have the Python check them and name the problem.
 f8_ok: Callable[[Any, int, int, float, float], bool] | None = None
 idmap_ok: Callable[[Any, int, int, float, float, int, int], bool] | None = None
+# zswarm.math.timing's gyro pre-integration of one agent's samples (a rate vector each): True with
+# the result in ``out``, False to have the Python do it (a stack of draws).
+rate_integral: Callable[[Any, float, float, bool, np.ndarray], bool] | None = None
 
 if _lib is not None:
     lib: Any = _lib
@@ -129,4 +132,4 @@ if _lib is not None:
 
     exp_batch, rigid_step, flow_xi, flow_aux, predict, terms, log_stack = _exp_batch, _rigid_step, _flow_xi, _flow_aux, _predict, _terms, _log_stack
     lib.set_ndarray(np.ndarray)
-    f8_ok, idmap_ok = lib.f8_ok, lib.idmap_ok
+    f8_ok, idmap_ok, rate_integral = lib.f8_ok, lib.idmap_ok, lib.rate_integral
