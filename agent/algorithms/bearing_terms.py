@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from zswarm.math import kernels
 from zswarm.math.so3 import Mat3, T, Vec3, apply, cross, dot
 from zswarm.scenario.algorithm import Field, View
 
@@ -48,6 +49,10 @@ def bearing_correction(R_hat: Mat3, nbrs: tuple[NeighborData, ...]) -> Vec3:
 
     With ``b_ij^j = -b_ji^j``: each term is ``-(R̂_j b_ji^j) × (R̂_i b_ij^i)``.
     """
+    if kernels.bearing_correction1 is not None:  # one draw in C, the same operations (zswarm/math/_kernels.c)
+        out = np.empty(3)
+        if kernels.bearing_correction1(R_hat, nbrs, out):
+            return out
     s = np.zeros(3)
     for n in nbrs:
         s = s + n.k * cross(-apply(n.R_hat_j, n.b_nbr), apply(R_hat, n.b_own))
@@ -65,6 +70,10 @@ def position_rate(R_hat: Mat3, p_hat: Vec3, sigma: Vec3, k_p: float, nbrs: tuple
     ``ṗ̂_i = -[σ_i]^x p̂_i - k_p Σ_j R̂_i P_{b_ij^i} R̂_i^T (p̂_i - p̂_j)``.
     Since ``R̂ P_b R̂^T = P_{R̂ b}`` it is computed as ``P_{R̂_i b_ij^i}``.
     """
+    if kernels.position_rate1 is not None:  # one draw in C, the same operations (zswarm/math/_kernels.c)
+        out = np.empty(3)
+        if kernels.position_rate1(R_hat, p_hat, sigma, k_p, nbrs, out):
+            return out
     acc = np.zeros(3)
     for n in nbrs:
         g = apply(R_hat, n.b_own if n.b_pos is None else n.b_pos)

@@ -254,6 +254,77 @@ def test_rate_integral_is_the_python_loop(monkeypatch):
     assert timing._integrate(stack, 1.0, 1.005, True).shape == (4, 3)
 
 
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_one_draw_so3_products_are_the_python_ones(monkeypatch):
+    """so3.exp, mul and apply of one vector or matrix in C against their Python float code, bit
+    for bit: rotation vectors on both sides of the Taylor branch (|w|² = 1e-8) and past the trig
+    kernels' range, transposed (strided) views, and what goes to the Python (lists, stacks)."""
+    from zswarm.math import so3
+
+    assert kernels.exp1 is not None and kernels.mul1 is not None and kernels.apply1 is not None, NEEDED
+    rng = np.random.default_rng(3)
+    ws = [rng.normal(size=3) * s for s in (1e-9, 1e-5, 9.9e-5, 1e-4, 0.01, 1.0, 3.0, 40.0) for _ in range(40)]
+    Rs = [so3.exp(w) for w in ws[200:]]
+    pairs = [(A, B) for A in Rs[:30] for B in (Rs[30], so3.T(Rs[31]), rng.normal(size=(3, 3)))]
+    fast = ([so3.exp(w) for w in ws], [so3.mul(A, B) for A, B in pairs], [so3.apply(A, w) for A in Rs[:30] for w in ws[:40]], so3.apply(so3.T(Rs[0]), ws[5]))
+    for name in ("exp1", "mul1", "apply1"):
+        monkeypatch.setattr(kernels, name, None)
+    slow = ([so3.exp(w) for w in ws], [so3.mul(A, B) for A, B in pairs], [so3.apply(A, w) for A in Rs[:30] for w in ws[:40]], so3.apply(so3.T(Rs[0]), ws[5]))
+    monkeypatch.undo()
+    for f, sl in zip(fast[:3], slow[:3], strict=True):
+        assert all(_same(a, b) for a, b in zip(f, sl, strict=True))
+    assert _same(fast[3], slow[3])
+    out = np.empty(3)
+    assert kernels.apply1(Rs[0], ws[0], out) and not kernels.apply1(Rs[0].tolist(), ws[0], out) and not kernels.apply1(Rs[0], np.zeros((2, 3)), out)
+    assert not kernels.exp1(np.zeros(3, dtype=np.float32), np.empty((3, 3))) and not kernels.mul1(Rs[0], np.stack([Rs[0]] * 2), np.empty((3, 3)))
+    with pytest.raises(ValueError):
+        kernels.exp1(ws[0], np.empty(3))  # the output's size is checked
+    assert _same(so3.mul(Rs[0].tolist(), Rs[1]), so3.mul(Rs[0], Rs[1]))  # a list still works, in Python
+
+
+def test_bearing_sums_are_the_numpy_ones(monkeypatch):
+    """bearing_terms.bearing_correction and position_rate of one draw in C against their numpy
+    code, bit for bit, with and without b_pos (moving agents), an int k, no neighbour; and a
+    stack of draws (the batched engine) left to numpy."""
+    from agent.algorithms import bearing_terms as bt
+    from zswarm.math import so3
+
+    assert kernels.bearing_correction1 is not None and kernels.position_rate1 is not None, NEEDED
+    rng = np.random.default_rng(9)
+
+    def unit(v: np.ndarray) -> np.ndarray:
+        return v / np.linalg.norm(v)
+
+    for case in range(60):
+        n = case % 4
+        nbrs = tuple(
+            bt.NeighborData(
+                float(rng.uniform(0.5, 2.0)) if q % 2 == 0 else 1,
+                so3.exp(rng.normal(size=3)),
+                rng.normal(size=3) * 5.0,
+                unit(rng.normal(size=3)),
+                unit(rng.normal(size=3)),
+                unit(rng.normal(size=3)) if case % 3 == 0 else None,
+            )
+            for q in range(n)
+        )
+        R, p, sigma, k_p = so3.exp(rng.normal(size=3)), rng.normal(size=3) * 5.0, rng.normal(size=3), float(rng.uniform(0.1, 3.0))
+        fast = (bt.bearing_correction(R, nbrs), bt.position_rate(R, p, sigma, k_p, nbrs))
+        monkeypatch.setattr(kernels, "bearing_correction1", None)
+        monkeypatch.setattr(kernels, "position_rate1", None)
+        slow = (bt.bearing_correction(R, nbrs), bt.position_rate(R, p, sigma, k_p, nbrs))
+        monkeypatch.undo()
+        assert _same(fast[0], slow[0]) and _same(fast[1], slow[1]), (case, fast, slow)
+        assert kernels.bearing_correction1(R, nbrs, np.empty(3)) and kernels.position_rate1(R, p, sigma, k_p, nbrs, np.empty(3))
+    stack = (bt.NeighborData(1.0, np.stack([so3.exp(rng.normal(size=3))] * 2), np.zeros((2, 3)), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])),)
+    assert not kernels.bearing_correction1(R, stack, np.empty(3)) and not kernels.position_rate1(R, p, sigma, k_p, stack, np.empty(3))
+    assert not kernels.position_rate1(R, p, sigma, np.array([1.0, 2.0]), nbrs, np.empty(3))  # per-draw gains
+    assert bt.bearing_correction(R, stack).shape == (2, 3)
+
+
 def test_the_default_build_gives_the_same_numbers(tmp_path):
     """A CPU without AVX2 and FMA runs the default clones (SSE2, fma() the C library's): built
     alone here (-DZSWARM_DEFAULT_ONLY) and loaded in another interpreter (ZSWARM_KERNELS_FILE),

@@ -1003,6 +1003,226 @@ static PyObject *py_rate_integral(PyObject *Py_UNUSED(self), PyObject *const *a,
     Py_RETURN_TRUE;
 }
 
+/* ---- one draw's SO(3) products and the §3 observers' sums (zswarm/math/so3.py exp, mul, apply on a
+ * single vector or matrix; agent/algorithms/bearing_terms.py bearing_correction and position_rate): the
+ * operations of the Python float code in the same order, so the same bits.  A sim or real agent's step
+ * called them ~20 times a tick at 1-3 us each in Python (2026-12-06). */
+
+/* 1: o is a float64 array of shape (3,) (n = 3) or (3, 3) (n = 9), any strides, copied into x (row-major); 0: not. */
+static int read_f8(PyObject *o, int n, double *x)
+{
+    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
+        return 0;
+    Py_buffer b;
+    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = b.format ? b.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    int ok = b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
+    if (ok) {
+        const char *base = (const char *)b.buf;
+        if (n == 3)
+            for (int i = 0; i < 3; i++)
+                memcpy(x + i, base + i * b.strides[0], 8);
+        else
+            for (int i = 0; i < 3; i++)
+                for (int k = 0; k < 3; k++)
+                    memcpy(x + 3 * i + k, base + i * b.strides[0] + k * b.strides[1], 8);
+    }
+    PyBuffer_Release(&b);
+    return ok;
+}
+
+/* n values into the writable float64 array o of exactly n; -1 with an exception set. */
+static int write_f8(PyObject *o, int n, const double *x)
+{
+    Bufs B = {.n = 0};
+    if (take(&B, o, F64, 1, "out") < 0 || want_items(&B.b[0], n, "out") < 0) {
+        release_all(&B);
+        return -1;
+    }
+    memcpy(B.b[0].buf, x, 8 * (size_t)n);
+    release_all(&B);
+    return 0;
+}
+
+/* so3.exp of one rotation vector (Rodrigues, its Taylor branch below |w|^2 = 1e-8). */
+static void exp1(const double w[3], double E[9])
+{
+    const double x = w[0], y = w[1], z = w[2];
+    const double t2 = x * x + y * y + z * z;
+    double a, b;
+    if (t2 < 1e-8) {
+        a = 1.0 - t2 / 6.0;
+        b = 0.5 - t2 / 24.0;
+    } else {
+        const double t = sqrt(t2);
+        double sn, cs;
+        sincos1(t, &sn, &cs);
+        a = sn / t;
+        b = (1.0 - cs) / t2;
+    }
+    const double bxy = b * x * y, bxz = b * x * z, byz = b * y * z;
+    E[0] = 1.0 - b * (y * y + z * z), E[1] = bxy - a * z, E[2] = bxz + a * y;
+    E[3] = bxy + a * z, E[4] = 1.0 - b * (x * x + z * z), E[5] = byz - a * x;
+    E[6] = bxz - a * y, E[7] = byz + a * x, E[8] = 1.0 - b * (x * x + y * y);
+}
+
+static inline void mv3(const double *R, const double *v, double *out)
+{
+    for (int i = 0; i < 3; i++)
+        out[i] = (R[3 * i] * v[0] + R[3 * i + 1] * v[1]) + R[3 * i + 2] * v[2];
+}
+
+/* exp1(w, out (3,3)) -> bool: so3.exp of a (3,) array; False: not one. */
+static PyObject *py_exp1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double w[3], E[9];
+    if (want_nargs(nargs, 2, "exp1") < 0)
+        return NULL;
+    if (!read_f8(a[0], 3, w))
+        Py_RETURN_FALSE;
+    exp1(w, E);
+    if (write_f8(a[1], 9, E) < 0)
+        return NULL;
+    Py_RETURN_TRUE;
+}
+
+/* mul1(A, B, out (3,3)) -> bool: so3.mul of two (3, 3) arrays; False: not such. */
+static PyObject *py_mul1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double A[9], Bm[9], C[9];
+    if (want_nargs(nargs, 3, "mul1") < 0)
+        return NULL;
+    if (!read_f8(a[0], 9, A) || !read_f8(a[1], 9, Bm))
+        Py_RETURN_FALSE;
+    mm3(A, Bm, C);
+    if (write_f8(a[2], 9, C) < 0)
+        return NULL;
+    Py_RETURN_TRUE;
+}
+
+/* apply1(R, v, out (3)) -> bool: so3.apply of a (3, 3) and a (3,) array; False: not such. */
+static PyObject *py_apply1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double R[9], v[3], out[3];
+    if (want_nargs(nargs, 3, "apply1") < 0)
+        return NULL;
+    if (!read_f8(a[0], 9, R) || !read_f8(a[1], 3, v))
+        Py_RETURN_FALSE;
+    mv3(R, v, out);
+    if (write_f8(a[2], 3, out) < 0)
+        return NULL;
+    Py_RETURN_TRUE;
+}
+
+/* A number that is a Python float or int (not a bool, not an array of draws) as a double; 0: not one. */
+static int plain_number(PyObject *o, double *x)
+{
+    if (PyFloat_CheckExact(o)) {
+        *x = PyFloat_AS_DOUBLE(o);
+        return 1;
+    }
+    if (PyLong_CheckExact(o)) {
+        *x = PyLong_AsDouble(o);
+        if (*x == -1.0 && PyErr_Occurred()) {
+            PyErr_Clear();
+            return 0;
+        }
+        return 1;
+    }
+    return 0;
+}
+
+/* An attribute of a neighbour's data: a (3,)/(3,3) array into x (n values); 0: absent or not such. */
+static int nbr_f8(PyObject *nbr, const char *name, int n, double *x)
+{
+    PyObject *v = PyObject_GetAttrString(nbr, name);
+    if (v == NULL) {
+        PyErr_Clear();
+        return 0;
+    }
+    const int ok = read_f8(v, n, x);
+    Py_DECREF(v);
+    return ok;
+}
+
+/* bearing_correction1(R, nbrs, out (3)) -> bool: bearing_terms.bearing_correction of one draw,
+ * Σ_j k (−R̂_j b_nbr) × (R̂ b_own) from 0; False: a stack of draws or anything else, for the numpy. */
+static PyObject *py_bearing_correction1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double R[9], s[3] = {0.0, 0.0, 0.0};
+    if (want_nargs(nargs, 3, "bearing_correction1") < 0)
+        return NULL;
+    if (!read_f8(a[0], 9, R) || !PyTuple_CheckExact(a[1]))
+        Py_RETURN_FALSE;
+    for (Py_ssize_t q = 0; q < PyTuple_GET_SIZE(a[1]); q++) {
+        PyObject *nbr = PyTuple_GET_ITEM(a[1], q);
+        double Rj[9], bn[3], bo[3], k, u[3], v[3];
+        PyObject *ko = PyObject_GetAttrString(nbr, "k");
+        if (ko == NULL) {
+            PyErr_Clear();
+            Py_RETURN_FALSE;
+        }
+        const int kok = plain_number(ko, &k);
+        Py_DECREF(ko);
+        if (!kok || !nbr_f8(nbr, "R_hat_j", 9, Rj) || !nbr_f8(nbr, "b_nbr", 3, bn) || !nbr_f8(nbr, "b_own", 3, bo))
+            Py_RETURN_FALSE;
+        mv3(Rj, bn, u);
+        mv3(R, bo, v);
+        const double n0 = -u[0], n1 = -u[1], n2 = -u[2];
+        const double c[3] = {n1 * v[2] - n2 * v[1], n2 * v[0] - n0 * v[2], n0 * v[1] - n1 * v[0]};
+        for (int i = 0; i < 3; i++)
+            s[i] = s[i] + k * c[i];
+    }
+    if (write_f8(a[2], 3, s) < 0)
+        return NULL;
+    Py_RETURN_TRUE;
+}
+
+/* position_rate1(R, p, sigma, k_p, nbrs, out (3)) -> bool: bearing_terms.position_rate of one draw,
+ * −σ × p̂ − k_p Σ_j P_g (p̂ − p̂_j), g = R̂ b / |R̂ b| with b = b_pos or else b_own; False: not one draw. */
+static PyObject *py_position_rate1(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    double R[9], p[3], sg[3], k_p, acc[3] = {0.0, 0.0, 0.0};
+    if (want_nargs(nargs, 6, "position_rate1") < 0)
+        return NULL;
+    if (!read_f8(a[0], 9, R) || !read_f8(a[1], 3, p) || !read_f8(a[2], 3, sg) || !plain_number(a[3], &k_p) || !PyTuple_CheckExact(a[4]))
+        Py_RETURN_FALSE;
+    for (Py_ssize_t q = 0; q < PyTuple_GET_SIZE(a[4]); q++) {
+        PyObject *nbr = PyTuple_GET_ITEM(a[4], q);
+        double b[3], pj[3], g[3], d[3];
+        PyObject *bp = PyObject_GetAttrString(nbr, "b_pos");
+        if (bp == NULL) {
+            PyErr_Clear();
+            Py_RETURN_FALSE;
+        }
+        const int bok = bp == Py_None ? nbr_f8(nbr, "b_own", 3, b) : read_f8(bp, 3, b);
+        Py_DECREF(bp);
+        if (!bok || !nbr_f8(nbr, "p_hat_j", 3, pj))
+            Py_RETURN_FALSE;
+        mv3(R, b, g);
+        const double norm = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        for (int i = 0; i < 3; i++) {
+            g[i] = g[i] / norm;
+            d[i] = p[i] - pj[i];
+        }
+        const double gd = g[0] * d[0] + g[1] * d[1] + g[2] * d[2];
+        for (int i = 0; i < 3; i++)
+            acc[i] = acc[i] + (d[i] - g[i] * gd);
+    }
+    const double c[3] = {sg[1] * p[2] - sg[2] * p[1], sg[2] * p[0] - sg[0] * p[2], sg[0] * p[1] - sg[1] * p[0]};
+    double out[3];
+    for (int i = 0; i < 3; i++)
+        out[i] = -c[i] - k_p * acc[i];
+    if (write_f8(a[5], 3, out) < 0)
+        return NULL;
+    Py_RETURN_TRUE;
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -1017,6 +1237,11 @@ static PyMethodDef methods[] = {
     {"f8_ok", (PyCFunction)(void (*)(void))py_f8_ok, METH_FASTCALL, "f8_ok(a, n, check, max_abs, tol) -> bool: a decoded (3,) or (3, 3) float64 array passes the wire's checks (zswarm/transport/message_checks.py)."},
     {"idmap_ok", (PyCFunction)(void (*)(void))py_idmap_ok, METH_FASTCALL, "idmap_ok(d, n, check, max_abs, tol, max_id, max_ids) -> bool: a decoded id map passes the wire's checks."},
     {"rate_integral", (PyCFunction)(void (*)(void))py_rate_integral, METH_FASTCALL, "rate_integral(samples, t0, t1, magnus, out) -> bool: timing._integrate of one rate vector a sample into out (False: not such samples)."},
+    {"exp1", (PyCFunction)(void (*)(void))py_exp1, METH_FASTCALL, "exp1(w, out) -> bool: so3.exp of one rotation vector into out (3, 3) (False: not a (3,) float64 array)."},
+    {"mul1", (PyCFunction)(void (*)(void))py_mul1, METH_FASTCALL, "mul1(A, B, out) -> bool: so3.mul of two 3x3 matrices into out (False: not such arrays)."},
+    {"apply1", (PyCFunction)(void (*)(void))py_apply1, METH_FASTCALL, "apply1(R, v, out) -> bool: so3.apply of a 3x3 matrix to a 3-vector into out (False: not such arrays)."},
+    {"bearing_correction1", (PyCFunction)(void (*)(void))py_bearing_correction1, METH_FASTCALL, "bearing_correction1(R, nbrs, out) -> bool: bearing_terms.bearing_correction of one draw (False: not one)."},
+    {"position_rate1", (PyCFunction)(void (*)(void))py_position_rate1, METH_FASTCALL, "position_rate1(R, p, sigma, k_p, nbrs, out) -> bool: bearing_terms.position_rate of one draw (False: not one)."},
     {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };

@@ -68,6 +68,13 @@ idmap_ok: Callable[[Any, int, int, float, float, int, int], bool] | None = None
 # zswarm.math.timing's gyro pre-integration of one agent's samples (a rate vector each): True with
 # the result in ``out``, False to have the Python do it (a stack of draws).
 rate_integral: Callable[[Any, float, float, bool, np.ndarray], bool] | None = None
+# One draw's SO(3) products and the §3 observers' sums (so3.exp, mul, apply; bearing_terms): True with
+# the result in the last argument, False (a stack of draws, other types) to have the Python do it.
+exp1: Callable[[Any, np.ndarray], bool] | None = None
+mul1: Callable[[Any, Any, np.ndarray], bool] | None = None
+apply1: Callable[[Any, Any, np.ndarray], bool] | None = None
+bearing_correction1: Callable[[Any, Any, np.ndarray], bool] | None = None
+position_rate1: Callable[[Any, Any, Any, Any, Any, np.ndarray], bool] | None = None
 
 if _lib is not None:
     lib: Any = _lib
@@ -133,3 +140,4 @@ if _lib is not None:
     exp_batch, rigid_step, flow_xi, flow_aux, predict, terms, log_stack = _exp_batch, _rigid_step, _flow_xi, _flow_aux, _predict, _terms, _log_stack
     lib.set_ndarray(np.ndarray)
     f8_ok, idmap_ok, rate_integral = lib.f8_ok, lib.idmap_ok, lib.rate_integral
+    exp1, mul1, apply1, bearing_correction1, position_rate1 = lib.exp1, lib.mul1, lib.apply1, lib.bearing_correction1, lib.position_rate1

@@ -77,6 +77,10 @@ def mul(A: Mat3, B: Mat3) -> Mat3:
     ``OPENBLAS_CORETYPE``) and may fuse the multiply-adds or sum in another order, and differs
     between one matrix and a stack: measured, Prescott's kernel against SkylakeX/Haswell/Zen's.
     """
+    if kernels.mul1 is not None:  # one product in C, the same operations (False: not two 3x3 float64 arrays)
+        out = np.empty((3, 3))
+        if kernels.mul1(A, B, out):
+            return out
     A = np.asarray(A, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
     if A.shape == (3, 3) and B.shape == (3, 3):  # one product: the same operations on Python floats, a third of the time
@@ -96,6 +100,10 @@ def apply(R: Mat3, v: Vec3) -> Vec3:
     """``R v``: a matrix times a vector, or each of stacks (..., 3, 3) and (..., 3) (either may
     be a single one, broadcast), summed ``(r_i0 v_0 + r_i1 v_1) + r_i2 v_2`` as :func:`mul`
     does: no BLAS, so one draw and a stack of draws give the same bits on every CPU."""
+    if kernels.apply1 is not None:  # one product in C, the same operations (False: not a 3x3 and a 3-vector float64 array)
+        out = np.empty(3)
+        if kernels.apply1(R, v, out):
+            return out
     R = np.asarray(R, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
     if R.shape == (3, 3) and v.shape == (3,):  # one product: the same operations on Python floats (R @ v took 1.4 µs, this 0.9)
@@ -158,6 +166,10 @@ def exp(w: Vec3) -> Mat3:
     """
     if type(w) is np.ndarray and w.ndim > 1:
         return exp_batch(w.reshape(-1, 3)).reshape(w.shape[:-1] + (3, 3))
+    if kernels.exp1 is not None:  # the lines below in C, the same operations (False: not a float64 (3,) array)
+        out = np.empty((3, 3))
+        if kernels.exp1(w, out):
+            return out
     x, y, z = w.tolist() if type(w) is np.ndarray else (float(w[0]), float(w[1]), float(w[2]))
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
