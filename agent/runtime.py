@@ -27,6 +27,7 @@ import numpy as np
 
 from agent.inbox import MAX_NEIGHBOR_EVENTS, Inbox, step_ends
 from agent.tick_view import TickView
+from zswarm.math.kernels import finite_f8
 from zswarm.scenario.algorithm import AlgorithmSpec, Part, Publish, jumps
 from zswarm.scenario.clock import AgentClock
 from zswarm.scenario.links import LinkModel
@@ -71,7 +72,8 @@ def _finite_estimate(e: Mapping[str, Any]) -> bool:
     """Every number of an estimate (R_hat, p_hat, and the arrays and numbers it reports) finite."""
     for v in e.values():
         if isinstance(v, np.ndarray):
-            if not np.isfinite(v).all():
+            ok = finite_f8(v) if finite_f8 is not None else None  # a float64 array in C (3.5 -> 0.3 µs)
+            if ok is False or (ok is None and not np.isfinite(v).all()):
                 return False
         elif isinstance(v, float):
             if not math.isfinite(v):

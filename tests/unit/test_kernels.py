@@ -325,6 +325,35 @@ def test_bearing_sums_are_the_numpy_ones(monkeypatch):
     assert bt.bearing_correction(R, stack).shape == (2, 3)
 
 
+def test_rotation_and_finite_verdicts_are_the_pythons(monkeypatch):
+    """so3.rotations_ok of one received (read-only) matrix in C gives the Python's verdict at every
+    distance from SO(3) around the tolerance, NaN and a writable matrix included; finite_f8 is
+    np.isfinite(a).all() for float64 arrays and None for what it does not read."""
+    from zswarm.math import so3
+    from zswarm.math.limits import ROT_TOL
+
+    assert kernels.finite_f8 is not None, NEEDED
+    rng = np.random.default_rng(4)
+    mats = []
+    for eps in (0.0, 0.2 * ROT_TOL, 0.45 * ROT_TOL, 0.5 * ROT_TOL, 0.55 * ROT_TOL, ROT_TOL, 2 * ROT_TOL, 0.1):
+        for _ in range(40):
+            M = so3.exp(rng.normal(size=3)) + eps * rng.normal(size=(3, 3))
+            M.flags.writeable = False
+            mats.append(M)
+    bad = np.eye(3)
+    bad[1, 1] = np.nan
+    bad.flags.writeable = False
+    mats += [bad, -np.eye(3), np.eye(3)]  # NaN, det -1, writable
+    fast = [so3.rotations_ok(M, ROT_TOL) for M in mats]
+    monkeypatch.setattr(kernels, "f8_ok", None)
+    slow = [so3.rotations_ok(M, ROT_TOL) for M in mats]
+    monkeypatch.undo()
+    assert fast == slow and 0 < sum(fast) < len(fast), (sum(fast), len(fast))
+    for a in (np.zeros(3), np.array([1.0, np.inf, 0]), np.array([[np.nan]]), np.arange(9.0).reshape(3, 3).T, np.zeros(3, dtype=np.float32), [1.0]):
+        want = bool(np.isfinite(a).all()) if isinstance(a, np.ndarray) and a.dtype == np.float64 and a.flags.c_contiguous else None
+        assert kernels.finite_f8(a) is want, a
+
+
 def test_the_default_build_gives_the_same_numbers(tmp_path):
     """A CPU without AVX2 and FMA runs the default clones (SSE2, fma() the C library's): built
     alone here (-DZSWARM_DEFAULT_ONLY) and loaded in another interpreter (ZSWARM_KERNELS_FILE),

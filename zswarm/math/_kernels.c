@@ -1223,6 +1223,34 @@ static PyObject *py_position_rate1(PyObject *Py_UNUSED(self), PyObject *const *a
     Py_RETURN_TRUE;
 }
 
+/* finite_f8(a) -> True | False | None: every value of a contiguous float64 array finite (None: not such an array). */
+static PyObject *py_finite_f8(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 1, "finite_f8") < 0)
+        return NULL;
+    if (ndarray_type == NULL || (PyObject *)Py_TYPE(a[0]) != ndarray_type)
+        Py_RETURN_NONE;
+    Py_buffer b;
+    if (PyObject_GetBuffer(a[0], &b, PyBUF_RECORDS_RO) < 0) {
+        PyErr_Clear();
+        Py_RETURN_NONE;
+    }
+    const char *f = b.format ? b.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    if (!(b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && PyBuffer_IsContiguous(&b, 'C'))) {
+        PyBuffer_Release(&b);
+        Py_RETURN_NONE;
+    }
+    const double *x = (const double *)b.buf;
+    int ok = 1;
+    for (Py_ssize_t k = 0; k < b.len / 8; k++)
+        if (!isfinite(x[k]))
+            ok = 0;
+    PyBuffer_Release(&b);
+    return PyBool_FromLong(ok);
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -1242,6 +1270,7 @@ static PyMethodDef methods[] = {
     {"apply1", (PyCFunction)(void (*)(void))py_apply1, METH_FASTCALL, "apply1(R, v, out) -> bool: so3.apply of a 3x3 matrix to a 3-vector into out (False: not such arrays)."},
     {"bearing_correction1", (PyCFunction)(void (*)(void))py_bearing_correction1, METH_FASTCALL, "bearing_correction1(R, nbrs, out) -> bool: bearing_terms.bearing_correction of one draw (False: not one)."},
     {"position_rate1", (PyCFunction)(void (*)(void))py_position_rate1, METH_FASTCALL, "position_rate1(R, p, sigma, k_p, nbrs, out) -> bool: bearing_terms.position_rate of one draw (False: not one)."},
+    {"finite_f8", (PyCFunction)(void (*)(void))py_finite_f8, METH_FASTCALL, "finite_f8(a) -> True | False | None: every value of a contiguous float64 array finite (None: not such an array)."},
     {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };

@@ -61,6 +61,8 @@ flow_aux: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
 predict: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None
 log_stack: Callable[[np.ndarray], np.ndarray] | None = None
 terms: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+# What f8_ok and idmap_ok check of an array besides its values (zswarm/transport/message_checks.py names them too).
+CHECK_NONE, CHECK_UNIT, CHECK_ROTATION = 0, 1, 2
 # The wire's checks of a decoded message's arrays (zswarm/transport/message_checks.py): True when
 # they pass, False to have the Python check them and name the problem.
 f8_ok: Callable[[Any, int, int, float, float], bool] | None = None
@@ -75,6 +77,8 @@ mul1: Callable[[Any, Any, np.ndarray], bool] | None = None
 apply1: Callable[[Any, Any, np.ndarray], bool] | None = None
 bearing_correction1: Callable[[Any, Any, np.ndarray], bool] | None = None
 position_rate1: Callable[[Any, Any, Any, Any, Any, np.ndarray], bool] | None = None
+# Every value of a contiguous float64 array finite: True or False (None: not such an array).
+finite_f8: Callable[[Any], bool | None] | None = None
 
 if _lib is not None:
     lib: Any = _lib
@@ -141,3 +145,4 @@ if _lib is not None:
     lib.set_ndarray(np.ndarray)
     f8_ok, idmap_ok, rate_integral = lib.f8_ok, lib.idmap_ok, lib.rate_integral
     exp1, mul1, apply1, bearing_correction1, position_rate1 = lib.exp1, lib.mul1, lib.apply1, lib.bearing_correction1, lib.position_rate1
+    finite_f8 = lib.finite_f8

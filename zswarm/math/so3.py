@@ -317,6 +317,10 @@ def rotations_ok(M: NDArray[np.float64], tol: float) -> bool:
     per-call overhead for the stacked form, which was a third of a ``sim`` run's time."""
     M = np.asarray(M)
     if M.shape == (3, 3):
+        # A read-only (received) matrix in C, the same sums and verdicts (zswarm/math/_kernels.c f8_check);
+        # False there (writable, NaN, not float64) is decided here.
+        if kernels.f8_ok is not None and kernels.f8_ok(M, 9, kernels.CHECK_ROTATION, math.inf, tol):
+            return True
         return _rotation_ok(M.ravel().tolist(), tol)
     M = M.reshape(-1, 3, 3)
     if not M.shape[0]:

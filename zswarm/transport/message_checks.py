@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.math.kernels import f8_ok, idmap_ok
+from zswarm.math.kernels import CHECK_NONE, CHECK_ROTATION, CHECK_UNIT, f8_ok, idmap_ok  # CHECK_*: what the C checks of an array besides its values
 from zswarm.math.limits import MAX_ABS, ROT_TOL
 from zswarm.math.so3 import _rotation_ok, rotations_ok
 
@@ -38,7 +38,6 @@ ENVELOPE = ("type", "v", "src", "seq", "inc", "t")
 JUMP_OWNERS = ("edge", "agent")  # a hybrid variable per tree edge (ξ_k), or the agent's own (ζ_i)
 _F8 = np.dtype("<f8")
 _VEC, _MAT = [3], [3, 3]  # the shapes of most arrays, as a payload writes them
-CHECK_NONE, CHECK_UNIT, CHECK_ROTATION = 0, 1, 2  # what zswarm/math/_kernels.c checks of an array besides its values
 
 
 def decoded_ok(a: Any, n: int, check: int = CHECK_NONE) -> bool:
