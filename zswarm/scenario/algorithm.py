@@ -271,7 +271,7 @@ def _check_fields(fields: Mapping[str, Any], spec: Mapping[str, Field], what: st
             if not f.optional:
                 raise ValueError(f"{what} field {name!r} missing")
             continue
-        shape = np.shape(v)
+        shape = v.shape if type(v) is np.ndarray else np.shape(v)  # np.shape costs 0.4 µs a call
         if shape != f.shape:
             raise ValueError(f"{what} field {name!r}: shape {shape}, expected {f.shape}")
         if f.rotation and not rotations_ok(v, ROT_TOL):
