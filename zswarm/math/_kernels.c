@@ -848,6 +848,47 @@ static PyObject *py_set_ndarray(PyObject *Py_UNUSED(self), PyObject *const *a, P
     Py_RETURN_NONE;
 }
 
+/* 1: o is a float64 array of shape (3,) (n = 3) or (3, 3) (n = 9), any strides, copied into x (row-major); 0: not. */
+static int read_f8(PyObject *o, int n, double *x)
+{
+    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
+        return 0;
+    Py_buffer b;
+    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = b.format ? b.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    int ok = b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
+    if (ok) {
+        const char *base = (const char *)b.buf;
+        if (n == 3)
+            for (int i = 0; i < 3; i++)
+                memcpy(x + i, base + i * b.strides[0], 8);
+        else
+            for (int i = 0; i < 3; i++)
+                for (int k = 0; k < 3; k++)
+                    memcpy(x + 3 * i + k, base + i * b.strides[0] + k * b.strides[1], 8);
+    }
+    PyBuffer_Release(&b);
+    return ok;
+}
+
+/* n values into the writable float64 array o of exactly n; -1 with an exception set. */
+static int write_f8(PyObject *o, int n, const double *x)
+{
+    Bufs B = {.n = 0};
+    if (take(&B, o, F64, 1, "out") < 0 || want_items(&B.b[0], n, "out") < 0) {
+        release_all(&B);
+        return -1;
+    }
+    memcpy(B.b[0].buf, x, 8 * (size_t)n);
+    release_all(&B);
+    return 0;
+}
+
 /* ---- the gyro's pre-integration on one agent (zswarm/math/timing.py _integrate, a single rate
  * vector per sample): the same operations in the same order as the Python, so the same bits.  The
  * Python did it in ~20 us a step (a tenth of a §3.2 agent's tick, 2026-12-06); here ~1 us. */
@@ -870,26 +911,6 @@ static Py_ssize_t bisect_right(const double *ts, Py_ssize_t n, double x)
 
 static inline double py_max(double a, double b) { return b > a ? b : a; } /* Python's max(a, b) */
 static inline double py_min(double a, double b) { return b < a ? b : a; } /* Python's min(a, b) */
-
-/* 1: o is a float64 array of 3 contiguous values, copied into w; 0: not. */
-static int vec3_of(PyObject *o, double w[3])
-{
-    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
-        return 0;
-    Py_buffer b;
-    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
-        PyErr_Clear();
-        return 0;
-    }
-    const char *f = b.format ? b.format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    const int ok = b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && b.len == 24 && b.ndim == 1 && PyBuffer_IsContiguous(&b, 'C');
-    if (ok)
-        memcpy(w, b.buf, 24);
-    PyBuffer_Release(&b);
-    return ok;
-}
 
 /* rate_integral(samples, t0, t1, magnus, out (3) out) -> bool: timing._integrate of samples, a list
  * of at least 2 (time, float64 (3,) array) tuples, for t0 < t1, into out; False (out untouched): the
@@ -925,7 +946,7 @@ static PyObject *py_rate_integral(PyObject *Py_UNUSED(self), PyObject *const *a,
     const double *ts = ts_all + first;
     double W[RATE_MAX][3];
     for (Py_ssize_t k = 0; k < m; k++)
-        if (!vec3_of(PyTuple_GET_ITEM(PyList_GET_ITEM(samples, first + k), 1), W[k]))
+        if (!read_f8(PyTuple_GET_ITEM(PyList_GET_ITEM(samples, first + k), 1), 3, W[k]))
             Py_RETURN_FALSE;
     const double gap = ts_all[n - 1] - ts_all[n - 2];
     const double *Wl = W[m - 1], *Wp = W[m - 2];
@@ -991,15 +1012,10 @@ static PyObject *py_rate_integral(PyObject *Py_UNUSED(self), PyObject *const *a,
         }
         memcpy(lo, hi, 24);
     }
-    Bufs B = {.n = 0};
-    if (take(&B, a[4], F64, 1, "out") < 0 || want_items(&B.b[0], 3, "out") < 0) {
-        release_all(&B);
-        return NULL;
-    }
     const double span = t1 - t0;
-    for (int c = 0; c < 3; c++)
-        D(0)[c] = acc[c] / span;
-    release_all(&B);
+    const double mean[3] = {acc[0] / span, acc[1] / span, acc[2] / span};
+    if (write_f8(a[4], 3, mean) < 0)
+        return NULL;
     Py_RETURN_TRUE;
 }
 
@@ -1007,47 +1023,6 @@ static PyObject *py_rate_integral(PyObject *Py_UNUSED(self), PyObject *const *a,
  * single vector or matrix; agent/algorithms/bearing_terms.py bearing_correction and position_rate): the
  * operations of the Python float code in the same order, so the same bits.  A sim or real agent's step
  * called them ~20 times a tick at 1-3 us each in Python (2026-12-06). */
-
-/* 1: o is a float64 array of shape (3,) (n = 3) or (3, 3) (n = 9), any strides, copied into x (row-major); 0: not. */
-static int read_f8(PyObject *o, int n, double *x)
-{
-    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
-        return 0;
-    Py_buffer b;
-    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
-        PyErr_Clear();
-        return 0;
-    }
-    const char *f = b.format ? b.format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    int ok = b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
-    if (ok) {
-        const char *base = (const char *)b.buf;
-        if (n == 3)
-            for (int i = 0; i < 3; i++)
-                memcpy(x + i, base + i * b.strides[0], 8);
-        else
-            for (int i = 0; i < 3; i++)
-                for (int k = 0; k < 3; k++)
-                    memcpy(x + 3 * i + k, base + i * b.strides[0] + k * b.strides[1], 8);
-    }
-    PyBuffer_Release(&b);
-    return ok;
-}
-
-/* n values into the writable float64 array o of exactly n; -1 with an exception set. */
-static int write_f8(PyObject *o, int n, const double *x)
-{
-    Bufs B = {.n = 0};
-    if (take(&B, o, F64, 1, "out") < 0 || want_items(&B.b[0], n, "out") < 0) {
-        release_all(&B);
-        return -1;
-    }
-    memcpy(B.b[0].buf, x, 8 * (size_t)n);
-    release_all(&B);
-    return 0;
-}
 
 /* so3.exp of one rotation vector (Rodrigues, its Taylor branch below |w|^2 = 1e-8). */
 static void exp1(const double w[3], double E[9])
