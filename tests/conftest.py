@@ -85,6 +85,11 @@ def pytest_terminal_summary(terminalreporter):
     terminalreporter.write_line(f"checks downgraded by overload: {len(notes)}")
     for nodeid, why in notes:
         terminalreporter.write_line(f"  {nodeid}: {why}")
+    # The runs made again because the machine did not keep up (tests/layers.sh, --only-rerun), with why.
+    reruns = terminalreporter.stats.get("rerun", [])
+    terminalreporter.write_line(f"tests run again after an overloaded run: {len(reruns)}")
+    for r in reruns:
+        terminalreporter.write_line(f"  {r.nodeid}: {str(r.longrepr).strip().splitlines()[-1][:300]}")
 
 
 def pytest_collection_modifyitems(config, items):
