@@ -19,8 +19,10 @@ import os
 import statistics
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,6 +33,34 @@ def _worktree(ref: str, base: Path) -> Path:
     if not path.exists():
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(path), ref], check=True, capture_output=True)
     return path
+
+
+def _build_kernels(tree: Path) -> None:
+    """Compile the tree's C loops (each ``_kernels.c`` under ``zswarm/``) in place, with the flags
+    pyproject.toml gives them, so an earlier commit runs with its compiled loops as its install
+    had them (a worktree has only the sources; without the loops it would run slower than it was)."""
+    suffix = sysconfig.get_config_var("EXT_SUFFIX")
+    for src in sorted((tree / "zswarm").rglob("_kernels.c")):
+        so = src.with_name("_kernels" + suffix)
+        if not so.exists():
+            subprocess.run(
+                ["gcc", "-shared", "-fPIC", "-O2", "-ffp-contract=off", "-fno-math-errno", "-Wno-psabi", f"-I{sysconfig.get_paths()['include']}", str(src), "-lm", "-o", str(so)],
+                check=True,
+            )
+
+
+def _entry_points(tree: Path) -> None:
+    """Give the tree its own distribution metadata (its pyproject's entry points: algorithms, report
+    families) ahead of the installed one on PYTHONPATH, so an earlier commit finds its own plugins,
+    not this tree's."""
+    meta = tomllib.loads((tree / "pyproject.toml").read_text())["project"]
+    info = tree / f"zswarm-{meta.get('version', '0')}.dist-info"
+    info.mkdir(exist_ok=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: zswarm\nVersion: {meta.get('version', '0')}\n")
+    groups = meta.get("entry-points", {})
+    if "scripts" in meta:
+        groups = {"console_scripts": meta["scripts"], **groups}
+    (info / "entry_points.txt").write_text("".join(f"[{g}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items()) + "\n" for g, eps in groups.items()))
 
 
 def _run(code: Path, topology: str, duration: float, out: Path) -> tuple[float, dict[str, float]]:
@@ -56,13 +86,18 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="zswarm-bench-sim-") as tmp:
         base = Path(tmp)
         ref = _worktree(args.ref, base)
+        _build_kernels(ref)
+        _entry_points(ref)
         try:
             walls: dict[str, list[float]] = {"this tree": [], args.ref: []}
             runs: list[float] = []
             for r in range(args.rounds):
                 for name, code in (("this tree", ROOT), (args.ref, ref)):
                     out = base / f"{name.replace(' ', '_')}-{r}"
-                    wall, ph = _run(code, args.topology, args.duration, out)
+                    topo = Path(args.topology).resolve()
+                    if topo.is_relative_to(ROOT):  # the tree's own copy: the scenario format may have changed since
+                        topo = code / topo.relative_to(ROOT)
+                    wall, ph = _run(code, str(topo), args.duration, out)
                     walls[name].append(wall)
                     extra = ""
                     if "wall_time_run_s" in ph:

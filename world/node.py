@@ -72,6 +72,8 @@ class Sensing:
         """Each agent's packet fields from the truth's attitudes R (n, 3, 3), positions p, body
         rates W and inertial velocities V (None: the agents do not move)."""
         B = self.bearings(R, p)
+        if B is not None:
+            B.flags.writeable = False  # this sample's own: its rows go out as they are (see _sealed)
         out: dict[int, dict[str, object]] = {}
         for i in self.ids:
             a = self.index[i]
@@ -97,8 +99,25 @@ class Sensing:
             if "rel_pos" in want:
                 # toward the robots i senses (Body.senses): the sensing graph is directed
                 m["rel_pos"] = {j: sensors.relative_position(R[a], p[a], p[self.index[j]], self.rel_pos_std, rng) for j in self.sensed[i]}
-            out[i] = m
+            out[i] = _sealed(m)
         return out
+
+
+def _sealed(m: dict[str, object]) -> dict[str, object]:
+    """``m`` with the arrays this sample made read-only: a message holds its arrays read-only,
+    and copies a sender's writable ones (zswarm.transport.message_checks); a fresh array no one
+    else holds need not be copied, and the wire's C check takes it as it takes a decoded one
+    (``zswarm sim``: a sense packet's checks then cost what a received one's do).  Only arrays
+    that own their data, or rows of the bearings computed for this sample (read-only already):
+    a view of the truth (a noise-free attitude, the position) stays writable and is copied."""
+    for v in m.values():
+        if type(v) is dict:
+            for x in v.values():
+                if type(x) is np.ndarray and x.base is None:
+                    x.flags.writeable = False
+        elif type(v) is np.ndarray and v.base is None:
+            v.flags.writeable = False
+    return m
 
 
 class World:
