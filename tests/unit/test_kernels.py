@@ -354,6 +354,66 @@ def test_rotation_and_finite_verdicts_are_the_pythons(monkeypatch):
         assert kernels.finite_f8(a) is want, a
 
 
+def _same(a, b) -> bool:
+    """The same value as the wire holds it: arrays of one type, dtype, shape, flags and bytes."""
+    if isinstance(a, np.ndarray):
+        return type(b) is np.ndarray and a.dtype == b.dtype and a.shape == b.shape and a.flags.writeable == b.flags.writeable and a.tobytes() == b.tobytes()
+    if isinstance(a, list):
+        return type(b) is list and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return type(a) is type(b) and a == b
+
+
+def test_wire_hooks_are_the_python_hooks():
+    """The compiled msgspec hooks (messages.ENC_HOOK, DEC_HOOK) answer what the Python enc_hook and
+    dec_hook answer: the usual arrays in C, everything else handed to them (their errors too), so
+    every payload encodes to the same bytes and decodes to the same arrays."""
+    import msgspec
+
+    from zswarm.transport import messages, wire
+    from zswarm.transport.message_checks import MessageError
+
+    assert messages.ENC_HOOK is not messages.enc_hook and messages.DEC_HOOK is not messages.dec_hook, NEEDED
+    rng = np.random.default_rng(5)
+    big = np.arange(6.0).reshape(3, 2).astype(">f8")
+    outs = [rng.normal(size=3), rng.normal(size=(3, 3)), np.zeros(0), np.array(2.5), rng.normal(size=(2, 4, 5)), rng.normal(size=(3, 3)).T,
+            rng.normal(size=6)[::2], np.ones(3, dtype=np.float32), big, np.arange(3), np.float64(1.25), np.int32(7)]  # fmt: skip
+    ro = rng.normal(size=3)
+    ro.flags.writeable = False
+    outs.append(ro)
+    for x in outs:
+        assert _same(messages.enc_hook(x), messages.ENC_HOOK(x)), x
+    for x in (object(), "text", 1 + 2j):
+        with pytest.raises(NotImplementedError) as slow:
+            messages.enc_hook(x)
+        with pytest.raises(NotImplementedError) as fast:
+            messages.ENC_HOOK(x)
+        assert str(fast.value) == str(slow.value)
+    ins = [[[3], rng.normal(size=3).tobytes()], [[3, 3], rng.normal(size=9).tobytes()], [[3.0], bytes(24)], [[2], bytes(16)], [[3], bytes(23)],
+           [[3, 3], bytes(24)], [[9], bytes(72)], [[1, 3], bytes(24)], [[True, 3], bytes(24)], [[3], bytearray(24)], [[3], bytes(24), 0], ([3], bytes(24)),
+           [[2 ** 70], bytes(24)], [[-3], bytes(24)], [[3], "x" * 24], [[], bytes(8)], [[2, 3, 4], bytes(192)]]  # fmt: skip
+    for x in ins:
+        try:
+            want = messages.dec_hook(np.ndarray, x)
+        except (MessageError, NotImplementedError) as exc:
+            with pytest.raises(type(exc)) as got:
+                messages.DEC_HOOK(np.ndarray, x)
+            assert str(got.value) == str(exc), x
+            continue
+        assert _same(want, messages.DEC_HOOK(np.ndarray, x)), x
+    with pytest.raises(NotImplementedError):
+        messages.DEC_HOOK(list, [[3], bytes(24)])
+    # Whole messages: the same payload bytes, decoded to the same arrays.
+    m = wire.build("sense", 0, 3, 0.5, gyro=rng.normal(size=3), bearings={2: np.array([0.0, 0.6, 0.8]), 5: np.array([1.0, 0.0, 0.0])}, attitude=np.eye(3))
+    slow_enc = msgspec.msgpack.Encoder(enc_hook=messages.enc_hook)
+    slow_dec = msgspec.msgpack.Decoder(messages.Sense, dec_hook=messages.dec_hook)
+    payload = wire.encode_message(m)
+    assert payload == slow_enc.encode(m)
+    a, b = wire.decode(payload, "sense"), slow_dec.decode(payload)
+    for f in ("gyro", "attitude"):
+        assert _same(getattr(a, f), getattr(b, f)), f
+    assert all(_same(a.bearings[j], b.bearings[j]) for j in (2, 5))
+
+
 def test_the_default_build_gives_the_same_numbers(tmp_path):
     """A CPU without AVX2 and FMA runs the default clones (SSE2, fma() the C library's): built
     alone here (-DZSWARM_DEFAULT_ONLY) and loaded in another interpreter (ZSWARM_KERNELS_FILE),

@@ -1226,6 +1226,126 @@ static PyObject *py_finite_f8(PyObject *Py_UNUSED(self), PyObject *const *a, Py_
     return PyBool_FromLong(ok);
 }
 
+/* ---- msgspec's hooks for the wire's arrays (zswarm/transport/messages.py enc_hook and dec_hook): an
+ * array on the wire is [shape, bytes].  msgspec calls the hook once per array field, and a Python
+ * hook cost a frame and a few calls each time (a tenth of a received message's decoding, 2026-12-06);
+ * these do the usual cases without a frame and hand everything else to the Python hooks (set by
+ * set_wire_hooks), so their results are the Python's: the same arrays, the same bytes. */
+static PyObject *hook_frombuffer = NULL, *hook_f8 = NULL, *hook_dec_py = NULL, *hook_enc_py = NULL, *hook_kwnames = NULL,
+                *hook_mat_shape = NULL, *hook_reshape = NULL;
+
+/* set_wire_hooks(numpy.frombuffer, float64 dtype, dec_hook, enc_hook) */
+static PyObject *py_set_wire_hooks(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 4, "set_wire_hooks") < 0)
+        return NULL;
+    if (hook_kwnames == NULL) {
+        hook_kwnames = Py_BuildValue("(s)", "dtype");
+        hook_mat_shape = Py_BuildValue("(ii)", 3, 3);
+        hook_reshape = PyUnicode_InternFromString("reshape");
+        if (hook_kwnames == NULL || hook_mat_shape == NULL || hook_reshape == NULL)
+            return NULL;
+    }
+    PyObject **slots[4] = {&hook_frombuffer, &hook_f8, &hook_dec_py, &hook_enc_py};
+    for (int k = 0; k < 4; k++) {
+        Py_INCREF(a[k]);
+        Py_XSETREF(*slots[k], a[k]);
+    }
+    Py_RETURN_NONE;
+}
+
+/* 1: o is the exact int v. */
+static int is_int(PyObject *o, long v)
+{
+    if (!PyLong_CheckExact(o))
+        return 0;
+    int overflow = 0;
+    const long x = PyLong_AsLongAndOverflow(o, &overflow);
+    return !overflow && x == v;
+}
+
+/* dec_hook(type, obj): [[3], 24 bytes] -> frombuffer(bytes, float64); [[3, 3], 72 bytes] -> its
+ * reshape(3, 3); anything else: the Python dec_hook's answer. */
+static PyObject *py_dec_hook(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 2, "dec_hook") < 0)
+        return NULL;
+    if (hook_dec_py == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "dec_hook: set_wire_hooks was not called");
+        return NULL;
+    }
+    PyObject *obj = a[1];
+    if (ndarray_type != NULL && a[0] == ndarray_type && PyList_CheckExact(obj) && PyList_GET_SIZE(obj) == 2 && PyList_CheckExact(PyList_GET_ITEM(obj, 0)) &&
+        PyBytes_CheckExact(PyList_GET_ITEM(obj, 1))) {
+        PyObject *shape = PyList_GET_ITEM(obj, 0), *data = PyList_GET_ITEM(obj, 1);
+        const Py_ssize_t nd = PyList_GET_SIZE(shape), len = PyBytes_GET_SIZE(data);
+        const int vec = nd == 1 && len == 24 && is_int(PyList_GET_ITEM(shape, 0), 3);
+        const int mat = !vec && nd == 2 && len == 72 && is_int(PyList_GET_ITEM(shape, 0), 3) && is_int(PyList_GET_ITEM(shape, 1), 3);
+        if (vec || mat) {
+            PyObject *args[2] = {data, hook_f8};
+            PyObject *arr = PyObject_Vectorcall(hook_frombuffer, args, 1, hook_kwnames);
+            if (arr == NULL || vec)
+                return arr;
+            PyObject *margs[2] = {arr, hook_mat_shape};
+            PyObject *out = PyObject_VectorcallMethod(hook_reshape, margs, 2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+            Py_DECREF(arr);
+            return out;
+        }
+    }
+    return PyObject_Vectorcall(hook_dec_py, a, 2, NULL);
+}
+
+/* enc_hook(obj): a C-contiguous native float64 numpy array -> [list(shape), its bytes]; anything
+ * else: the Python enc_hook's answer. */
+static PyObject *py_enc_hook(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 1, "enc_hook") < 0)
+        return NULL;
+    if (hook_enc_py == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "enc_hook: set_wire_hooks was not called");
+        return NULL;
+    }
+    PyObject *obj = a[0];
+    if (ndarray_type != NULL && (PyObject *)Py_TYPE(obj) == ndarray_type) {
+        Py_buffer b;
+        if (PyObject_GetBuffer(obj, &b, PyBUF_RECORDS_RO) < 0)
+            PyErr_Clear();
+        else {
+            const char *f = b.format ? b.format : "B";
+            if (*f == '<' || *f == '=' || *f == '@')
+                f++;
+            PyObject *out = NULL;
+            if (b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && PyBuffer_IsContiguous(&b, 'C')) {
+                PyObject *shape = PyList_New(b.ndim);
+                PyObject *data = shape ? PyBytes_FromStringAndSize((const char *)b.buf, b.len) : NULL;
+                for (int k = 0; data != NULL && k < b.ndim; k++) {
+                    PyObject *d = PyLong_FromSsize_t(b.shape[k]);
+                    if (d == NULL) {
+                        Py_CLEAR(data);
+                        break;
+                    }
+                    PyList_SET_ITEM(shape, k, d);
+                }
+                if (data != NULL)
+                    out = PyList_New(2);
+                if (out != NULL) {
+                    PyList_SET_ITEM(out, 0, shape);
+                    PyList_SET_ITEM(out, 1, data);
+                } else {
+                    Py_XDECREF(shape);
+                    Py_XDECREF(data);
+                    PyBuffer_Release(&b);
+                    return NULL;
+                }
+                PyBuffer_Release(&b);
+                return out;
+            }
+            PyBuffer_Release(&b);
+        }
+    }
+    return PyObject_Vectorcall(hook_enc_py, a, 1, NULL);
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -1246,6 +1366,9 @@ static PyMethodDef methods[] = {
     {"bearing_correction1", (PyCFunction)(void (*)(void))py_bearing_correction1, METH_FASTCALL, "bearing_correction1(R, nbrs, out) -> bool: bearing_terms.bearing_correction of one draw (False: not one)."},
     {"position_rate1", (PyCFunction)(void (*)(void))py_position_rate1, METH_FASTCALL, "position_rate1(R, p, sigma, k_p, nbrs, out) -> bool: bearing_terms.position_rate of one draw (False: not one)."},
     {"finite_f8", (PyCFunction)(void (*)(void))py_finite_f8, METH_FASTCALL, "finite_f8(a) -> True | False | None: every value of a contiguous float64 array finite (None: not such an array)."},
+    {"set_wire_hooks", (PyCFunction)(void (*)(void))py_set_wire_hooks, METH_FASTCALL, "set_wire_hooks(frombuffer, float64, dec_hook, enc_hook): what dec_hook and enc_hook call, and the Python hooks for what they do not do."},
+    {"dec_hook", (PyCFunction)(void (*)(void))py_dec_hook, METH_FASTCALL, "dec_hook(type, obj): the wire's msgspec dec_hook (zswarm/transport/messages.py) for a 3-vector or 3x3 matrix, else the Python one."},
+    {"enc_hook", (PyCFunction)(void (*)(void))py_enc_hook, METH_FASTCALL, "enc_hook(obj): the wire's msgspec enc_hook for a contiguous float64 array, else the Python one."},
     {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };

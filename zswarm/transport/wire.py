@@ -29,6 +29,8 @@ from zswarm.transport.message_checks import (  # the bounds and the error, which
     MessageError,
 )
 from zswarm.transport.messages import (  # the types
+    DEC_HOOK,
+    ENC_HOOK,
     FIELDS,
     KINDS,
     Cmd,
@@ -38,8 +40,6 @@ from zswarm.transport.messages import (  # the types
     Sense,
     Stats,
     Truth,
-    dec_hook,
-    enc_hook,
     readable,
     version_of,
 )
@@ -79,8 +79,8 @@ __all__ = [
 ]
 
 
-_ENCODER = msgspec.msgpack.Encoder(enc_hook=enc_hook)
-_DECODER = msgspec.msgpack.Decoder(Union[tuple(KINDS.values())], dec_hook=dec_hook)  # type: ignore[arg-type]  # noqa: UP007 - a runtime union of the kinds
+_ENCODER = msgspec.msgpack.Encoder(enc_hook=ENC_HOOK)
+_DECODER = msgspec.msgpack.Decoder(Union[tuple(KINDS.values())], dec_hook=DEC_HOOK)  # type: ignore[arg-type]  # noqa: UP007 - a runtime union of the kinds
 
 
 def build(mtype: str, src: int, seq: int, t: float, *, inc: int = 0, **fields: Any) -> Msg:
