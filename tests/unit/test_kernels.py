@@ -414,6 +414,48 @@ def test_wire_hooks_are_the_python_hooks():
     assert all(_same(a.bearings[j], b.bearings[j]) for j in (2, 5))
 
 
+def test_decoded_named_values_are_checked_as_the_python_does(monkeypatch):
+    """message_checks._named of a decoded map through kernels.named_decoded gives the Python's map
+    (the same names in the same order, the same floats and arrays) or the Python's error, around
+    every bound it checks: the value bound and NaN, the name's length, the envelope's names, the
+    number of values, the shapes, and what it leaves to the Python (ints, bools, other shapes)."""
+    from zswarm.transport import message_checks as mc
+
+    assert kernels.named_decoded is not None, NEEDED
+    rng = np.random.default_rng(9)
+    M = mc.MAX_ABS
+
+    def arr(*shape, fill=None):
+        a = rng.normal(size=shape) if fill is None else np.full(shape, fill)
+        return [list(shape), a.tobytes()]
+
+    values = [0.5, -M, M, np.nextafter(M, np.inf), -np.nextafter(M, np.inf), np.nan, np.inf, 3, True, np.float64(2.0), "x", None,
+              arr(3), arr(3, 3), arr(3, fill=M), arr(3, 3, fill=-M), arr(3, fill=np.nan), arr(3, 3, fill=np.inf), arr(3, fill=2 * M),
+              arr(4), arr(1, 3), arr(2, 2), [[3], bytes(16)], [[3.0], bytes(24)], [[3], bytes(24), 1]]  # fmt: skip
+    names = ["a", "sigma", "x" * mc.MAX_NAME, "x" * (mc.MAX_NAME + 1), "", "t", "src", "values_", 5]
+    maps = [{n: v} for n in names for v in values[:3] + values[12:14]]
+    maps += [{"a": v} for v in values]
+    maps += [{f"v{k}": values[(k * 7) % len(values)] for k in range(m)} for m in (2, 5, 12)]
+    maps += [{f"v{k}": (0.25 if k % 2 else arr(3)) for k in range(n)} for n in (0, mc.MAX_OPEN, mc.MAX_OPEN + 1)]
+    maps += [[("a", 1.0)], "text"]
+
+    def run(m):
+        try:
+            return mc._named(m, "values")
+        except mc.MessageError as exc:
+            return exc
+
+    fast = [run(m) for m in maps]
+    monkeypatch.setattr(mc, "named_decoded", None)
+    slow = [run(m) for m in maps]
+    for m, f, w in zip(maps, fast, slow, strict=True):
+        if isinstance(w, Exception):
+            assert type(f) is type(w) and str(f) == str(w), m
+        else:
+            assert list(f) == list(w) and all(_same(f[n], w[n]) or (f[n] != f[n] and w[n] != w[n]) for n in w), m
+    assert sum(isinstance(w, Exception) for w in slow) > 10 and sum(not isinstance(w, Exception) for w in slow) > 10
+
+
 def test_the_default_build_gives_the_same_numbers(tmp_path):
     """A CPU without AVX2 and FMA runs the default clones (SSE2, fma() the C library's): built
     alone here (-DZSWARM_DEFAULT_ONLY) and loaded in another interpreter (ZSWARM_KERNELS_FILE),

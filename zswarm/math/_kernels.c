@@ -1346,6 +1346,83 @@ static PyObject *py_enc_hook(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
     return PyObject_Vectorcall(hook_enc_py, a, 1, NULL);
 }
 
+/* named_decoded(v, envelope, max_open, max_name, max_abs) -> dict | None: message_checks._named of a
+ * decoded map of named values when every value is a float or a decoded 3-vector or 3x3 matrix
+ * ([shape, bytes]): the map it returns (the floats as they are, each array frombuffer's, read-only,
+ * over the payload), each value within +-max_abs (NaN fails); None for anything else (a bad name, an
+ * int, another shape, a value out of bounds), which the Python then checks and names.  Needs
+ * set_wire_hooks. */
+static PyObject *py_named_decoded(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 5, "named_decoded") < 0)
+        return NULL;
+    const Py_ssize_t max_open = PyLong_AsSsize_t(a[2]), max_name = PyLong_AsSsize_t(a[3]);
+    const double max_abs = PyFloat_AsDouble(a[4]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *v = a[0], *envelope = a[1];
+    if (hook_frombuffer == NULL || !PyDict_CheckExact(v) || PyDict_GET_SIZE(v) > max_open || !PyAnySet_Check(envelope))
+        Py_RETURN_NONE;
+    PyObject *out = PyDict_New();
+    if (out == NULL)
+        return NULL;
+    Py_ssize_t pos = 0;
+    PyObject *k, *x;
+    while (PyDict_Next(v, &pos, &k, &x)) {
+        if (!PyUnicode_CheckExact(k) || PyUnicode_GET_LENGTH(k) == 0 || PyUnicode_GET_LENGTH(k) > max_name)
+            goto python;
+        const int env = PySet_Contains(envelope, k);
+        if (env < 0)
+            goto fail;
+        if (env)
+            goto python;
+        if (PyFloat_CheckExact(x)) {
+            const double y = PyFloat_AS_DOUBLE(x);
+            if (!(-max_abs <= y && y <= max_abs))
+                goto python;
+            if (PyDict_SetItem(out, k, x) < 0)
+                goto fail;
+            continue;
+        }
+        if (!PyList_CheckExact(x) || PyList_GET_SIZE(x) != 2 || !PyList_CheckExact(PyList_GET_ITEM(x, 0)) || !PyBytes_CheckExact(PyList_GET_ITEM(x, 1)))
+            goto python;
+        PyObject *shape = PyList_GET_ITEM(x, 0), *data = PyList_GET_ITEM(x, 1);
+        const Py_ssize_t nd = PyList_GET_SIZE(shape), len = PyBytes_GET_SIZE(data);
+        const int vec = nd == 1 && len == 24 && is_int(PyList_GET_ITEM(shape, 0), 3);
+        const int mat = !vec && nd == 2 && len == 72 && is_int(PyList_GET_ITEM(shape, 0), 3) && is_int(PyList_GET_ITEM(shape, 1), 3);
+        if (!vec && !mat)
+            goto python;
+        const double *d = (const double *)PyBytes_AS_STRING(data);
+        for (int q = 0; q < (vec ? 3 : 9); q++) {
+            double y;
+            memcpy(&y, d + q, 8);
+            if (!(fabs(y) <= max_abs))
+                goto python;
+        }
+        PyObject *args[2] = {data, hook_f8};
+        PyObject *arr = PyObject_Vectorcall(hook_frombuffer, args, 1, hook_kwnames);
+        if (arr != NULL && mat) {
+            PyObject *margs[2] = {arr, hook_mat_shape};
+            PyObject *m = PyObject_VectorcallMethod(hook_reshape, margs, 2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+            Py_DECREF(arr);
+            arr = m;
+        }
+        if (arr == NULL)
+            goto fail;
+        const int r = PyDict_SetItem(out, k, arr);
+        Py_DECREF(arr);
+        if (r < 0)
+            goto fail;
+    }
+    return out;
+python:
+    Py_DECREF(out);
+    Py_RETURN_NONE;
+fail:
+    Py_DECREF(out);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -1369,6 +1446,7 @@ static PyMethodDef methods[] = {
     {"set_wire_hooks", (PyCFunction)(void (*)(void))py_set_wire_hooks, METH_FASTCALL, "set_wire_hooks(frombuffer, float64, dec_hook, enc_hook): what dec_hook and enc_hook call, and the Python hooks for what they do not do."},
     {"dec_hook", (PyCFunction)(void (*)(void))py_dec_hook, METH_FASTCALL, "dec_hook(type, obj): the wire's msgspec dec_hook (zswarm/transport/messages.py) for a 3-vector or 3x3 matrix, else the Python one."},
     {"enc_hook", (PyCFunction)(void (*)(void))py_enc_hook, METH_FASTCALL, "enc_hook(obj): the wire's msgspec enc_hook for a contiguous float64 array, else the Python one."},
+    {"named_decoded", (PyCFunction)(void (*)(void))py_named_decoded, METH_FASTCALL, "named_decoded(v, envelope, max_open, max_name, max_abs) -> dict | None: the wire's check of decoded named values (floats, 3-vectors, 3x3 matrices), None for the Python to check."},
     {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };

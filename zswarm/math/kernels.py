@@ -79,6 +79,8 @@ bearing_correction1: Callable[[Any, Any, np.ndarray], bool] | None = None
 position_rate1: Callable[[Any, Any, Any, Any, Any, np.ndarray], bool] | None = None
 # Every value of a contiguous float64 array finite: True or False (None: not such an array).
 finite_f8: Callable[[Any], bool | None] | None = None
+# message_checks._named of a decoded map of floats, 3-vectors and 3x3 matrices (None: not such a map).
+named_decoded: Callable[[Any, frozenset[str], int, int, float], dict[str, Any] | None] | None = None
 
 
 def wire_hooks(enc_hook: Callable[[Any], Any], dec_hook: Callable[[type, Any], Any]) -> tuple[Callable[[Any], Any], Callable[[type, Any], Any]]:
@@ -157,4 +159,4 @@ if _lib is not None:
     lib.set_ndarray(np.ndarray)
     f8_ok, idmap_ok, rate_integral = lib.f8_ok, lib.idmap_ok, lib.rate_integral
     exp1, mul1, apply1, bearing_correction1, position_rate1 = lib.exp1, lib.mul1, lib.apply1, lib.bearing_correction1, lib.position_rate1
-    finite_f8 = lib.finite_f8
+    finite_f8, named_decoded = lib.finite_f8, lib.named_decoded

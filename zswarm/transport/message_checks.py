@@ -9,7 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from zswarm.math.kernels import CHECK_NONE, CHECK_ROTATION, CHECK_UNIT, f8_ok, idmap_ok  # CHECK_*: what the C checks of an array besides its values
+from zswarm.math.kernels import (  # CHECK_*: what the C checks of an array besides its values
+    CHECK_NONE,
+    CHECK_ROTATION,
+    CHECK_UNIT,
+    f8_ok,
+    idmap_ok,
+    named_decoded,
+)
 from zswarm.math.limits import MAX_ABS, ROT_TOL
 from zswarm.math.so3 import _rotation_ok, rotations_ok
 
@@ -36,6 +43,7 @@ MAX_COUNTER_DEPTH = 6
 MAX_COUNTER_ITEMS = 20000
 ENVELOPE = ("type", "v", "src", "seq", "inc", "t")
 JUMP_OWNERS = ("edge", "agent")  # a hybrid variable per tree edge (ξ_k), or the agent's own (ζ_i)
+_ENVELOPE = frozenset(ENVELOPE)
 _F8 = np.dtype("<f8")
 _VEC, _MAT = [3], [3, 3]  # the shapes of most arrays, as a payload writes them
 
@@ -193,6 +201,12 @@ def _id_map(v: Any, field: str, shape: tuple[int, ...], check: Any = None) -> di
 def _named(v: Any, field: str) -> dict[str, float | np.ndarray]:
     """Named values: each a finite number or a float64 array of at most 4 dimensions and
     MAX_VALUE_LEN elements."""
+    if named_decoded is not None:
+        # A decoded map of numbers, 3-vectors and 3x3 matrices (an edge's, an estimate's), checked
+        # in C with the verdicts below, its arrays made as they are below; None: checked here.
+        done = named_decoded(v, _ENVELOPE, MAX_OPEN, MAX_NAME, MAX_ABS)
+        if done is not None:
+            return done
     if type(v) is not dict or len(v) > MAX_OPEN or not all(type(n) is str and 0 < len(n) <= MAX_NAME and n not in ENVELOPE for n in v):
         raise _fail(field, f"expected a map of at most {MAX_OPEN} names (of at most {MAX_NAME} characters, not {', '.join(ENVELOPE)}) to values")
     out: dict[str, float | np.ndarray] = {}
