@@ -40,14 +40,44 @@ from zswarm.scenario import Scenario  # noqa: E402
 from zswarm.studies import generate  # noqa: E402
 
 
-def cpu_window(pids: dict[str, int], start: float, window: float) -> dict[str, float]:
-    """% of a core each pid used from ``start`` (monotonic) for ``window`` s."""
+def thread_seconds(pid: int) -> dict[str, float]:
+    """CPU seconds of each thread kind of process ``pid``: its main thread ("main", the agent's
+    ticks) and the others by name (Zenoh's runtime threads, "python" for the threads
+    zenoh-python runs callbacks on, and so on), summed over the threads of a name."""
+    out: dict[str, float] = {}
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            with open(f"/proc/{pid}/task/{tid}/stat") as f:
+                head, tail = f.read().rsplit(")", 1)
+        except OSError:
+            continue
+        name = "main" if tid == str(pid) else head.split("(", 1)[1]
+        name = name.rstrip("0123456789-") or name  # rx-0, rx-1 -> rx
+        parts = tail.split()
+        out[name] = out.get(name, 0.0) + (int(parts[11]) + int(parts[12])) / os.sysconf("SC_CLK_TCK")
+    return out
+
+
+def cpu_window(pids: dict[str, int], start: float, window: float, threads: dict[str, float] | None = None) -> dict[str, float]:
+    """% of a core each pid used from ``start`` (monotonic) for ``window`` s; ``threads``: filled
+    with the agents' mean % of a core per thread kind (:func:`thread_seconds`)."""
     time.sleep(max(0.0, start - time.monotonic()))
+    agents = {k: p for k, p in pids.items() if k.startswith("agent-")}
+    t0 = {k: thread_seconds(p) for k, p in agents.items()}
     c0 = {k: cpu_seconds(p) for k, p in pids.items()}
     w0 = time.monotonic()
     time.sleep(window)
     c1 = {k: cpu_seconds(p) for k, p in pids.items()}
+    t1 = {k: thread_seconds(p) for k, p in agents.items()}
     w = time.monotonic() - w0
+    if threads is not None and agents:
+        for k in agents:
+            for name, sec in t1[k].items():
+                threads[name] = threads.get(name, 0.0) + 100 * (sec - t0[k].get(name, 0.0)) / w / len(agents)
     return {k: 100 * (c1[k] - c0[k]) / w for k in pids if c0.get(k) is not None and c1.get(k) is not None}  # type: ignore[operator]
 
 
@@ -118,7 +148,8 @@ def run_raw(sc: Scenario, sizes: dict[str, Any], duration: float) -> dict[str, A
                 start(f"agent-{i}", "agent", str(cfg_path), ep, f"{d}/agent-{i}.json", str(i))
             start("world", "world", str(cfg_path), ep, f"{d}/world.json")
             t_start = time.monotonic() + 3.0  # sessions up, start announced 1 s after the last token
-            cpu = cpu_window({k: p.pid for k, p in procs.items()} | {"router": os.getpid()}, t_start + duration / 4, duration / 2)
+            threads: dict[str, float] = {}
+            cpu = cpu_window({k: p.pid for k, p in procs.items()} | {"router": os.getpid()}, t_start + duration / 4, duration / 2, threads)
             for p in procs.values():
                 p.wait(duration + 120)
         finally:
@@ -130,7 +161,7 @@ def run_raw(sc: Scenario, sizes: dict[str, Any], duration: float) -> dict[str, A
     agents = [res[f"agent-{i}"] for i in sc.ids]
     ticks = sum(a["ticks"] + a["missed"] for a in agents)
     p99 = [v["p99_ms"] for a in agents for k, v in a["links"].items() if k.startswith("edge/")]
-    return row(sum(a["missed"] for a in agents), ticks, p99, cpu, sc, lost_in_recording=None, world_late=res["world"]["late"])
+    return row(sum(a["missed"] for a in agents), ticks, p99, cpu, sc, lost_in_recording=None, world_late=res["world"]["late"], agent_threads=threads)
 
 
 def run_zswarm(topology: Path, sc: Scenario, duration: float, out: Path) -> dict[str, Any]:
@@ -148,7 +179,8 @@ def run_zswarm(topology: Path, sc: Scenario, duration: float, out: Path) -> dict
             if launcher.poll() is not None:
                 raise RuntimeError(launcher.stdout.read().decode() if launcher.stdout else "zswarm run failed")
             time.sleep(0.1)
-        cpu = cpu_window(pids, time.monotonic() + 1.0 + duration / 4, duration / 2)
+        threads: dict[str, float] = {}
+        cpu = cpu_window(pids, time.monotonic() + 1.0 + duration / 4, duration / 2, threads)
         text = launcher.communicate(timeout=duration + 180)[0].decode()
     finally:
         if launcher.poll() is None:
@@ -169,6 +201,7 @@ def run_zswarm(topology: Path, sc: Scenario, duration: float, out: Path) -> dict
         lost_in_recording=(s.get("recording") or {}).get("missing_total"),
         world_late=s["world"].get("late"),
         alive_at_end=sum(1 for a in ag if a.get("alive_at_end")),
+        agent_threads=threads,
     )
 
 
@@ -203,6 +236,12 @@ def main() -> int:
             f"{z['world_cpu_pct']:.0f} / {w['world_cpu_pct']:.0f} % | {z['recorder_cpu_pct']:.0f} / {w['recorder_cpu_pct']:.0f} % | "
             f"{z['router_cpu_pct']:.0f} / {w['router_cpu_pct']:.0f} % | {z['lost_in_recording']} | {z['alive_at_end']}/{r['n']} |"
         )
+    print()
+    print("An agent's CPU by thread (% of a core, mean over agents): main = its ticks; python = zenoh-python's callback threads; the rest Zenoh's runtime")
+    for r in rows:
+        z, w = r["zswarm"]["agent_threads"], r["raw"]["agent_threads"]
+        names = sorted(set(z) | set(w), key=lambda k: -(z.get(k, 0.0) + w.get(k, 0.0)))
+        print(f"N={r['n']}: " + ", ".join(f"{k} {z.get(k, 0.0):.2f} / {w.get(k, 0.0):.2f}" for k in names if z.get(k, 0.0) + w.get(k, 0.0) >= 0.05) + "  (zswarm / raw)")
     for who in ("zswarm", "raw"):
         ok = [r["n"] for r in rows if r[who]["missed_pct"] < 1.0]
         print(f"largest N with < 1 % missed deadlines, {who}: {max(ok) if ok else 'none'} (of {args.n})")
