@@ -108,23 +108,61 @@ def test_id_maps_get_the_python_verdict():
         assert not kernels.idmap_ok(m, 3, mc.CHECK_UNIT, MAX_ABS, mc.UNIT_TOL, mc.MAX_ID, mc.MAX_IDS), m
 
 
-@pytest.mark.parametrize("kind", ["sense", "edge"])
+def _python_only(monkeypatch) -> None:
+    """Every check of a message in Python: the C checks of arrays, id maps, named values and of
+    the envelope with a kind's fixed fields (messages.Msg.__post_init__) off."""
+    monkeypatch.setattr(mc, "f8_ok", None)
+    monkeypatch.setattr(mc, "idmap_ok", None)  # decoded_ok and _id_map then check in Python
+    monkeypatch.setattr(mc, "named_decoded", None)
+    monkeypatch.setattr(kernels, "fields_ok", None)
+
+
+def _envelopes(kind: str) -> list[dict]:
+    """A kind's ordinary payload with each envelope field (and t_local) at, inside and past its
+    bound, of the right type and of others."""
+    base = {"type": kind, "v": wire.VERSION, "src": 0 if kind == "sense" else 2, "seq": 1, "t": 0.5}
+    if kind != "sense":
+        base["t_local"] = 0.5
+    if kind == "est":
+        base |= {"R_hat": [[3, 3], np.eye(3).tobytes()], "p_hat": [[3], np.zeros(3).tobytes()]}
+    elif kind == "sense":
+        base |= {"gyro": [[3], np.zeros(3).tobytes()]}
+    big = np.nextafter(MAX_ABS, np.inf)
+    out = []
+    for k, values in (("v", (wire.VERSION - 1, float(wire.VERSION), True)), ("src", (-1, mc.MAX_ID, mc.MAX_ID + 1, 2.0, True)),
+                      ("seq", (0, mc.MAX_SEQ - 1, mc.MAX_SEQ, -1, 1.0)), ("inc", (0, mc.MAX_SEQ - 1, mc.MAX_SEQ, 2.5)),
+                      ("t", (MAX_ABS, -MAX_ABS, big, -big, float("nan"), float("inf"), 3, True, "t")),
+                      ("t_local", (MAX_ABS, big, float("nan"), 2, False))):  # fmt: skip
+        if k == "t_local" and kind == "sense":
+            continue
+        out += [base | {k: x} for x in values]
+    if kind == "est":
+        out += [base | {"edges": {"xi": {1: 0.5}}}, base | {"jumps": [["xi", "edge", 1, 0.1, 0.0, 2.5]]}, base | {"values": {"sigma": 0.5}}, base | {"R_hat": None}]
+    return out
+
+
+@pytest.mark.parametrize("kind", ["sense", "edge", "est"])
 def test_a_message_decodes_the_same_with_and_without_the_c_checks(kind, monkeypatch):
     """Hostile and ordinary payloads: the same message, or the same refusal, either way."""
     rng = np.random.default_rng(11)
-    payloads = []
+    payloads = _envelopes(kind)
     for a in near_unit(rng, 60) + specials((3,)):
         arr = [[3], np.asarray(a, dtype="<f8").tobytes()]
         if kind == "sense":
             payloads.append({"type": "sense", "v": wire.VERSION, "src": 0, "seq": 1, "t": 0.5, "gyro": arr, "bearings": {2: arr, 3: [[3], decoded([0, 0, 1.0]).tobytes()]}})
-        else:
+            payloads.append({"type": "sense", "v": wire.VERSION, "src": 0, "seq": 1, "t": 0.5, "position": arr, "rel_pos": {2: arr}})
+        elif kind == "edge":
             payloads.append({"type": "edge", "v": wire.VERSION, "src": 2, "seq": 1, "t": 0.5, "t_local": 0.5, "values": {"b": arr, "R_hat": [[3, 3], np.eye(3).tobytes()], "k": 1.5}})
+        else:
+            payloads.append({"type": "est", "v": wire.VERSION, "src": 2, "seq": 1, "t": 0.5, "t_local": 0.5, "p_hat": arr, "values": {"b": arr}})
     for R in near_rotation(rng, 40) + specials((3, 3)):
         arr = [[3, 3], np.asarray(R, dtype="<f8").tobytes()]
         if kind == "sense":
             payloads.append({"type": "sense", "v": wire.VERSION, "src": 0, "seq": 1, "t": 0.5, "attitude": arr, "rel_att": {4: arr}})
-        else:
+        elif kind == "edge":
             payloads.append({"type": "edge", "v": wire.VERSION, "src": 2, "seq": 1, "t": 0.5, "t_local": 0.5, "values": {"R_hat": arr}})
+        else:
+            payloads.append({"type": "est", "v": wire.VERSION, "src": 2, "seq": 1, "t": 0.5, "t_local": 0.5, "R_hat": arr})
 
     def outcomes():
         out = []
@@ -137,8 +175,7 @@ def test_a_message_decodes_the_same_with_and_without_the_c_checks(kind, monkeypa
         return out
 
     with_c = outcomes()
-    monkeypatch.setattr(mc, "f8_ok", None)
-    monkeypatch.setattr(mc, "idmap_ok", None)  # decoded_ok and _id_map then check in Python
+    _python_only(monkeypatch)
     without = outcomes()
     assert with_c == without
     assert {o for o, _ in with_c} == {"ok", "refused"}
@@ -167,7 +204,6 @@ def test_a_sender_builds_the_same_message_with_and_without_the_c_checks(monkeypa
         return out
 
     with_c = outcomes()
-    monkeypatch.setattr(mc, "f8_ok", None)
-    monkeypatch.setattr(mc, "idmap_ok", None)
+    _python_only(monkeypatch)
     assert with_c == outcomes()
     assert {o for o, _ in with_c} == {"ok", "refused"}

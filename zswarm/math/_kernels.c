@@ -1423,6 +1423,124 @@ fail:
     return NULL;
 }
 
+/* ---- A decoded message's envelope and fixed fields at once (zswarm/transport/messages.py, Msg.__post_init__
+ * and the kinds' _check): fields_ok(m, spec, version, max_id, max_seq, max_abs, unit_tol, rot_tol, max_ids)
+ * -> bool.  True: m's envelope is as Msg.__post_init__ wants it (v == version an exact int, src an exact int in
+ * [0, max_id], seq and inc exact ints in [0, max_seq), t an exact float within +-max_abs) and each field of
+ * spec, a tuple of (name, code) pairs, passes: so the Python's checks would pass and leave every field as it
+ * is (bar an id map's copy).  False: anything else, for the Python to check, convert and name. */
+enum { F_VEC = 1, F_VEC_UNIT = 2, F_MAT_ROT = 3, F_MAP_VEC = 4, F_MAP_VEC_UNIT = 5, F_MAP_MAT_ROT = 6, F_FLOAT = 7, F_EMPTY = 8 };
+
+static int attr_ok(PyObject *x, long code, double max_abs, double unit_tol, double rot_tol, long long max_id, Py_ssize_t max_ids)
+{
+    switch (code) {
+    case F_VEC:
+        return x == Py_None ? 1 : f8_check(x, 3, CHECK_NONE, max_abs, 0.0);
+    case F_VEC_UNIT:
+        return x == Py_None ? 1 : f8_check(x, 3, CHECK_UNIT, max_abs, unit_tol);
+    case F_MAT_ROT:
+        return x == Py_None ? 1 : f8_check(x, 9, CHECK_ROTATION, max_abs, rot_tol);
+    case F_MAP_VEC:
+    case F_MAP_VEC_UNIT:
+    case F_MAP_MAT_ROT: {
+        if (x == Py_None)
+            return 1;
+        if (!PyDict_CheckExact(x) || PyDict_GET_SIZE(x) > max_ids)
+            return 0;
+        const int n = code == F_MAP_MAT_ROT ? 9 : 3;
+        const int check = code == F_MAP_VEC ? CHECK_NONE : code == F_MAP_VEC_UNIT ? CHECK_UNIT : CHECK_ROTATION;
+        const double tol = code == F_MAP_VEC ? 0.0 : code == F_MAP_VEC_UNIT ? unit_tol : rot_tol;
+        Py_ssize_t pos = 0;
+        PyObject *k, *v;
+        while (PyDict_Next(x, &pos, &k, &v)) {
+            if (!PyLong_CheckExact(k))
+                return 0;
+            int overflow = 0;
+            const long long j = PyLong_AsLongLongAndOverflow(k, &overflow);
+            if (overflow || j < 0 || j > max_id)
+                return 0;
+            const int r = f8_check(v, n, check, max_abs, tol);
+            if (r != 1)
+                return r;
+        }
+        return 1;
+    }
+    case F_FLOAT:
+        return PyFloat_CheckExact(x) && -max_abs <= PyFloat_AS_DOUBLE(x) && PyFloat_AS_DOUBLE(x) <= max_abs;
+    case F_EMPTY:
+        return (PyDict_CheckExact(x) && PyDict_GET_SIZE(x) == 0) || (PyList_CheckExact(x) && PyList_GET_SIZE(x) == 0);
+    default:
+        return 0;
+    }
+}
+
+/* 1: the attribute `name` of m is an exact int in [lo, hi]. */
+static int int_attr(PyObject *m, const char *name, long long lo, long long hi)
+{
+    PyObject *x = PyObject_GetAttrString(m, name);
+    if (x == NULL) {
+        PyErr_Clear();
+        return 0;
+    }
+    int ok = 0;
+    if (PyLong_CheckExact(x)) {
+        int overflow = 0;
+        const long long v = PyLong_AsLongLongAndOverflow(x, &overflow);
+        ok = !overflow && lo <= v && v <= hi;
+    }
+    Py_DECREF(x);
+    return ok;
+}
+
+static PyObject *py_fields_ok(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
+{
+    if (want_nargs(nargs, 9, "fields_ok") < 0)
+        return NULL;
+    PyObject *m = a[0], *spec = a[1];
+    const long long version = PyLong_AsLongLong(a[2]), max_id = PyLong_AsLongLong(a[3]), max_seq = PyLong_AsLongLong(a[4]);
+    const double max_abs = PyFloat_AsDouble(a[5]), unit_tol = PyFloat_AsDouble(a[6]), rot_tol = PyFloat_AsDouble(a[7]);
+    const Py_ssize_t max_ids = PyLong_AsSsize_t(a[8]);
+    if (PyErr_Occurred())
+        return NULL;
+    if (!PyTuple_CheckExact(spec)) {
+        PyErr_SetString(PyExc_TypeError, "fields_ok: spec must be a tuple of (name, code)");
+        return NULL;
+    }
+    if (!int_attr(m, "v", version, version) || !int_attr(m, "src", 0, max_id) || !int_attr(m, "seq", 0, max_seq - 1) || !int_attr(m, "inc", 0, max_seq - 1))
+        Py_RETURN_FALSE;
+    PyObject *t = PyObject_GetAttrString(m, "t");
+    if (t == NULL) {
+        PyErr_Clear();
+        Py_RETURN_FALSE;
+    }
+    const int t_ok = attr_ok(t, F_FLOAT, max_abs, unit_tol, rot_tol, max_id, max_ids);
+    Py_DECREF(t);
+    if (!t_ok)
+        Py_RETURN_FALSE;
+    for (Py_ssize_t q = 0; q < PyTuple_GET_SIZE(spec); q++) {
+        PyObject *item = PyTuple_GET_ITEM(spec, q);
+        if (!PyTuple_CheckExact(item) || PyTuple_GET_SIZE(item) != 2) {
+            PyErr_SetString(PyExc_TypeError, "fields_ok: spec must be a tuple of (name, code)");
+            return NULL;
+        }
+        const long code = PyLong_AsLong(PyTuple_GET_ITEM(item, 1));
+        if (code == -1 && PyErr_Occurred())
+            return NULL;
+        PyObject *x = PyObject_GetAttr(m, PyTuple_GET_ITEM(item, 0));
+        if (x == NULL) {
+            PyErr_Clear();
+            Py_RETURN_FALSE;
+        }
+        const int r = attr_ok(x, code, max_abs, unit_tol, rot_tol, max_id, max_ids);
+        Py_DECREF(x);
+        if (r < 0)
+            return NULL;
+        if (!r)
+            Py_RETURN_FALSE;
+    }
+    Py_RETURN_TRUE;
+}
+
 static PyMethodDef methods[] = {
     {"exp_batch", (PyCFunction)(void (*)(void))py_exp_batch, METH_FASTCALL, "exp_batch(W, E): Rodrigues' formula of n rotation vectors W (n,3) into E (n,3,3)."},
     {"rigid_step", (PyCFunction)(void (*)(void))py_rigid_step, METH_FASTCALL, "rigid_step(R, w, J_inv, tau, h, R_out, w_out): one implicit-midpoint step of n rigid bodies."},
@@ -1447,6 +1565,7 @@ static PyMethodDef methods[] = {
     {"dec_hook", (PyCFunction)(void (*)(void))py_dec_hook, METH_FASTCALL, "dec_hook(type, obj): the wire's msgspec dec_hook (zswarm/transport/messages.py) for a 3-vector or 3x3 matrix, else the Python one."},
     {"enc_hook", (PyCFunction)(void (*)(void))py_enc_hook, METH_FASTCALL, "enc_hook(obj): the wire's msgspec enc_hook for a contiguous float64 array, else the Python one."},
     {"named_decoded", (PyCFunction)(void (*)(void))py_named_decoded, METH_FASTCALL, "named_decoded(v, envelope, max_open, max_name, max_abs) -> dict | None: the wire's check of decoded named values (floats, 3-vectors, 3x3 matrices), None for the Python to check."},
+    {"fields_ok", (PyCFunction)(void (*)(void))py_fields_ok, METH_FASTCALL, "fields_ok(m, spec, version, max_id, max_seq, max_abs, unit_tol, rot_tol, max_ids) -> bool: a decoded message's envelope and the fields of spec pass the wire's checks as they are."},
     {"set_ndarray", (PyCFunction)(void (*)(void))py_set_ndarray, METH_FASTCALL, "set_ndarray(numpy.ndarray): the array type f8_ok and idmap_ok accept."},
     {NULL, NULL, 0, NULL},
 };

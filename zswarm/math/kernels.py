@@ -79,6 +79,10 @@ bearing_correction1: Callable[[Any, Any, np.ndarray], bool] | None = None
 position_rate1: Callable[[Any, Any, Any, Any, Any, np.ndarray], bool] | None = None
 # Every value of a contiguous float64 array finite: True or False (None: not such an array).
 finite_f8: Callable[[Any], bool | None] | None = None
+# A decoded message's envelope and the fields its kind lists pass the wire's checks as they are
+# (messages.Msg.__post_init__); the codes of the fields' kinds (_kernels.c, fields_ok).
+fields_ok: Callable[..., bool] | None = None
+F_VEC, F_VEC_UNIT, F_MAT_ROT, F_MAP_VEC, F_MAP_VEC_UNIT, F_MAP_MAT_ROT, F_FLOAT, F_EMPTY = range(1, 9)
 # message_checks._named of a decoded map of floats, 3-vectors and 3x3 matrices (None: not such a map).
 named_decoded: Callable[[Any, frozenset[str], int, int, float], dict[str, Any] | None] | None = None
 
@@ -159,4 +163,4 @@ if _lib is not None:
     lib.set_ndarray(np.ndarray)
     f8_ok, idmap_ok, rate_integral = lib.f8_ok, lib.idmap_ok, lib.rate_integral
     exp1, mul1, apply1, bearing_correction1, position_rate1 = lib.exp1, lib.mul1, lib.apply1, lib.bearing_correction1, lib.position_rate1
-    finite_f8, named_decoded = lib.finite_f8, lib.named_decoded
+    finite_f8, named_decoded, fields_ok = lib.finite_f8, lib.named_decoded, lib.fields_ok

@@ -42,7 +42,9 @@ from typing import Annotated, Any, ClassVar
 import msgspec
 import numpy as np
 
-from zswarm.math.kernels import wire_hooks
+from zswarm.math import kernels
+from zswarm.math.kernels import F_EMPTY, F_FLOAT, F_MAP_MAT_ROT, F_MAP_VEC, F_MAP_VEC_UNIT, F_MAT_ROT, F_VEC, wire_hooks
+from zswarm.math.limits import MAX_ABS, ROT_TOL
 from zswarm.transport.message_checks import (  # re-exported: the bounds and errors users read here
     _F8,
     CHECK_ROTATION,
@@ -55,6 +57,7 @@ from zswarm.transport.message_checks import (  # re-exported: the bounds and err
     MAX_OPEN,
     MAX_SEQ,
     MAX_STR,
+    UNIT_TOL,
     VERSION,
     MessageError,
     _array,
@@ -93,8 +96,18 @@ class Msg(msgspec.Struct, kw_only=True, tag_field="type", omit_defaults=True, di
     t: float
 
     OPEN: ClassVar[bool] = False  # an open kind: its ``values`` read as its fields
+    # The kind's fields that the C check takes with the envelope (kernels.fields_ok: (name, code)
+    # pairs); None: the envelope and every field checked here.  When they pass, the kind's
+    # :meth:`_rest` checks what is left; otherwise :meth:`_check` checks all and names the problem.
+    _FAST: ClassVar[tuple[tuple[str, int], ...] | None] = None
 
     def __post_init__(self) -> None:
+        # A decoded message (and a sender's of read-only arrays) in one C call where it passes:
+        # a sense packet's checks 2.8 -> 0.6 µs hot (2026-12-06).
+        fast = self._FAST
+        if fast is not None and kernels.fields_ok is not None and kernels.fields_ok(self, fast, VERSION, MAX_ID, MAX_SEQ, MAX_ABS, UNIT_TOL, ROT_TOL, MAX_IDS):
+            self._rest()
+            return
         if self.v != VERSION:
             raise MessageError(f"schema version {self.v!r}, expected {VERSION}")
         if not _id(self.src):
@@ -108,6 +121,9 @@ class Msg(msgspec.Struct, kw_only=True, tag_field="type", omit_defaults=True, di
 
     def _check(self) -> None:
         """The kind's own fields (raises MessageError)."""
+
+    def _rest(self) -> None:
+        """What :meth:`_check` does beyond the fields of ``_FAST``, when those passed in C."""
 
     @property
     def type(self) -> str:
@@ -177,6 +193,17 @@ class Sense(Msg, tag="sense"):
     position: np.ndarray | None = None
     rel_pos: IdMap | None = None
 
+    _FAST = (("gyro", F_VEC), ("velocity", F_VEC), ("velocity_body", F_VEC), ("position", F_VEC), ("attitude", F_MAT_ROT), ("bearings", F_MAP_VEC_UNIT), ("rel_att", F_MAP_MAT_ROT), ("rel_pos", F_MAP_VEC))
+
+    def _rest(self) -> None:
+        # As _check leaves them: the maps copied (_id_map), the arrays as they are.
+        if self.bearings is not None:
+            self.bearings = dict(self.bearings)
+        if self.rel_att is not None:
+            self.rel_att = dict(self.rel_att)
+        if self.rel_pos is not None:
+            self.rel_pos = dict(self.rel_pos)
+
     def _check(self) -> None:
         arrays = []
         for k in ("gyro", "velocity", "velocity_body", "position"):
@@ -214,9 +241,13 @@ class Edge(Msg, tag="edge"):
     values: Named = {}
 
     OPEN: ClassVar[bool] = True
+    _FAST = (("t_local", F_FLOAT),)
 
     def _check(self) -> None:
         self.t_local = _number(self.t_local, "t_local")
+        self._rest()
+
+    def _rest(self) -> None:
         self.values = _named(self.values, "values")
         if "t_local" in self.values or "values" in self.values:  # they would shadow its own fields (JSON writes its values beside them)
             raise _fail("values", "a value named t_local or values")
@@ -245,6 +276,12 @@ class Est(Msg, tag="est"):
     values: Named = {}
     edges: Annotated[dict[str, Annotated[dict[int, float], msgspec.Meta(max_length=MAX_IDS)]], msgspec.Meta(max_length=MAX_OPEN)] = {}
     jumps: Annotated[list[Jump], msgspec.Meta(max_length=MAX_IDS)] = []
+
+    _FAST = (("t_local", F_FLOAT), ("R_hat", F_MAT_ROT), ("p_hat", F_VEC), ("edges", F_EMPTY), ("jumps", F_EMPTY))
+
+    def _rest(self) -> None:
+        if self.values:
+            self.values = _named(self.values, "values")
 
     def _check(self) -> None:
         self.t_local = _number(self.t_local, "t_local")
