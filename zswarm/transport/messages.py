@@ -102,8 +102,9 @@ class Msg(msgspec.Struct, kw_only=True, tag_field="type", omit_defaults=True, di
     _FAST: ClassVar[tuple[tuple[str, int], ...] | None] = None
 
     def __post_init__(self) -> None:
-        # A decoded message (and a sender's of read-only arrays) in one C call where it passes:
-        # a sense packet's checks 2.8 -> 0.6 µs hot (2026-12-06).
+        # A decoded message (and a sender's of read-only arrays) in one C call where it passes: a
+        # §3.2 sim with bytes between its processes 696 -> 673 M instructions a simulated second
+        # (callgrind, 2026-12-06).
         fast = self._FAST
         if fast is not None and kernels.fields_ok is not None and kernels.fields_ok(self, fast, VERSION, MAX_ID, MAX_SEQ, MAX_ABS, UNIT_TOL, ROT_TOL, MAX_IDS):
             self._rest()
@@ -431,7 +432,8 @@ def dec_hook(tp: type, obj: Any) -> Any:
 _VEC, _MAT = [3], [3, 3]
 
 # What the wire's encoder and decoder call (zswarm.transport.wire): the two hooks above, their usual
-# cases compiled (the same arrays and bytes; a received message's decoding 10 % cheaper, 2026-12-06).
+# cases compiled (the same arrays and bytes; a sense packet of four arrays decoded in 5.5 -> 4.6 µs,
+# encoded in 1.9 -> 1.0 µs hot, 2026-12-06).
 ENC_HOOK, DEC_HOOK = wire_hooks(enc_hook, dec_hook)
 
 
