@@ -737,21 +737,33 @@ static PyObject *ndarray_type = NULL;
 
 enum { CHECK_NONE = 0, CHECK_UNIT = 1, CHECK_ROTATION = 2 };
 
+/* 1: o is an exact numpy array (the type given to set_ndarray) of native float64 values, its buffer
+ * (PyBUF_RECORDS_RO: shape and strides) in b, which the caller releases; 0: not, nothing held. */
+static int f8_buffer(PyObject *o, Py_buffer *b)
+{
+    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
+        return 0;
+    if (PyObject_GetBuffer(o, b, PyBUF_RECORDS_RO) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *f = b->format ? b->format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    if (b->itemsize == 8 && f[0] == 'd' && f[1] == '\0')
+        return 1;
+    PyBuffer_Release(b);
+    return 0;
+}
+
 /* 1: o is a decoded float64 array of n (3 or 9) values, shape (3,) or (3, 3), all within +-max_abs
  * and passing `check`; 0: not (or not such an array); -1: an error. */
 static int f8_check(PyObject *o, int n, int check, double max_abs, double tol)
 {
-    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
-        return 0;
     Py_buffer b;
-    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
-        PyErr_Clear();
+    if (!f8_buffer(o, &b))
         return 0;
-    }
-    const char *f = b.format ? b.format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    int ok = b.readonly && b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && b.len == 8 * n && PyBuffer_IsContiguous(&b, 'C') &&
+    int ok = b.readonly && b.len == 8 * n && PyBuffer_IsContiguous(&b, 'C') &&
              (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
     if (ok) {
         const double *x = (const double *)b.buf;
@@ -851,17 +863,10 @@ static PyObject *py_set_ndarray(PyObject *Py_UNUSED(self), PyObject *const *a, P
 /* 1: o is a float64 array of shape (3,) (n = 3) or (3, 3) (n = 9), any strides, copied into x (row-major); 0: not. */
 static int read_f8(PyObject *o, int n, double *x)
 {
-    if (ndarray_type == NULL || (PyObject *)Py_TYPE(o) != ndarray_type)
-        return 0;
     Py_buffer b;
-    if (PyObject_GetBuffer(o, &b, PyBUF_RECORDS_RO) < 0) {
-        PyErr_Clear();
+    if (!f8_buffer(o, &b))
         return 0;
-    }
-    const char *f = b.format ? b.format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    int ok = b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
+    int ok = (n == 3 ? b.ndim == 1 && b.shape[0] == 3 : b.ndim == 2 && b.shape[0] == 3 && b.shape[1] == 3);
     if (ok) {
         const char *base = (const char *)b.buf;
         if (n == 3)
@@ -1264,6 +1269,36 @@ static int is_int(PyObject *o, long v)
     return !overflow && x == v;
 }
 
+/* 3 or 9: obj is [shape, bytes] of a 3-vector ([3], 24 bytes) or a 3x3 matrix ([3, 3], 72 bytes),
+ * the shape's entries exact ints, its bytes in *data; 0: not. */
+static int wire_small(PyObject *obj, PyObject **data)
+{
+    if (!PyList_CheckExact(obj) || PyList_GET_SIZE(obj) != 2 || !PyList_CheckExact(PyList_GET_ITEM(obj, 0)) || !PyBytes_CheckExact(PyList_GET_ITEM(obj, 1)))
+        return 0;
+    PyObject *shape = PyList_GET_ITEM(obj, 0);
+    *data = PyList_GET_ITEM(obj, 1);
+    const Py_ssize_t nd = PyList_GET_SIZE(shape), len = PyBytes_GET_SIZE(*data);
+    if (nd == 1 && len == 24 && is_int(PyList_GET_ITEM(shape, 0), 3))
+        return 3;
+    if (nd == 2 && len == 72 && is_int(PyList_GET_ITEM(shape, 0), 3) && is_int(PyList_GET_ITEM(shape, 1), 3))
+        return 9;
+    return 0;
+}
+
+/* The read-only float64 array over data of wire_small's n values, as dec_hook in Python makes it:
+ * numpy.frombuffer(data, float64), reshaped to (3, 3) for 9 (a new reference; NULL: an error). */
+static PyObject *wire_array(PyObject *data, int n)
+{
+    PyObject *args[2] = {data, hook_f8};
+    PyObject *arr = PyObject_Vectorcall(hook_frombuffer, args, 1, hook_kwnames);
+    if (arr == NULL || n == 3)
+        return arr;
+    PyObject *margs[2] = {arr, hook_mat_shape};
+    PyObject *out = PyObject_VectorcallMethod(hook_reshape, margs, 2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+    Py_DECREF(arr);
+    return out;
+}
+
 /* dec_hook(type, obj): [[3], 24 bytes] -> frombuffer(bytes, float64); [[3, 3], 72 bytes] -> its
  * reshape(3, 3); anything else: the Python dec_hook's answer. */
 static PyObject *py_dec_hook(PyObject *Py_UNUSED(self), PyObject *const *a, Py_ssize_t nargs)
@@ -1274,25 +1309,9 @@ static PyObject *py_dec_hook(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
         PyErr_SetString(PyExc_RuntimeError, "dec_hook: set_wire_hooks was not called");
         return NULL;
     }
-    PyObject *obj = a[1];
-    if (ndarray_type != NULL && a[0] == ndarray_type && PyList_CheckExact(obj) && PyList_GET_SIZE(obj) == 2 && PyList_CheckExact(PyList_GET_ITEM(obj, 0)) &&
-        PyBytes_CheckExact(PyList_GET_ITEM(obj, 1))) {
-        PyObject *shape = PyList_GET_ITEM(obj, 0), *data = PyList_GET_ITEM(obj, 1);
-        const Py_ssize_t nd = PyList_GET_SIZE(shape), len = PyBytes_GET_SIZE(data);
-        const int vec = nd == 1 && len == 24 && is_int(PyList_GET_ITEM(shape, 0), 3);
-        const int mat = !vec && nd == 2 && len == 72 && is_int(PyList_GET_ITEM(shape, 0), 3) && is_int(PyList_GET_ITEM(shape, 1), 3);
-        if (vec || mat) {
-            PyObject *args[2] = {data, hook_f8};
-            PyObject *arr = PyObject_Vectorcall(hook_frombuffer, args, 1, hook_kwnames);
-            if (arr == NULL || vec)
-                return arr;
-            PyObject *margs[2] = {arr, hook_mat_shape};
-            PyObject *out = PyObject_VectorcallMethod(hook_reshape, margs, 2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
-            Py_DECREF(arr);
-            return out;
-        }
-    }
-    return PyObject_Vectorcall(hook_dec_py, a, 2, NULL);
+    PyObject *data = NULL;
+    const int n = ndarray_type != NULL && a[0] == ndarray_type ? wire_small(a[1], &data) : 0;
+    return n ? wire_array(data, n) : PyObject_Vectorcall(hook_dec_py, a, 2, NULL);
 }
 
 /* enc_hook(obj): a C-contiguous native float64 numpy array -> [list(shape), its bytes]; anything
@@ -1305,45 +1324,32 @@ static PyObject *py_enc_hook(PyObject *Py_UNUSED(self), PyObject *const *a, Py_s
         PyErr_SetString(PyExc_RuntimeError, "enc_hook: set_wire_hooks was not called");
         return NULL;
     }
-    PyObject *obj = a[0];
-    if (ndarray_type != NULL && (PyObject *)Py_TYPE(obj) == ndarray_type) {
-        Py_buffer b;
-        if (PyObject_GetBuffer(obj, &b, PyBUF_RECORDS_RO) < 0)
-            PyErr_Clear();
-        else {
-            const char *f = b.format ? b.format : "B";
-            if (*f == '<' || *f == '=' || *f == '@')
-                f++;
-            PyObject *out = NULL;
-            if (b.itemsize == 8 && f[0] == 'd' && f[1] == '\0' && PyBuffer_IsContiguous(&b, 'C')) {
-                PyObject *shape = PyList_New(b.ndim);
-                PyObject *data = shape ? PyBytes_FromStringAndSize((const char *)b.buf, b.len) : NULL;
-                for (int k = 0; data != NULL && k < b.ndim; k++) {
-                    PyObject *d = PyLong_FromSsize_t(b.shape[k]);
-                    if (d == NULL) {
-                        Py_CLEAR(data);
-                        break;
-                    }
-                    PyList_SET_ITEM(shape, k, d);
-                }
-                if (data != NULL)
-                    out = PyList_New(2);
-                if (out != NULL) {
-                    PyList_SET_ITEM(out, 0, shape);
-                    PyList_SET_ITEM(out, 1, data);
-                } else {
-                    Py_XDECREF(shape);
-                    Py_XDECREF(data);
-                    PyBuffer_Release(&b);
-                    return NULL;
-                }
-                PyBuffer_Release(&b);
-                return out;
-            }
-            PyBuffer_Release(&b);
-        }
+    Py_buffer b;
+    if (!f8_buffer(a[0], &b))
+        return PyObject_Vectorcall(hook_enc_py, a, 1, NULL);
+    if (!PyBuffer_IsContiguous(&b, 'C')) {
+        PyBuffer_Release(&b);
+        return PyObject_Vectorcall(hook_enc_py, a, 1, NULL);
     }
-    return PyObject_Vectorcall(hook_enc_py, a, 1, NULL);
+    PyObject *shape = PyList_New(b.ndim);
+    PyObject *data = shape ? PyBytes_FromStringAndSize((const char *)b.buf, b.len) : NULL;
+    for (int k = 0; data != NULL && k < b.ndim; k++) {
+        PyObject *d = PyLong_FromSsize_t(b.shape[k]);
+        if (d == NULL)
+            Py_CLEAR(data);
+        else
+            PyList_SET_ITEM(shape, k, d);
+    }
+    PyBuffer_Release(&b);
+    PyObject *out = data != NULL ? PyList_New(2) : NULL;
+    if (out == NULL) {
+        Py_XDECREF(shape);
+        Py_XDECREF(data);
+        return NULL;
+    }
+    PyList_SET_ITEM(out, 0, shape);
+    PyList_SET_ITEM(out, 1, data);
+    return out;
 }
 
 /* named_decoded(v, envelope, max_open, max_name, max_abs) -> dict | None: message_checks._named of a
@@ -1384,29 +1390,18 @@ static PyObject *py_named_decoded(PyObject *Py_UNUSED(self), PyObject *const *a,
                 goto fail;
             continue;
         }
-        if (!PyList_CheckExact(x) || PyList_GET_SIZE(x) != 2 || !PyList_CheckExact(PyList_GET_ITEM(x, 0)) || !PyBytes_CheckExact(PyList_GET_ITEM(x, 1)))
-            goto python;
-        PyObject *shape = PyList_GET_ITEM(x, 0), *data = PyList_GET_ITEM(x, 1);
-        const Py_ssize_t nd = PyList_GET_SIZE(shape), len = PyBytes_GET_SIZE(data);
-        const int vec = nd == 1 && len == 24 && is_int(PyList_GET_ITEM(shape, 0), 3);
-        const int mat = !vec && nd == 2 && len == 72 && is_int(PyList_GET_ITEM(shape, 0), 3) && is_int(PyList_GET_ITEM(shape, 1), 3);
-        if (!vec && !mat)
+        PyObject *data = NULL;
+        const int n = wire_small(x, &data);
+        if (!n)
             goto python;
         const double *d = (const double *)PyBytes_AS_STRING(data);
-        for (int q = 0; q < (vec ? 3 : 9); q++) {
+        for (int q = 0; q < n; q++) {
             double y;
             memcpy(&y, d + q, 8);
             if (!(fabs(y) <= max_abs))
                 goto python;
         }
-        PyObject *args[2] = {data, hook_f8};
-        PyObject *arr = PyObject_Vectorcall(hook_frombuffer, args, 1, hook_kwnames);
-        if (arr != NULL && mat) {
-            PyObject *margs[2] = {arr, hook_mat_shape};
-            PyObject *m = PyObject_VectorcallMethod(hook_reshape, margs, 2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
-            Py_DECREF(arr);
-            arr = m;
-        }
+        PyObject *arr = wire_array(data, n);
         if (arr == NULL)
             goto fail;
         const int r = PyDict_SetItem(out, k, arr);
