@@ -54,6 +54,7 @@ from zswarm.report.series import leave_time, settle_time
 from zswarm.scenario import Override, Scenario, load, loads, parse_override, with_rotations
 from zswarm.studies.sweep import _fmt  # the same CSV cells as sweep.csv
 from zswarm.transport import procutil
+from zswarm.util import files, rows
 from zswarm.util.progress import Progress
 
 # Draws stepped together at most (a chunk: one task of the pool; resume reruns a whole chunk).
@@ -233,10 +234,7 @@ def verdict_in(path: Path, default: str = "settled") -> str:
 
 def read_rows(path: Path) -> list[dict[str, str]]:
     """The rows of basin.csv, the newest per draw (a failed draw is run again on resume)."""
-    if not path.exists():
-        return []
-    with open(path, newline="") as f:
-        last = {r["draw"]: r for r in csv.DictReader(f) if r.get("status")}
+    last = {r["draw"]: r for r in rows.read(path).rows if r.get("status") and r.get("draw", "").isdigit()}
     return sorted(last.values(), key=lambda r: int(r["draw"]))
 
 
@@ -267,21 +265,18 @@ def run_basin(
     ``advance``: told the number of draws done (this run's and a resumed one's) as each finishes.
     basin.csv's third column is the family's verdict (Basin.verdict: its word for a draw that settles)."""
     path = out / "basin.csv"
+    verdict = basin_of(_load((text, topology) if text is not None else topology)).verdict
+    # Resumed with the file's own columns (a folder written by an older zswarm); its torn rows
+    # (a kill or power cut mid-write) are dropped first, so their draws run again.
+    f, w, table = rows.open_append(path, columns(verdict))
+    if table.torn:
+        progress(rows.torn_text(path, table.torn))
+    cols = tuple(w.fieldnames)
+    verdict = cols[2]
     done = {int(r["draw"]) for r in read_rows(path) if r["status"] == "ok"}
     todo = [d for d in range(draws) if d not in done]
-    new = not path.exists()
-    verdict = basin_of(_load((text, topology) if text is not None else topology)).verdict
-    cols = columns(verdict)
-    if not new:  # resume with the file's own columns (a folder written by an older zswarm)
-        with open(path, newline="") as f:
-            cols = tuple(next(csv.reader(f), cols))
-        verdict = cols[2]
     interrupted = False
-    with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-        if new:
-            w.writeheader()
-            f.flush()
+    with f:
         with zswarm_cluster.executor(jobs, cluster) as runner:
             pool, jobs = runner.pool, runner.slots
             source: Source = topology if cluster is None and text is None else (text or Path(topology).read_text(encoding="utf-8"), topology)
@@ -316,8 +311,7 @@ def run_basin(
                     except Exception as exc:  # a failed draw (chunk) is recorded, not fatal
                         rows_ = [{"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]} for d in ds]
                     for row in rows_:
-                        w.writerow({k: _fmt(row.get(k)) for k in cols})
-                    f.flush()
+                        rows.append(f, w, {k: row.get(k) for k in cols})
                     finished_n += len(rows_)
                     if advance is not None:
                         advance(len(done) + finished_n)
@@ -461,7 +455,7 @@ def table(name: str, s: dict[str, Any]) -> str:
 
 def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None, verdict: str = "settled", measure: str = "the basin measure") -> dict[str, Any]:
     s = {"scenario": name, **summarize(rows, threshold, duration, near, verdict, measure)}
-    (out / "basin.json").write_text(json.dumps(s, indent=2) + "\n")
+    files.write_text(out / "basin.json", json.dumps(s, indent=2) + "\n")
     plot(out, name, rows, s)
     return s
 
@@ -488,12 +482,17 @@ def command(args: argparse.Namespace) -> int:
     spec = {"topology": str(args.topology), "scenario": sc.name, "seed": args.seed, "duration_s": duration, "threshold": args.threshold, "near": args.near, "set": list(args.overrides), "measure": b.measure}
     spec_path = out / "basin_def.json"
     if spec_path.exists():
-        old = json.loads(spec_path.read_text())
+        try:
+            old = json.loads(spec_path.read_text(encoding="utf-8"))
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
+        except (ValueError, UnicodeDecodeError) as exc:
+            procutil.fail_usage(f"{spec_path}: not a basin check's definition ({exc}); use another --out")
         diff = sorted(k for k in spec if k not in ("topology", "measure") and old.get(k, [] if k == "set" else None) != spec[k])
         if diff:
             procutil.fail_usage(f"--out {out}: holds a different basin check (differs in: {', '.join(diff)}); use another --out")
     else:
-        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+        files.write_text(spec_path, json.dumps(spec, indent=2) + "\n")  # whole or not at all
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
     jobs = args.jobs or (os.cpu_count() or 1)

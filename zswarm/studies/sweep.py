@@ -40,7 +40,7 @@ from zswarm import report, results
 from zswarm.families import contract as family
 from zswarm.scenario import Override, Scenario, ScenarioError, load, loads, parse_field, parse_override
 from zswarm.transport import procutil
-from zswarm.util import files, progress
+from zswarm.util import files, progress, rows
 from zswarm.util.quoting import shown
 
 COLUMNS_RESULT = (
@@ -166,15 +166,8 @@ def _column(v: Vary) -> str:
 
 
 def read_done(path: Path) -> dict[str, dict[str, str]]:
-    """Rows of an existing sweep.csv by run id (a torn last line is ignored)."""
-    if not path.exists():
-        return {}
-    done = {}
-    with open(path, newline="") as f:
-        for row in csv.DictReader(f):
-            if row.get("run_id") and row.get("status") in ("ok", "failed"):
-                done[row["run_id"]] = row
-    return done
+    """The whole rows of an existing sweep.csv by run id (a torn row is left out: zswarm.util.rows)."""
+    return {r["run_id"]: r for r in rows.read(path).rows if r.get("run_id") and r.get("status") in ("ok", "failed")}
 
 
 def _median(xs: list[float]) -> float | None:
@@ -325,9 +318,7 @@ def run_sweep(
                     failed += 1
                     prog.failed += 1
                 row["wall_s"] = round(wall, 2)
-                w.writerow({k: _fmt(v) for k, v in row.items()})
-                f.flush()
-                os.fsync(f.fileno())
+                rows.append(f, w, row)
                 if not keep_recordings:
                     (folder / "recording.mcap").unlink(missing_ok=True)
                 prog.done += 1
@@ -342,21 +333,15 @@ def run_sweep(
 
 def _open(out: Path, jobs: list[Job], varies: Sequence[Vary], result: Sequence[str]) -> tuple[Any, csv.DictWriter[str], list[Job], Progress]:
     """sweep.csv opened to append (its header written when new: the run's, the varied fields
-    and ``result``; its own kept when resumed), the jobs not in it yet, and the progress line."""
+    and ``result``; its own kept when resumed, its torn rows dropped so their runs run again),
+    the jobs not in it yet, and the progress line."""
     csv_path = out / "sweep.csv"
-    done = read_done(csv_path)
-    todo = [j for j in jobs if j.run_id not in done]
     header = ["run_id", "point", "repeat", "seed", *(_column(v) for v in varies), *result]
-    new_file = not csv_path.exists() or csv_path.stat().st_size == 0
-    if not new_file:
-        _repair_tail(csv_path)
-        with open(csv_path, newline="") as fh:
-            header = next(csv.reader(fh), header)  # a folder begun by an older zswarm keeps its columns
-    f = open(csv_path, "a", newline="")  # noqa: SIM115 - the caller closes it
-    w = csv.DictWriter(f, fieldnames=header, extrasaction="ignore")
-    if new_file:
-        w.writeheader()
-        f.flush()
+    f, w, table = rows.open_append(csv_path, header)
+    if table.torn:
+        print(rows.torn_text(csv_path, table.torn), file=sys.stderr)
+    done = {r["run_id"]: r for r in table.rows if r.get("run_id") and r.get("status") in ("ok", "failed")}
+    todo = [j for j in jobs if j.run_id not in done]
     prog = Progress(len(jobs), len(jobs) - len(todo))
     prog.failed = sum(1 for r in done.values() if r["status"] == "failed")
     prog.update()
@@ -441,9 +426,7 @@ def run_sweep_cluster(
                         failed += 1
                         prog.failed += 1
                     row["wall_s"] = round(time.monotonic() - t0, 2)
-                    w.writerow({k: _fmt(v) for k, v in row.items()})
-                    f.flush()
-                    os.fsync(f.fileno())
+                    rows.append(f, w, row)
                     prog.done += 1
                     prog.update(job, row["status"])
     finally:
@@ -463,13 +446,6 @@ def _not_completed(folder: Path) -> list[str] | None:
     return [str(p) for p in s.get("problems", [])] or None
 
 
-def _repair_tail(path: Path) -> None:
-    """Drop a torn last line (a kill during a write) so appended rows stay well-formed."""
-    data = path.read_bytes()
-    if data and not data.endswith(b"\n"):
-        path.write_bytes(data[: data.rfind(b"\n") + 1])
-
-
 def _kill(proc: subprocess.Popen[bytes]) -> None:
     """Stop a run's process group (its own session) and reap it, by PID."""
     for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGKILL, 5.0)):
@@ -487,9 +463,4 @@ def _kill(proc: subprocess.Popen[bytes]) -> None:
         proc.wait()
 
 
-def _fmt(v: Any) -> Any:
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return v
+_fmt = rows.cell  # the cells of sweep.csv and basin.csv

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from zswarm.families import contract as family
 from zswarm.transport import procutil
+from zswarm.util import files
 
 
 def command(args: argparse.Namespace) -> int:
@@ -84,14 +85,19 @@ def command(args: argparse.Namespace) -> int:
         on_sim = [j for j, _ in rest]
     spec_path = out / "sweep.json"
     if spec_path.exists():
-        old = json.loads(spec_path.read_text())
+        try:
+            old = json.loads(spec_path.read_text(encoding="utf-8"))
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
+        except (ValueError, UnicodeDecodeError) as exc:
+            procutil.fail_usage(f"{spec_path}: not a sweep's definition ({exc}); use another --out to start a new sweep")
         # The engines whose rows agree (batched and sim: tests/component/test_sweep.py) may resume each other's sweeps.
         same_rows = {old.get("engine"), spec.get("engine")} <= {"auto", "batched", "sim"}
         diff = sorted(k for k in set(old) | set(spec) if k != "topology" and not (k == "engine" and same_rows) and old.get(k) != spec.get(k))
         if diff:
             procutil.fail_usage(f"--out {out}: holds a different sweep (differs in: {', '.join(diff)}); use another --out to start a new one")
     else:
-        spec_path.write_text(json.dumps(spec, indent=2) + "\n")
+        files.write_text(spec_path, json.dumps(spec, indent=2) + "\n")  # whole or not at all
     sim_engine = "run" if args.engine == "run" else "sim"
     timeout = args.timeout or (max(120.0, 10.0 * duration) if sim_engine == "sim" else duration + 180.0)
     stop = threading.Event()

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -27,8 +26,10 @@ def _key(x: str) -> Any:
 
 
 def load_rows(path: Path) -> list[dict[str, str]]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+    """sweep.csv's whole rows, one per run (a torn row is left out: zswarm.util.rows)."""
+    from zswarm.util import rows
+
+    return list({r.get("run_id", str(n)): r for n, r in enumerate(rows.read(path).rows)}.values())
 
 
 def plot_sweep(
