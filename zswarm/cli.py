@@ -60,7 +60,8 @@ def _live_arg(p: argparse.ArgumentParser, what: str) -> None:
 
 
 # Every subcommand's --help ends with examples and its exit codes (issue 48).  1 is what each
-# command means by a failure; 2 and 130 mean the same everywhere (EXIT_USAGE, main's Ctrl-C).
+# command means by a failure; 2, 130 and 143 mean the same everywhere (EXIT_USAGE; SIGINT and
+# SIGTERM, 128 + the signal's number: procutil.interrupted_code).
 T32 = "topologies/thesis-3.2-fixed8.toml"
 T56 = "topologies/thesis-5.6-hybrid7.toml"
 EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
@@ -74,8 +75,8 @@ EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
     "compose": ((f"zswarm compose {T32} -o compose.yml",), "a file could not be written"),
     "record": ((f"zswarm record {T32} --connect tcp/127.0.0.1:7447 --run-id demo",), "a results file could not be written"),
     "replay": (("zswarm replay runs/thesis-3.2-fixed8 --live",), "a file could not be read or written"),
-    "view": (("zswarm view runs/thesis-3.2-fixed8", "zswarm view runs/thesis-3.2-fixed8 --save run.rrd"), "the viewer failed"),
-    "report": (("zswarm report runs/thesis-3.2-fixed8",), "a results file could not be written"),
+    "view": (("zswarm view runs/thesis-3.2-fixed8", "zswarm view runs/thesis-3.2-fixed8 --save run.rrd"), "the viewer failed, or the recording is damaged (what could be read is shown; a line names each loss)"),
+    "report": (("zswarm report runs/thesis-3.2-fixed8",), "the run did not complete (as zswarm run says: its summary's problems), the recording is damaged, or a results file could not be written"),
     "info": (("zswarm info runs/thesis-3.2-fixed8", "zswarm info runs/thesis-3.2-fixed8/recording.mcap --json"), "the path could not be read"),
     "runs": (("zswarm runs", "zswarm runs results/ --json"), "the directory could not be read"),
     "echo": (("zswarm echo est/3 --results runs/thesis-3.2-fixed8", "zswarm echo 'edge/*/3' --connect tcp/127.0.0.1:7447 --run-id demo --count 5"), "the Zenoh session failed"),
@@ -85,7 +86,7 @@ EXAMPLES: dict[str, tuple[tuple[str, ...], str]] = {
 
 
 def _epilog(examples: tuple[str, ...], failure: str) -> str:
-    lines = ["examples:", *(f"  {e}" for e in examples), "", "exit codes:", "  0    done", f"  1    {failure}", "  2    bad arguments or a bad scenario file (one line on stderr: file: field: problem)", "  130  interrupted (Ctrl-C)"]
+    lines = ["examples:", *(f"  {e}" for e in examples), "", "exit codes:", "  0    done", f"  1    {failure}", "  2    bad arguments or a bad scenario file (one line on stderr: file: field: problem)", "  130  interrupted (Ctrl-C, SIGINT)", "  143  stopped by SIGTERM (kill, docker stop)"]
     return "\n".join(lines)
 
 
@@ -535,30 +536,46 @@ def cmd_certs(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from zswarm import results
     from zswarm.recording.mcap_io import decode, ensure_recording, read
+    from zswarm.recording.mcap_read import NotMcap
     from zswarm.transport import wire
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
-    rec_path = ensure_recording(args.results, sc)
-    if not rec_path.exists():
-        procutil.fail_usage(f"{rec_path}: no recording there")
-    start = None
-    for topic, payload, _t in read(rec_path):
-        if topic == "ctl/start":
-            try:
-                start = decode(payload, "start")
-            except wire.MessageError:
-                continue
-            break
-    prev = {}
+    try:
+        rec_path = ensure_recording(args.results, sc)
+        if not rec_path.exists():
+            procutil.fail_usage(f"{rec_path}: no recording there")
+        start = None
+        for topic, payload, _t in read(rec_path, []):  # its losses are the report's to tell
+            if topic == "ctl/start":
+                try:
+                    start = decode(payload, "start")
+                except wire.MessageError:
+                    continue
+                break
+    except NotMcap as exc:
+        procutil.fail_usage(str(exc))
+    prev: dict[str, Any] = {}
     if (args.results / "summary.json").exists():
-        prev = json.loads((args.results / "summary.json").read_text())
+        try:
+            prev = json.loads((args.results / "summary.json").read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            print(f"warning: {args.results / 'summary.json'}: not JSON ({exc}); made again from the recording", file=sys.stderr)
+        prev = prev if isinstance(prev, dict) else {}
     engine = prev.get("engine", "run")
     duration = float(prev.get("duration_s", start["duration"] if start else sc.duration))
     scale = float(prev.get("time_scale", start["time_scale"] if start else 1.0))
     seed = int(prev.get("seed", start["seed"] if start else sc.seed))
-    summary = results.make_report(args.results, sc, engine, duration, scale, seed, not_recorded=prev.get("recording", {}).get("not_recorded", ()))
+    # What only the launcher knew (its children's exit codes, an interruption, their CPU) is
+    # kept: the report's verdict is then the run's (exit 1 where `zswarm run` exited 1).
+    kept = {k: prev[k] for k in ("exit_codes", "interrupted", "cpu", "fault_actions") if k in prev}
+    codes = kept.get("exit_codes") if isinstance(kept.get("exit_codes"), dict) else None
+    summary = results.make_report(
+        args.results, sc, engine, duration, scale, seed, exit_codes=codes, not_recorded=prev.get("recording", {}).get("not_recorded", ()), keep=kept
+    )
     print(results.table(summary))
-    return 0
+    for line in summary.get("recording", {}).get("damaged", []):
+        print(line, file=sys.stderr)
+    return 0 if summary["completed"] else 1
 
 
 def cmd_info(args: argparse.Namespace) -> int:

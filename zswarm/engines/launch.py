@@ -479,5 +479,5 @@ def run(
     print(results.table(summary))
     print(f"results: {out}")
     if interrupted.is_set():
-        return 130
+        return procutil.interrupted_code()
     return 0 if summary["completed"] else 1

@@ -151,11 +151,11 @@ def command(args: argparse.Namespace) -> int:
                 log.info("waiting for a recorder of run %r", run)
                 while not up.wait(0.2):
                     if stop.is_set():
-                        return 130
+                        return procutil.interrupted_code()
         counts = replay.run_replay(args.results, sc, args.speed, args.live, bus, run, stop, hold=args.hold)
         log.info("replayed %d messages and %d liveliness events%s", counts["messages"], counts["alive_events"], f" onto run {run!r}" if run else "")
     finally:
         if bus is not None:
             time.sleep(0.5)  # let the last samples leave before the session closes
             bus.close()
-    return 130 if stop.is_set() else 0
+    return procutil.interrupted_code() if stop.is_set() else 0

@@ -37,15 +37,16 @@ from __future__ import annotations
 
 import functools
 import logging
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import msgpack
 import orjson
-from mcap.reader import NonSeekingReader
 
 from zswarm.recording.foxglove import object_schema
+from zswarm.recording.mcap_read import Lost, records
 from zswarm.scenario import Scenario
 from zswarm.transport import wire, wire_json
 from zswarm.util.files import RecordingError
@@ -72,6 +73,15 @@ STREAM_TYPES: dict[str, str | tuple[str, ...]] = {
     "stats": "stats",
     "ctl": ("start", "stop", "progress"),
 }
+# What reading the raw recording could not read (a damaged or cut chunk, mcap_read.Lost), kept in
+# the viewer recording made from it: the raw file goes, its damage is still told.
+LOST_CHANNEL = "events/lost"
+LOST_SCHEMA = object_schema(
+    "zswarm.Lost",
+    "A part of the raw recording that could not be read (damage, or a file cut short)",
+    {"text": {"type": "string"}, "offset": {"type": "integer"}},
+    ("text", "offset"),
+)
 ALIVE_SCHEMA = object_schema(
     "zswarm.Alive",
     "A process's liveliness token appeared (alive) or went away",
@@ -400,9 +410,12 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
         raise
     n_raw = 0
     ok = False
+    losses: list[Lost] = []
     try:
-        for stream, payload, t in read(raw):
+        t_last = 0
+        for stream, payload, t in read(raw, losses):
             n_raw += 1
+            t_last = max(t_last, t)
             if stream == MALFORMED_CHANNEL:  # described by the recorder (RawOut: oversized), as it is
                 try:
                     desc = unpack(payload)
@@ -423,6 +436,9 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
                 vo.alive(event, t)
             else:
                 vo.message(stream, payload, t)
+        for x in losses:  # stamped at the end: the reader names where in the file, not when
+            vo.log_json(LOST_CHANNEL, LOST_SCHEMA, {"text": x.text(), "offset": x.offset}, t_last)
+            vo.count += 1
         vo.close()
         ok = True
     finally:
@@ -456,48 +472,51 @@ def ensure_recording(results: Path, scenario: Scenario | None) -> Path:
     return rec
 
 
-def read(path: str | Path) -> Iterator[tuple[str, Any, int]]:
+def read(path: str | Path, lost: list[Lost] | None = None) -> Iterator[tuple[str, Any, int]]:
     """Yield ``(stream, message, log_time_ns)`` of the run's messages in file order.
 
     ``message`` is the JSON object as written (:func:`zswarm.transport.wire_json.from_json`
     validates it), or the msgpack payload (bytes) of an old recording.  The
-    derived viewer channels are left out.  Uses the streaming reader, so a
-    file cut short (no summary section) is read up to its last complete chunk
-    instead of failing.
+    derived viewer channels are left out.
 
     File order, not log-time order: a recorder writes in arrival order (log times
     out of order by at most the bus thread's hand-over, ~ms), and the streaming
     reader's log-time order sorts the whole file in memory first, so a file cut
     short by a SIGKILL yielded nothing at all (the truncation ended the sort).
+
+    A file cut short or damaged is read past the damage where its format allows
+    (:func:`zswarm.recording.mcap_read.records`); each loss goes into ``lost``, or
+    without it is printed on stderr as one line.  A file that is not MCAP at all raises
+    :class:`~zswarm.recording.mcap_read.NotMcap` (a RecordingError naming it).
     """
-    with open(path, "rb") as f:
-        reader = NonSeekingReader(f)
-        try:
-            for _schema, channel, message in reader.iter_messages(log_time_order=False):
-                topic = channel.topic
-                if channel.message_encoding == "msgpack":
-                    yield topic, message.data, message.log_time
-                elif channel.message_encoding == "json" and topic[1:].split("/", 1)[0] in STREAM_TYPES | {"events": 0}:
-                    yield topic[1:], orjson.loads(message.data), message.log_time
-        except Exception as exc:  # a truncated tail ends the stream
-            if not _is_truncation(exc):
-                raise
+    losses: list[Lost] = [] if lost is None else lost
+    try:
+        for channel, message in records(path, losses):
+            topic = channel.topic
+            if channel.message_encoding == "msgpack":
+                yield topic, message.data, message.log_time
+            elif channel.message_encoding == "json" and topic[1:].split("/", 1)[0] in STREAM_TYPES | {"events": 0}:
+                try:
+                    obj = orjson.loads(message.data)
+                except orjson.JSONDecodeError as exc:  # a chunk whose CRC was 0 (unchecked) with damage inside
+                    losses.append(Lost(Path(path), -1, f"{topic}: a message that is not JSON ({exc})", "dropped"))
+                    continue
+                yield topic[1:], obj, message.log_time
+    finally:
+        if lost is None:
+            for x in losses:
+                print(f"warning: {x.text()}", file=sys.stderr)
 
 
 def recorded_run_id(path: Path) -> str | None:
     """The run id the recording was made under (its ``ctl/start``), if any."""
-    for stream, payload, _t in read(path):
+    for stream, payload, _t in read(path, []):  # its losses are told by whoever reads it whole
         if stream == "ctl/start":
             try:
                 return str(decode(payload, "start")["run"])
             except wire.MessageError:
                 return None
     return None
-
-
-def _is_truncation(exc: Exception) -> bool:
-    name = type(exc).__name__
-    return name in ("EndOfFile", "InvalidMagic", "RecordLengthLimitExceeded") or isinstance(exc, (EOFError, ValueError))
 
 
 def decode(message: bytes | dict[str, Any] | wire.Message, expect: str | tuple[str, ...] | None = None) -> wire.Message:

@@ -259,6 +259,7 @@ class RerunViewer:
         self.scenario = scenario
         self.count = 0
         self.malformed = 0
+        self.lost: list[str] = []  # the recording's damage, a line each (mcap_read.Lost.text)
         self.horizon = 0.0  # the newest world time seen
 
     def save(self, path: Path) -> None:
@@ -319,12 +320,17 @@ def view(run_dir: Path, save: Path) -> RerunViewer:
     sc = load(sc_file) if sc_file.exists() else None
     viewer = RerunViewer(sc, recording_id=record.recorded_run_id(mcap), offline=True)
     viewer.save(save)
+    losses: list[Any] = []
     try:
-        for stream, payload, t in record.read(mcap):
+        for stream, payload, t in record.read(mcap, losses):
+            if stream == record.LOST_CHANNEL:  # what the transcode could not read of the raw file
+                viewer.lost.append(str(payload.get("text", "") if isinstance(payload, dict) else "a loss not described"))
+                continue
             viewer.message(stream, payload, t)
     except BaseException:
         viewer.close()
         raise
+    viewer.lost += [x.text() for x in losses]
     viewer.finish(viewer.horizon)
     return viewer
 
@@ -383,7 +389,12 @@ def _free_port(host: str) -> int:
         return int(s.getsockname()[1])
 
 
+_TERMINATED = False
+
+
 def _terminated(signum: int, frame: Any) -> None:
+    global _TERMINATED
+    _TERMINATED = True
     raise KeyboardInterrupt  # SIGTERM stops like Ctrl-C: the viewer program is stopped and reaped
 
 
@@ -393,7 +404,7 @@ def command(args: argparse.Namespace) -> int:
         return _command(args)
     except KeyboardInterrupt:
         print("zswarm view: interrupted", file=sys.stderr)
-        return 130
+        return 128 + (signal.SIGTERM if _TERMINATED else signal.SIGINT)  # 143 or 130, as the shell's convention
 
 
 def _command(args: argparse.Namespace) -> int:
@@ -421,9 +432,11 @@ def _command(args: argparse.Namespace) -> int:
             print(f"zswarm view: {run_dir}: {exc}", file=sys.stderr)
             return 2
         print(f"{run_dir}: {v.count} messages" + (f", {v.malformed} malformed (dropped)" if v.malformed else "") + f" -> {save}", flush=True)
+        for line in v.lost:  # a damaged recording: what was read is shown, each loss named
+            print(line, file=sys.stderr, flush=True)
         if args.web is None:
             if args.save:
-                return 0
+                return 1 if v.lost else 0
             return _open_native(save)
         host, port = _host_port(args.web)
         proc, url = serve_web(save, host, port)

@@ -25,7 +25,8 @@ import msgpack
 import numpy as np
 
 from zswarm.math import so3
-from zswarm.recording.mcap_io import ALIVE_CHANNEL, MALFORMED_CHANNEL, decode, read, unpack
+from zswarm.recording.mcap_io import ALIVE_CHANNEL, LOST_CHANNEL, MALFORMED_CHANNEL, decode, read, unpack
+from zswarm.recording.mcap_read import Lost
 from zswarm.transport import run_control, wire
 
 
@@ -56,6 +57,7 @@ class Recording:
     stats_by_inc: dict[tuple[str, int, int], dict[str, Any]] = field(default_factory=dict)  # (role, src, incarnation): its last stats
     envelopes: dict[str, list[tuple[float, int, int]]] = field(default_factory=dict)  # stream -> (t, inc, seq) per message, when asked
     outside_run: dict[str, int] = field(default_factory=dict)  # stream kind -> messages stamped outside the run (ignored)
+    lost: list[str] = field(default_factory=list)  # the file's damage, a line each (zswarm.recording.mcap_read.Lost.text)
 
 
 # A message stamped more than this outside [0, duration] of world time is not the run's: it
@@ -102,11 +104,16 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
     by_inc: dict[tuple[str, int, int], dict[str, Any]] = {}
     outside: dict[str, int] = defaultdict(int)
     t_lo, t_hi = -OUTSIDE_RUN_MARGIN_S, (math.inf if duration is None else duration + OUTSIDE_RUN_MARGIN_S)
-    for topic, payload, _t in read(path) if isinstance(path, (str, Path)) else path:
+    losses: list[Lost] = []
+    lost_texts: list[str] = []
+    for topic, payload, _t in read(path, losses) if isinstance(path, (str, Path)) else path:
         counts[topic.split("/")[0]] += 1
         streams[topic] += 1
         if topic == ALIVE_CHANNEL:
             alive.append({**unpack(payload), "log_t": _t})
+            continue
+        if topic == LOST_CHANNEL:  # what the transcode could not read of the raw recording
+            lost_texts.append(str(payload.get("text", "") if isinstance(payload, dict) else "a loss not described")[:400])
             continue
         if topic == MALFORMED_CHANNEL:  # what the recorder (or the transcode) dropped as malformed
             malformed += 1
@@ -176,6 +183,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         alive_events=alive,
         start=start,
         stop_seen=stop_seen,
+        lost=lost_texts + [x.text() for x in losses],
         counts=dict(counts),
         streams=dict(streams),
         malformed=malformed,

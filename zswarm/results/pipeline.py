@@ -223,11 +223,20 @@ def run_problems(
     """Why the run is not ``completed`` (summary.json ``problems``; empty: completed): the
     world's stop missing from the recording, a recording that ends short of the run, the
     world or the recorder not exiting cleanly, an agent that failed most of its steps."""
-    out = []
+    out = [f"the recording is damaged: {x}" for x in rec.lost]
     if not rec.stop_seen:
         out.append("the world's stop is not in the recording (the run was stopped early, or its recording was cut)")
     if recording.get("cut_short"):
         out.append(f"the recording ends at t = {recording['ends_at_s']:.2f} s of {duration:g}")
+    # A hole in the middle (a recorder stopped or starved for a while, a damaged chunk) loses
+    # data as an end cut short does: the truth, estimates and edges of that span are not there.
+    gaps = recording.get("truth_gaps") or {}
+    holes = [(a, b) for a, b in gaps.get("spans", []) if not (recording.get("cut_short") and b >= duration)]
+    if holes:
+        spans = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in holes[:3]) + (" ..." if len(holes) > 3 else "")
+        short = {k: v for k, v in sorted((recording.get("missing") or {}).items(), key=lambda kv: -kv[1])[:3]}
+        what = f"; {recording.get('missing_total', 0)} messages missing (most: " + ", ".join(f"{k} {v}" for k, v in short.items()) + ")" if short else ""
+        out.append(f"the recording has {len(holes)} hole{'s' if len(holes) > 1 else ''} (no truth for longer than {gaps.get('bound_s')} s): {spans}{what}")
     for name in ("world", "recorder"):
         code = (exit_codes or {}).get(name, 0)
         if code != 0:
@@ -256,6 +265,7 @@ def recording_section(sc: Scenario, rec: Recording, duration: float, not_recorde
         out["exact"] = False
         out["missing_after_s"] = end
     out["outside_run"] = dict(rec.outside_run)
+    out["damaged"] = list(rec.lost)
     return out
 
 
@@ -344,12 +354,14 @@ def make_report_parts(
     thresholds: tuple[float, float] = THRESHOLDS,
     messages: Iterable[tuple[str, bytes, int]] | None = None,
     not_recorded: Sequence[str] = (),
+    keep: Mapping[str, Any] | None = None,
 ) -> ReportParts:
     """Read ``out_dir/recording.mcap`` (or ``messages``, an in-memory recording);
     write errors.csv, summary.json, the family's CSVs and the plots; return the summary with
     the recording, errors and metrics it was computed from (zswarm study takes its series
     from them instead of reading the run again).  ``not_recorded``: channel prefixes the
-    recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean)."""
+    recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean).  ``keep``: entries of an
+    earlier summary.json that only the launcher knew (``zswarm report`` keeps them)."""
     rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
     errs = errors(rec)
     fam = family.of(sc)
@@ -358,6 +370,7 @@ def make_report_parts(
     if sc.faults:
         t_grid, att, _pos = fam.series(sc, errs, m, duration)
         summary["faults"] = faults.summary(sc, rec, engine, t_grid, att, summary["convergence"]["measure"] + " (attitude)")
+    summary.update(keep or {})
     write_errors_csv(out_dir / "errors.csv", errs)
     fam.write(out_dir, sc, rec, m)
     write_summary(out_dir / "summary.json", summary)

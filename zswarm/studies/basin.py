@@ -517,7 +517,7 @@ def command(args: argparse.Namespace) -> int:
     bar.close()
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
-        return 130
+        return procutil.interrupted_code()
     s = basin.write(out, sc.name, rows, args.threshold, duration, args.near, basin.verdict_in(out / "basin.csv", b.verdict), b.measure)
     print(basin.table(sc.name, s))
     print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")

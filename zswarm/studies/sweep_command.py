@@ -130,7 +130,7 @@ def command(args: argparse.Namespace) -> int:
     rows = sweep_figures.load_rows(out / "sweep.csv")
     if interrupted:
         print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
-        return 130
+        return procutil.interrupted_code()
     plots = sweep_figures.plot_sweep(out, rows, [v.field for v in varies], duration, family.of(sc).sweep.figures, scenario=sc.name)
     n_failed = sum(1 for r in rows if r["status"] == "failed")
     print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")

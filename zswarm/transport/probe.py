@@ -104,7 +104,7 @@ def echo(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 shown += 1
     if bad[0]:
         print(f"zswarm echo: {bad[0]} payloads on {key_expr} did not decode (dropped)", file=sys.stderr)
-    return 130 if stop.is_set() and args.duration is None and args.count is None else 0
+    return procutil.interrupted_code() if stop.is_set() and args.duration is None and args.count is None else 0
 
 
 class Rates:
@@ -199,4 +199,4 @@ def hz(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                     file=out,
                 )
             out.flush()
-    return 130 if stop.is_set() and args.duration is None else 0
+    return procutil.interrupted_code() if stop.is_set() and args.duration is None else 0

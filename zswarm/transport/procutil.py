@@ -124,7 +124,10 @@ class SignalEvent:
         self._thread.start()
         self._prev = {s: signal.signal(s, self._handler) for s in self.SIGNALS}
 
-    def _handler(self, _signum: int, _frame: object) -> None:
+    def _handler(self, signum: int, _frame: object) -> None:
+        global _FIRST_STOP_SIGNAL
+        if _FIRST_STOP_SIGNAL is None:
+            _FIRST_STOP_SIGNAL = signum
         try:
             os.write(self._w, b"\0")
         except (BlockingIOError, InterruptedError):
@@ -150,6 +153,16 @@ class SignalEvent:
             signal.signal(s, h)
         os.close(self._w)  # the thread reads EOF and ends
         self._thread.join(1.0)
+
+
+_FIRST_STOP_SIGNAL: int | None = None  # the signal that stopped this process first (SignalEvent)
+
+
+def interrupted_code() -> int:
+    """The exit code of a command stopped by a signal it caught, by the shell's convention
+    128 + the signal's number: 130 for SIGINT (Ctrl-C), 143 for SIGTERM (``kill``, a
+    container's stop)."""
+    return 128 + (_FIRST_STOP_SIGNAL or signal.SIGINT)
 
 
 PARENT_ENV = "ZSWARM_PARENT_PID"  # set by a launcher for its children: see die_with_parent
