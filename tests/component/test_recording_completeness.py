@@ -172,7 +172,7 @@ def test_transcoding_a_cut_raw_file_keeps_what_it_holds(tmp_path, fixed8):
     """The launcher's report of a run whose recorder was SIGKILLed: the cut raw file becomes
     a viewer recording with every message it held and a report; a raw file with no complete
     message is kept, not replaced by an empty recording."""
-    from zswarm.recording.mcap_io import EmptyRecording
+    from zswarm.recording.mcap_io import LOST_CHANNEL, EmptyRecording
 
     sc, msgs = fixed8
     path = tmp_path / "recording.raw.mcap"
@@ -181,9 +181,14 @@ def test_transcoding_a_cut_raw_file_keeps_what_it_holds(tmp_path, fixed8):
     path.write_bytes(whole[: sizes[5] + 100])  # 6 chunks on disk, the 7th cut
     assert transcode(path, tmp_path / "recording.mcap", sc) == 0
     assert not path.exists()
-    assert sum(1 for _ in read(tmp_path / "recording.mcap")) == 3000
+    got = [(s, m) for s, m, _t in read(tmp_path / "recording.mcap")]
+    assert sum(1 for s, _m in got if s != LOST_CHANNEL) == 3000
+    # The cut is named where it is (issue 50): one loss, in the 7th chunk, on events/lost.
+    (lost,) = [m["text"] for s, m in got if s == LOST_CHANNEL]
+    assert lost == f"{path}: byte {sizes[5]}: the file ends inside a record (cut short: a killed writer or a full disk); what followed was never written"
     rec = load_recording(tmp_path / "recording.mcap")
-    assert rec.streams == load_recording(msgs[:3000]).streams
+    assert rec.lost == [lost]
+    assert {k: v for k, v in rec.streams.items() if k != LOST_CHANNEL} == load_recording(msgs[:3000]).streams
     # Nothing complete: the raw file is kept as it is and no recording is written.
     (tmp_path / "recording.mcap").unlink()
     path.write_bytes(whole[:200])

@@ -13,7 +13,9 @@ workers on several hosts, and on SLURM with dask-jobqueue.
 
 from __future__ import annotations
 
+import os
 import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
@@ -44,6 +46,15 @@ def worker_init() -> None:
     the parent, not each worker, decides what is kept (it kills them)."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
+    # A parent killed with SIGKILL cannot kill them, and a spawned worker waiting for its next
+    # task never learns (it holds its own end of the task queue): it would wait for ever.
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), name="zswarm-parent-watch", daemon=True).start()
+
+
+def _exit_with_parent(ppid: int) -> None:
+    while os.getppid() == ppid:
+        time.sleep(0.5)
+    os._exit(1)
 
 
 @contextmanager

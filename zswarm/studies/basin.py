@@ -495,6 +495,8 @@ def command(args: argparse.Namespace) -> int:
         files.write_text(spec_path, json.dumps(spec, indent=2) + "\n")  # whole or not at all
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
+    if files.hold(out, "basin check", stop.is_set) is None:  # one at a time in a folder
+        return procutil.interrupted_code()
     jobs = args.jobs or (os.cpu_count() or 1)
     why = basin.engine_problem(sc, auto=args.engine == "auto")
     if args.engine == "batched" and why is not None:

@@ -266,8 +266,10 @@ def run_sweep(
     timeout: float,
     keep_recordings: bool,
     stop: Callable[[], bool] = lambda: False,
+    lock: int | None = None,
 ) -> tuple[int, int, bool]:
-    """Run what is not in sweep.csv yet; return (ok, failed, interrupted)."""
+    """Run what is not in sweep.csv yet; return (ok, failed, interrupted).  ``lock``: the
+    folder's lock (files.hold), held by each run's process too while it writes its folder."""
     f, w, todo, prog = _open(out, jobs, varies, columns(sc))
     running: dict[str, tuple[Job, subprocess.Popen[bytes], float, Path]] = {}
     ok = failed = 0
@@ -285,7 +287,7 @@ def run_sweep(
                     shutil.rmtree(folder)  # a run cut short by an interruption starts over
                 folder.mkdir(parents=True)
                 log = open(folder / "log.txt", "wb")  # noqa: SIM115 - the child owns it; closed when reaped
-                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration, keep_recordings), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=procutil.child_env())
+                proc = subprocess.Popen(_cmd(engine, topology, job, folder, duration, keep_recordings), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=procutil.child_env(), pass_fds=() if lock is None else (lock,))
                 log.close()
                 running[job.run_id] = (job, proc, time.monotonic(), folder)
             time.sleep(0.05)

@@ -102,6 +102,10 @@ def command(args: argparse.Namespace) -> int:
     timeout = args.timeout or (max(120.0, 10.0 * duration) if sim_engine == "sim" else duration + 180.0)
     stop = threading.Event()
     procutil.stop_on_signals_into(stop)
+    # One sweep at a time in a folder; a killed one's runs (which die with it) end first.
+    lock = files.hold(out, "sweep", stop.is_set)
+    if lock is None:
+        return procutil.interrupted_code()
     n_points = len(jobs) // args.repeats
     where = f"the Dask cluster at {args.cluster}" if args.cluster else f"{n_jobs} at a time"
     n_batched = sum(len(b) for b in batches)
@@ -120,7 +124,7 @@ def command(args: argparse.Namespace) -> int:
                 ok2, _failed, interrupted = sweep.run_sweep_cluster(args.topology, jobs, varies, out, duration, thresholds, args.cluster, stop.is_set)
             else:
                 ok2, _failed, interrupted = sweep.run_sweep(
-                    args.topology, sc, jobs, varies, out, sim_engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set
+                    args.topology, sc, jobs, varies, out, sim_engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set, lock
                 )
             ok += ok2
     except ClusterError as exc:

@@ -10,7 +10,7 @@ the error goes on to the caller, which names the path and the problem in one lin
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -51,3 +51,28 @@ def save_png(fig: object, path: Path) -> None:
 
 class RecordingError(Exception):
     """A recording that cannot be read or written as a whole (message names the file)."""
+
+
+def hold(folder: Path, what: str, stop: Callable[[], bool]) -> int | None:
+    """An exclusive lock on ``folder`` (``folder/.lock``, flock) for a command that appends to
+    its results, as an open descriptor to keep (and to hand to the children that write into
+    the folder, so the lock outlives a ``kill -9`` of the command until they have gone too).
+    Waits while another holds it, saying so once; None when ``stop`` came first."""
+    import fcntl
+    import sys
+    import time
+
+    fd = os.open(folder / ".lock", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    told = False
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return fd
+        except BlockingIOError:
+            if not told:
+                print(f"{folder}: in use by another {what}, or by the runs of one that was killed; waiting for them to end", file=sys.stderr, flush=True)
+                told = True
+            if stop():
+                os.close(fd)
+                return None
+            time.sleep(0.1)
