@@ -28,6 +28,7 @@ from zswarm.scenario import Fault, Scenario, fault_actions
 from zswarm.transport import keys, procutil, run_control, wire
 from zswarm.transport import secure as sec
 from zswarm.transport.bus import ZenohBus, zenoh_config
+from zswarm.util import files
 from zswarm.util.quoting import one_line
 
 
@@ -344,7 +345,7 @@ def run(
     out = results_dir(out_base, sc.name)
     (out / "logs").mkdir(exist_ok=True)
     # Every process reads the scenario as run (with any --set applied) from the results folder.
-    (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
+    files.write_text(out / "scenario.toml", sc.text)  # whole or not at all
     topology = str(out / "scenario.toml")
     run_id = keys.check_run_id(f"r{os.getpid()}-{int(time.time())}")
     certs: Path | None = None

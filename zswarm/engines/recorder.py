@@ -23,6 +23,7 @@ def command(args: argparse.Namespace) -> int:
     from zswarm.recording.mcap_io import RAW_SUFFIX
     from zswarm.transport import run_control, wire
     from zswarm.transport.bus import ZenohBus
+    from zswarm.util import files
 
     sc = procutil.load_or_exit(args.topology)
     conf = procutil.zenoh_conf(args, "recorder")
@@ -30,7 +31,7 @@ def command(args: argparse.Namespace) -> int:
     run = keys.check_run_id(args.run_id)
     out = results_dir(args.out, sc.name)
     if not (out / "scenario.toml").exists():
-        (out / "scenario.toml").write_text(sc.text)
+        files.write_text(out / "scenario.toml", sc.text)  # whole or not at all
     start: dict[str, object] = {}
     with ZenohBus(conf) as bus:
         stop = procutil.stop_on_signals()

@@ -18,7 +18,7 @@ from zswarm.scenario import Scenario, fault_actions
 from zswarm.scenario.programs import agent_program, world_program
 from zswarm.transport import keys, procutil, run_control
 from zswarm.transport.bus import MemoryBus
-from zswarm.util import plugins
+from zswarm.util import files, plugins
 from zswarm.util.progress import Progress
 
 LEAN_SKIP = ("sense/", "edge/", "cmd/")
@@ -201,7 +201,7 @@ def command(args: argparse.Namespace) -> int:
     procutil.check_faults_in_run(sc, duration, args.duration is not None)
     seed = sc.seed if args.seed is None else args.seed
     out = results_dir(args.out, sc.name)
-    (out / "scenario.toml").write_text(sc.text, encoding="utf-8")
+    files.write_text(out / "scenario.toml", sc.text)  # whole or not at all
     bar = Progress(duration, "s of world time")
 
     def progress(t: float) -> None:

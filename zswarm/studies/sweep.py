@@ -366,7 +366,7 @@ def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[f
     sc = loads(text, path, job.overrides)
     with tempfile.TemporaryDirectory(prefix="zswarm-sweep-") as d:
         folder = Path(d)
-        (folder / "scenario.toml").write_text(sc.text, encoding="utf-8")
+        files.write_text(folder / "scenario.toml", sc.text)
         msgs = simulate(sc, folder, duration, job.seed, lean=True, record=False)
         summary = results.make_report(folder, sc, "sim", duration, 0.0, job.seed, plots=False, messages=msgs, not_recorded=LEAN_SKIP)
         row = summarize_run(folder, sc, duration, thresholds)

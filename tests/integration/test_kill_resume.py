@@ -1,0 +1,212 @@
+"""``kill -9`` at seeded moments, then resume (issue 50; in the style of Jepsen's nemesis).
+
+A sweep and a basin check are each killed at 20 moments drawn from a seeded generator (listed
+below), resumed by the same command each time, and finally let finish.  Every run must then be
+in the results file once, whole, and equal to its row in an uninterrupted run of the same
+command (the wall-clock column aside).  ``zswarm record`` is killed at 20 moments of a live run:
+each recording it leaves reads (no exception), and ``zswarm report`` on it says what happened in
+one line per problem, without a traceback.
+
+Every process is reaped by PID: the commands here directly; what they started dies with them
+(procutil.die_with_parent, cluster.worker_init), which the end of each test checks in /proc.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import ROOT, TOPO
+from tests.integration.conftest import wait_for, zswarm
+from zswarm.engines.launch import free_port
+from zswarm.recording import mcap_io
+from zswarm.transport import keys
+from zswarm.transport.bus import ZenohBus, zenoh_config
+from zswarm.util import rows
+
+pytestmark = pytest.mark.integration
+
+T32, T56 = TOPO / "thesis-3.2-fixed8.toml", TOPO / "thesis-5.6-hybrid7.toml"
+N_KILLS = 20
+
+
+def moments(seed: int, lo: float, hi: float) -> list[float]:
+    """The seconds after its start at which each of the N_KILLS commands is killed."""
+    rng = random.Random(seed)
+    return [round(rng.uniform(lo, hi), 3) for _ in range(N_KILLS)]
+
+
+# Long enough that 20 kills at moments(seed, 0.3, 4.0) (a failure names the moment) mostly
+# hit the command at work: 24 runs of ~1.8 s each two at a time, 64 draws of ~0.6 s.
+SWEEP = [sys.executable, "-m", "zswarm", "sweep", str(T32), "--vary", "links.drop=0,0.1,0.2,0.3,0.4,0.5", "--repeats", "4", "--duration", "3", "--jobs", "2", "--engine", "sim"]
+BASIN = [sys.executable, "-m", "zswarm", "basin", str(T56), "--draws", "64", "--duration", "4", "--engine", "sim", "--jobs", "2"]
+WALL = {"wall_s"}  # the only cells that differ between two runs of the same command
+
+
+def _pids_using(path: Path) -> list[int]:
+    """Live processes whose command line names ``path`` (what a killed command left)."""
+    out = []
+    needle = str(path).encode()
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/cmdline", "rb") as f:
+                    cmd = f.read()
+                with open(f"/proc/{d}/stat") as f:
+                    state = f.read().rsplit(")", 1)[1].split()[0]
+            except OSError:
+                continue
+            if needle in cmd and state != "Z":
+                out.append(int(d))
+    return out
+
+
+def _none_left(path: Path, timeout: float = 60.0) -> None:
+    """Every process a killed command started has gone (they die with it); else kill them
+    (by PID) and fail."""
+    deadline = time.monotonic() + timeout
+    while (left := _pids_using(path)) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    for pid in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not left, f"processes outlived their killed command: {left}"
+
+
+def _descendants(pid: int) -> set[int]:
+    out: set[int] = set()
+    todo = [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            for tid in os.listdir(f"/proc/{p}/task"):
+                with open(f"/proc/{p}/task/{tid}/children") as f:
+                    kids = [int(x) for x in f.read().split()]
+                out.update(kids)
+                todo.extend(kids)
+        except OSError:
+            continue
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _kill_at(cmd: list[str], delay: float, log: Path) -> int | None:
+    """Start ``cmd``, SIGKILL it (the command alone, not its group: its children must see it
+    die) ``delay`` s later, reap it; its exit code when it ended by itself first.  The
+    processes it had started must end by themselves within 60 s (else killed, and a failure)."""
+    with open(log, "ab") as f:
+        p = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        try:
+            return p.wait(delay)
+        except subprocess.TimeoutExpired:
+            kids = _descendants(p.pid)
+            os.kill(p.pid, signal.SIGKILL)
+            p.wait()
+            deadline = time.monotonic() + 60
+            while (left := [k for k in kids if _alive(k)]) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            for k in left:
+                os.kill(k, signal.SIGKILL)
+            assert not left, f"{cmd[3]} killed at {delay} s: its processes {left} outlived it"
+            return None
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def _by(table: rows.Table, key: str) -> dict[str, dict[str, str]]:
+    got: dict[str, dict[str, str]] = {}
+    for r in table.rows:
+        assert r[key] not in got, f"{r[key]} is in the file twice"
+        got[r[key]] = {k: v for k, v in r.items() if k not in WALL}
+    return got
+
+
+def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed: int, tmp_path: Path) -> None:
+    p = subprocess.run([*cmd, "--out", str(ref)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    want = _by(rows.read(ref / csv_name), key)
+    assert len(want) > 1
+    log = tmp_path / "nemesis.log"
+    finished_early = 0
+    for k, delay in enumerate(moments(seed, 0.3, 4.0)):
+        rc = _kill_at([*cmd, "--out", str(out)], delay, log)
+        finished_early += rc is not None
+        assert rc in (None, 0), f"kill {k} at {delay} s: the command failed by itself (exit {rc}); see {log}"
+        _none_left(out)
+        if k % 5 == 4 and (out / csv_name).exists():  # a power cut as well: the file's last bytes lost
+            data = (out / csv_name).read_bytes()
+            (out / csv_name).write_bytes(data[: len(data) - random.Random(seed + k).randint(1, 40)])
+        t = rows.read(out / csv_name)
+        assert t.header is None or t.torn in ([], [len(t.rows) + 2]), f"kill {k} at {delay} s: torn lines {t.torn} beyond the last"
+        for rid, r in _by(t, key).items():  # what is in the file is whole and right at every moment
+            if r.get("status") == "ok":
+                assert r == want[rid], f"kill {k} at {delay} s: {rid}"
+    p = subprocess.run([*cmd, "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    final = rows.read(out / csv_name)
+    assert final.torn == []
+    assert _by(final, key) == want  # every run once, whole, as uninterrupted
+    # The moments must have hit the commands at work, not only after they had finished.
+    assert finished_early < N_KILLS // 2, f"{finished_early} of {N_KILLS} commands ended before their kill"
+
+
+def test_a_sweep_killed_at_20_moments_resumes_to_the_uninterrupted_rows(tmp_path):
+    _nemesis(SWEEP, tmp_path / "sweep", tmp_path / "ref", "sweep.csv", "run_id", 5001, tmp_path)
+
+
+def test_a_basin_killed_at_20_moments_resumes_to_the_uninterrupted_rows(tmp_path):
+    _nemesis(BASIN, tmp_path / "basin", tmp_path / "ref", "basin.csv", "draw", 5002, tmp_path)
+
+
+def test_a_recorder_killed_at_20_moments_leaves_readable_recordings(procs, tmp_path):
+    """A live world (§3.2; this test holds the agents' tokens); `zswarm record` joins it and
+    is killed at moments(5003, 0.5, 4.0).  Each recording it leaves is read up to the kill."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    procs.start(zswarm("router", "--listen", ep), log=tmp_path / "router.log")
+    run = "kill9"
+    alive: set = set()
+    with ZenohBus(zenoh_config("client", connect=[ep])) as bus:
+        bus.watch_alive(keys.alive_all(run), lambda k, up: (alive.add if up else alive.discard)(keys.parse_alive(k)))
+        for i in range(1, 9):
+            bus.declare_token(keys.alive(run, "agent", i))
+        first = tmp_path / "rec-first"
+        procs.start(zswarm("record", str(T32), "--out", str(first), "--run-id", run, "--connect", ep, "--no-report"), log=tmp_path / "rec-first.log")
+        wait_for(lambda: ("recorder", 0) in alive, 60, "the first recorder alive")
+        procs.start([sys.executable, "-m", "world", "--topology", str(T32), "--duration", "600", "--wait-for-recorder", "--run-id", run, "--connect", ep], log=tmp_path / "world.log")
+        wait_for(lambda: "start:" in (tmp_path / "world.log").read_text(), 60, "the world started")
+        read_any = 0
+        for k, delay in enumerate(moments(5003, 0.5, 4.0)):
+            out = tmp_path / f"rec-{k}"
+            rc = _kill_at(zswarm("record", str(T32), "--out", str(out), "--run-id", run, "--connect", ep, "--no-report"), delay, tmp_path / f"rec-{k}.log")
+            assert rc is None, f"recorder {k} ended by itself (exit {rc})"
+            raw = out / ("recording" + mcap_io.RAW_SUFFIX)
+            if not raw.exists():
+                continue  # killed before it opened its file
+            lost: list = []
+            got = list(mcap_io.read(raw, lost))  # never raises on a file a kill cut
+            assert all(x.offset >= 0 and "cut short" in x.text() for x in lost), [x.text() for x in lost]
+            if got:
+                read_any += 1
+                p = subprocess.run(zswarm("report", str(out)), cwd=ROOT, capture_output=True, text=True, timeout=300)
+                assert p.returncode == 1 and "Traceback" not in p.stderr + p.stdout, (k, delay, p.stderr)
+                assert "NOT COMPLETED" in p.stdout
+        assert read_any >= N_KILLS // 2, f"only {read_any} of {N_KILLS} recordings held messages"
