@@ -106,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         # action ends the process at once, even inside a connect wait.
         stop = procutil.stop_on_signals()
         node = AgentNode(program, bus, run, now=lambda: clock[0].now() if clock else 0.0, inc=procutil.incarnation())
+        node.run_over = run_over
         bus.subscribe(keys.ctl(run, "start"), on_start)
         bus.subscribe(keys.ctl(run, "stop"), on_stop)
         bus.watch_alive(keys.alive(run, "world", 0), on_world)

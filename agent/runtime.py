@@ -178,6 +178,9 @@ class AgentNode:
         # Own clock from a tick to its command's put, last 16 (0 in sim, whose ticks take no
         # time): the part of the command's way to the world that the sensors' transit lacks.
         self.send_delays: deque[float] = deque(maxlen=16)
+        # Whether the run is over (set by ``python -m agent``): a neighbour's token going then is
+        # its normal end, not a loss to warn of.
+        self.run_over: Callable[[], bool] = lambda: False
         for j in program.neighbors:  # last: a MemoryBus calls back at once for tokens already up
             bus.watch_alive(keys.alive(run, "agent", j), partial(self._on_neighbor, j))
 
@@ -188,6 +191,9 @@ class AgentNode:
             if self.lost.pop(j, None) is None:
                 return  # its first appearance, not a return
             log.info("agent %d: in-neighbour %d is back at t = %.3f s", self.id, j, t)
+        elif self.run_over():
+            log.info("agent %d: in-neighbour %d left at the run's end (t = %.3f s)", self.id, j, t)
+            return
         else:
             self.lost[j] = t
             log.warning("agent %d: in-neighbour %d lost (liveliness) at t = %.3f s", self.id, j, t)

@@ -128,4 +128,6 @@ def test_fuzz_over_zenoh(procs, tmp_path):
     got = list(read(ensure_recording(out, sc56)))
     malformed = [m for s, m, _ in got if s == "events/malformed"]
     # The recorder's own words for malformed also cover the world's real traffic, all valid.
-    assert len(malformed) == bad_for_recorder, (len(malformed), bad_for_recorder)
+    # Described one by one at first, then counted per key (mcap_io.DESCRIBE_PER_KEY, issue 50).
+    assert sum(m.get("count", 1) for m in malformed) == bad_for_recorder, (len(malformed), bad_for_recorder)
+    assert len(malformed) < bad_for_recorder // 10, len(malformed)

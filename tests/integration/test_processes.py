@@ -182,6 +182,12 @@ def test_a_sigkilled_recorder_leaves_a_report_of_what_was_on_disk(procs, tmp_pat
     s = json.loads((out / "summary.json").read_text())
     assert not s["completed"] and s["exit_codes"]["recorder"] == -9
     assert any("recorder exited with -9" in x for x in s["problems"]) and any("recording ends at t = " in x for x in s["problems"]), s["problems"]
+    # Issue 50: the death was told when it happened, and the agents, which ran to the end and
+    # exited 0, are alive at the end (their final stats went unrecorded, which is said).
+    assert "zswarm run: recorder killed by signal 9 at t = " in log, log[-3000:]
+    for i, a in s["agents"].items():
+        assert a["alive_at_end"] and a["fate"] == "finished; final stats not recorded", (i, a)
+    assert "agent 1: finished; final stats not recorded" in log
     r = s["recording"]
     assert r["cut_short"] and not r["exact"] and 3.0 < r["ends_at_s"] < 7.0, r
     # Built from at least 95 % of what was on disk: the viewer recording holds an entry for
@@ -189,10 +195,10 @@ def test_a_sigkilled_recorder_leaves_a_report_of_what_was_on_disk(procs, tmp_pat
     n_rec = sum(1 for _ in read(out / "recording.mcap"))
     assert n_rec >= 0.95 * n_disk, (n_rec, n_disk)
     assert not (out / "recording.raw.mcap").exists()
-    # And `zswarm report` rebuilds the same summary from the folder.
+    # And `zswarm report` rebuilds the same summary from the folder, and exits 1 as the run did.
     (out / "summary.json").unlink()
     rp = procs.start(zswarm("report", str(out)), log=tmp_path / "report.log")
-    assert rp.wait(120) == 0, (tmp_path / "report.log").read_text()[-2000:]
+    assert rp.wait(120) == 1, (tmp_path / "report.log").read_text()[-2000:]
     s2 = json.loads((out / "summary.json").read_text())
     assert s2["recording"] == r and not s2["completed"] and "NOT COMPLETED" in (tmp_path / "report.log").read_text()
 

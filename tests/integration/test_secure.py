@@ -69,6 +69,19 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
                 for key, payload in forged:
                     s.put(key, payload)
             time.sleep(0.005)
+    # Least privilege (issue 50): agent 4's certificate subscribes to the whole run; it gets its
+    # own sensor packets and the edges into it, and nothing of the truth, of agent 3's sensors
+    # or of any estimate.  It cannot stand in for agent 3's liveliness token either.
+    got: dict[str, int] = {}
+    with zenoh.open(zenoh_config("client", connect=[ep], secure=(str(certs), "agent-4"))) as s:
+        subs = [s.declare_subscriber(k, lambda sample: got.__setitem__(str(sample.key_expr), got.get(str(sample.key_expr), 0) + 1)) for k in (f"{keys.ROOT}/{run}/**", keys.truth(run), keys.sense(run, 3), f"{keys.ROOT}/{run}/est/*")]
+        fake = s.liveliness().declare_token(keys.alive(run, "agent", 3))
+        time.sleep(2.0)
+        fake.undeclare()
+        for sub in subs:
+            sub.undeclare()
+    assert got.get(keys.sense(run, 4), 0) > 50 and got.get(keys.edge(run, 3, 4), 0) > 50, got  # 2 s of 100 Hz
+    assert not [k for k in got if k.split(f"/{run}/", 1)[1].split("/")[0] in ("truth", "est", "cmd", "stats") or k == keys.sense(run, 3)], got
     # zswarm echo and hz on the secured run through its results folder (the recorder's certificate).
     echo = subprocess.run(zswarm("echo", "est/5", "--results", str(out), "--count", "2"), capture_output=True, text=True, timeout=60)
     assert echo.returncode == 0, echo.stderr

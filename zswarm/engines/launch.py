@@ -197,6 +197,20 @@ class Launch:
             c.log.close()
 
 
+def _ended(pid: int) -> str | None:
+    """How child ``pid`` ended ("exited with 1", "killed by signal 9"), None while it runs;
+    without reaping it (its /proc entry, and the CPU time read from it, stay)."""
+    try:
+        info = os.waitid(os.P_PID, pid, os.WEXITED | os.WNOWAIT | os.WNOHANG)
+    except ChildProcessError:
+        return "exited"  # reaped already
+    if info is None:
+        return None
+    if info.si_code == os.CLD_EXITED:
+        return f"exited with {info.si_status}"
+    return f"killed by signal {info.si_status}"
+
+
 def _exited(pid: int, block: bool = False) -> bool:
     """Whether child ``pid`` has exited, without reaping it (its /proc entry stays readable)."""
     try:
@@ -410,13 +424,21 @@ def run(
         la.sample_cpu()
         t_run, cpu0 = time.monotonic(), {id(c): c.cpu_s for c in la.children}
         own0 = resource.getrusage(resource.RUSAGE_SELF)
+        told: set[int] = set()
         while world.proc.poll() is None and not interrupted.is_set():
             time.sleep(faults.wait(0.1))
             faults.poll()
             la.sample_cpu()
+            for c in la.children:  # a death told when it happens, from the child's own exit status
+                if id(c) not in told and c.role != "world" and (how := _ended(c.proc.pid)) is not None and (how != "exited with 0" or c.role == "recorder"):
+                    told.add(id(c))
+                    lost = "; the run goes on, but nothing more of it is recorded" if c.role == "recorder" else ""
+                    print(f"zswarm run: {c.name} {how} at t = {progress[0]:.1f} s{lost}", file=sys.stderr, flush=True)  # even --quiet
             now = time.monotonic()
             if not quiet and (tty or now - last_print > 5.0):
-                n_alive = sum(1 for r, _ in alive if r == "agent")
+                # Alive: its token is up (it is running and connected) and its process, this
+                # launcher's child, has not exited (a token a peer copied cannot hide that).
+                n_alive = sum(1 for r, i in alive if r == "agent" and (c := la.child("agent", i)) is not None and id(c) not in told)
                 line = f"t = {progress[0]:6.1f} / {duration:g} s   agents alive: {n_alive}/{len(sc.ids)}"
                 print(("\r" + line) if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
                 last_print = now
@@ -464,7 +486,7 @@ def run(
     except Exception as exc:  # noqa: BLE001 - the run is over: keep what it left (recording, logs, exit codes)
         problem = procutil.write_problem(exc)
         if problem is not None:  # a full disk, a read-only folder: every process is stopped and reaped already
-            print(f"zswarm run: {one_line(problem)} (the run's processes stopped; what was written is in {out})", file=sys.stderr)
+            print(f"zswarm run: {one_line(problem)} (the run itself ran; every process has exited and is reaped; what was written is in {out})", file=sys.stderr)
             return 1
         # Counters that pass the wire's bounds may still be what the report did not expect.
         say(f"zswarm run: the report failed ({type(exc).__name__}: {exc}); the recording and logs are in {out}")

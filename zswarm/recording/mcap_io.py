@@ -90,10 +90,19 @@ ALIVE_SCHEMA = object_schema(
 )
 MALFORMED_SCHEMA = object_schema(
     "zswarm.Malformed",
-    "A payload under the run's keys that is not a valid zswarm message (dropped)",
-    {"stream": {"type": "string"}, "reason": {"type": "string"}, "size": {"type": "integer"}},
+    "Payloads under the run's keys that are not valid zswarm messages (dropped): one described, or count of them on a key",
+    {"stream": {"type": "string"}, "reason": {"type": "string"}, "size": {"type": "integer"}, "count": {"type": "integer"}},
     ("stream", "reason", "size"),
 )
+# Junk is described one entry a message for the first DESCRIBE_PER_KEY on a key (and
+# DESCRIBE_IN_ALL in all), then counted per key: one entry a key every MALFORMED_EVERY_S of log
+# time with how many came and their bytes.  A flood of 245 000 junk messages left 245 000
+# entries, a recording 3x a clean one's size; keys beyond MAX_JUNK_KEYS share one count.
+DESCRIBE_PER_KEY = 10
+DESCRIBE_IN_ALL = 1000
+MALFORMED_EVERY_S = 1.0
+MAX_JUNK_KEYS = 256
+OTHER_KEYS = "(other keys)"
 
 
 class _WriteErrors(logging.Filter):
@@ -236,6 +245,9 @@ class ViewerOut(_McapOut):
         self.server: Any = None
         self.count = 0
         self.malformed = 0
+        self._described: dict[str, int] = {}  # junk described one by one, per key
+        self._junk: dict[str, list[Any]] = {}  # key -> [count, bytes, first reason] not yet written
+        self._junk_due: int | None = None  # log time to write those counts at
         self._channels: dict[str, Any] = {}
         self.path = path
         self._errors0 = WRITE_ERRORS.count
@@ -271,13 +283,42 @@ class ViewerOut(_McapOut):
             if self.malformed <= 10 or self.malformed % 1000 == 0:
                 log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
             size = len(payload) if isinstance(payload, bytes) else len(wire.encode_message(payload)) if isinstance(payload, wire.Message) else len(_dumps(payload))
-            self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream[:256], "reason": str(exc)[:256], "size": size}, t)
+            self.junk(stream[:256], str(exc)[:256], size, t)
             self.count += 1
             return None
         self.log_json_bytes(stream, m["type"], wire_json.to_json_bytes(m), t)
         self.count += 1
         self.views.on_message(stream, m, t)
         return m
+
+    def junk(self, stream: str, reason: str, size: int, t: int, count: int = 1) -> None:
+        """``count`` malformed messages on ``stream`` at log time ``t``: described on
+        /events/malformed while few, else counted per key (see DESCRIBE_PER_KEY)."""
+        n = self._described.get(stream, 0)
+        if count == 1 and n < DESCRIBE_PER_KEY and len(self._described) < DESCRIBE_IN_ALL and sum(self._described.values()) < DESCRIBE_IN_ALL:
+            self._described[stream] = n + 1
+            self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream, "reason": reason, "size": size}, t)
+            return
+        key = stream if stream in self._junk or len(self._junk) < MAX_JUNK_KEYS else OTHER_KEYS
+        acc = self._junk.setdefault(key, [0, 0, reason])
+        acc[0] += count
+        acc[1] += size
+        if self._junk_due is None:
+            self._junk_due = t + int(MALFORMED_EVERY_S * 1e9)
+        elif t >= self._junk_due:
+            self.flush_junk(t)
+
+    def flush_junk(self, t: int) -> None:
+        """Write the counts of junk not yet written (one entry a key)."""
+        for key, (n, size, reason) in self._junk.items():
+            self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": key, "reason": f"{n} malformed, the first: {reason}"[:256], "size": size, "count": n}, t)
+        self._junk.clear()
+        self._junk_due = None
+
+    def close(self) -> None:
+        if self._junk:
+            self.flush_junk(self._junk_due or 0)
+        super().close()
 
     def alive(self, event: dict[str, Any], t: int) -> None:
         self.log_json(ALIVE_CHANNEL, ALIVE_SCHEMA, event, t)
@@ -421,7 +462,9 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
                     desc = unpack(payload)
                 except Exception:  # noqa: BLE001 - a foreign entry: described below as such
                     desc = {"stream": stream, "reason": "not a description", "size": len(payload)}
-                vo.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, desc, t)
+                if not isinstance(desc, dict):
+                    desc = {"stream": stream, "reason": "not a description", "size": len(payload)}
+                vo.junk(str(desc.get("stream", stream))[:256], str(desc.get("reason", ""))[:256], _int(desc.get("size")), t)
                 vo.malformed += 1
                 vo.count += 1
                 continue
@@ -429,7 +472,7 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
                 try:
                     event = unpack(payload)
                 except Exception as exc:  # noqa: BLE001 - a cut or foreign entry: described, not fatal
-                    vo.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream, "reason": f"not an event: {exc}"[:256], "size": len(payload)}, t)
+                    vo.junk(stream, f"not an event: {exc}"[:256], len(payload), t)
                     vo.malformed += 1
                     vo.count += 1
                     continue
@@ -456,6 +499,10 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
     tmp.replace(out)
     raw.unlink()
     return vo.malformed
+
+
+def _int(x: Any) -> int:
+    return x if isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 2**53 else 0
 
 
 class EmptyRecording(RecordingError):

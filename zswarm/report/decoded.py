@@ -116,7 +116,8 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
             lost_texts.append(str(payload.get("text", "") if isinstance(payload, dict) else "a loss not described")[:400])
             continue
         if topic == MALFORMED_CHANNEL:  # what the recorder (or the transcode) dropped as malformed
-            malformed += 1
+            n = payload.get("count", 1) if isinstance(payload, dict) else 1  # described, or counted on a key
+            malformed += n if isinstance(n, int) and not isinstance(n, bool) and 0 < n < 2**53 else 1
             continue
         kind = topic.split("/")[0]
         if envelopes and kind != "events":

@@ -55,6 +55,9 @@ def footer_lines(summary: dict[str, Any]) -> list[str]:
             f"cpu: every process together {100 * cpu['run_share_of_cores']:.0f} % of the {cpu['cores']} cores over the run "
             f"({cpu['run_cpu_total_s']:.1f} s in {cpu['run_wall_s']:.1f} s; per process in processes.json)"
         )
+    fates = [f"agent {i}: {a['fate']}" for i, a in (summary.get("agents") or {}).items() if a.get("fate", "finished") != "finished"]
+    if fates:  # how the processes ended, from their exit status (the launcher's)
+        lines.append("ended: " + "; ".join(fates) + ("" if all(a.get("fate") != "finished; final stats not recorded" for a in summary["agents"].values()) else " (their counts are from their last recorded stats)"))
     if summary.get("problems"):
         lines.append("NOT COMPLETED: " + "; ".join(summary["problems"]))
     if ov.get("late"):

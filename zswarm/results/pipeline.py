@@ -149,11 +149,11 @@ def summarize(
     for a in sc.agents:
         st = rec.stats.get(("agent", a.id), {})
         rows = errs.get(a.id, np.zeros((0, 4)))
-        # Alive at the end: it stopped cleanly (its final counters were recorded,
-        # which a killed process never sends) and, when known, exited with 0.
-        alive = bool(st.get("final"))
-        if exit_codes is not None and f"agent-{a.id}" in exit_codes:
-            alive = alive and exit_codes[f"agent-{a.id}"] == 0
+        # Alive at the end: from its exit status where the launcher knew it (an agent that
+        # exited 0 finished, whether or not a dead recorder got its final stats), else from
+        # its final counters being recorded (which a killed process never sends).
+        fate = _fate(bool(st.get("final")), exit_codes, f"agent-{a.id}")
+        alive = fate.startswith("finished") if fate is not None else bool(st.get("final"))
         agents[str(a.id)] = {
             "role": a.role,
             "alive_at_end": alive,
@@ -173,6 +173,8 @@ def summarize(
             "inbox_overflow": int(st.get("inbox_overflow", 0)),
             "stale_terms": int(sum(st.get("stale_terms", {}).values())),
         }
+        if fate is not None:
+            agents[str(a.id)]["fate"] = fate
         if "parts" in st:  # each part's achieved rate on the agent's clock
             agents[str(a.id)]["parts"] = st["parts"]
         for link, c in st.get("links", {}).items():
@@ -210,6 +212,18 @@ def summarize(
         "recording": recording,
         "malformed_in_recording": rec.malformed,
     } | ({"warnings": list(sc.warnings) + extra.get("warnings", [])} if sc.warnings or extra.get("warnings") else {})
+
+
+def _fate(final: bool, exit_codes: Mapping[str, int | None] | None, name: str) -> str | None:
+    """How a process ended, from its exit status (known to the launcher; None without it)."""
+    if exit_codes is None or name not in exit_codes:
+        return None
+    code = exit_codes[name]
+    if code == 0:
+        return "finished" if final else "finished; final stats not recorded"
+    if code is None:
+        return "did not exit (killed at the end)"
+    return f"killed by signal {-code}" if code < 0 else f"exited with {code}"
 
 
 # An agent that failed more than this share of its steps did not run the algorithm: the run

@@ -164,30 +164,52 @@ def own_keys(run: str, role: str, ident: int) -> tuple[list[str], list[str]]:
     return puts, [keys.alive(run, role, ident)]
 
 
+def readable_keys(run: str, role: str, ident: int) -> list[str]:
+    """The keys a process of ``run`` may subscribe to and receive: what its role reads and
+    nothing else (least privilege: an agent that could read the truth or another agent's
+    sensors could spoil an estimation experiment unseen).  An agent: its own sensor key, the
+    edges into it, the run's control; the world: the commands and the control; the recorder
+    (and the tools given its certificate: zswarm echo, hz): everything of the run."""
+    ctl = f"{keys.ROOT}/{run}/ctl/*"
+    if role == "agent":
+        return [keys.sense(run, ident), keys.edges_into(run, ident), ctl]
+    if role == "world":
+        return [keys.cmds_all(run), ctl]
+    return [f"{keys.ROOT}/{run}/**"]
+
+
 def acl(run: str, procs: Iterable[tuple[str, int]]) -> dict[str, Any]:
     """The router's ``access_control`` for a run of the processes ``procs`` ((role, id)):
-    deny by default; everyone may subscribe and receive; each may put only its own keys,
-    and ask only whether its own final stats are recorded, which the recorder answers."""
+    deny by default; each may subscribe to and receive only what its role reads
+    (:func:`readable_keys`), put only its own keys, declare only its own liveliness token,
+    and ask only whether its own final stats are recorded, which the recorder answers.
+    Everyone may watch the run's liveliness tokens (who is up)."""
     prefix = f"{keys.ROOT}/{run}/**"
     rules: list[dict[str, Any]] = [
         {
-            "id": "read",
+            "id": "liveliness",
             "permission": "allow",
             "flows": ["ingress", "egress"],
-            "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+            "messages": ["declare_liveliness_subscriber", "liveliness_query"],
             "key_exprs": [prefix],
         },
-        {"id": "deliver", "permission": "allow", "flows": ["egress"], "messages": ["put", "liveliness_token"], "key_exprs": [prefix]},
+        {"id": "tokens", "permission": "allow", "flows": ["egress"], "messages": ["liveliness_token", "declare_subscriber"], "key_exprs": [prefix]},
         # "Are my final stats recorded?" (keys.recorded): asked by each process of its own key
         # (below), served and answered by the recorder only.
         {"id": "recorded", "permission": "allow", "flows": ["egress"], "messages": ["query", "reply", "declare_queryable"], "key_exprs": [keys.recorded_all(run)]},
     ]
     subjects: list[dict[str, Any]] = [{"id": "anyone"}]
-    policies: list[dict[str, Any]] = [{"rules": ["read", "deliver", "recorded"], "subjects": ["anyone"]}]
+    policies: list[dict[str, Any]] = [{"rules": ["liveliness", "tokens", "recorded"], "subjects": ["anyone"]}]
     for role, ident in procs:
         name = name_of(role, ident)
         puts, tokens = own_keys(run, role, ident)
-        own = [{"id": f"put {name}", "permission": "allow", "flows": ["ingress"], "messages": ["put"], "key_exprs": puts}] if puts else []
+        reads = readable_keys(run, role, ident)
+        own = [
+            {"id": f"subscribe {name}", "permission": "allow", "flows": ["ingress"], "messages": ["declare_subscriber"], "key_exprs": reads},
+            {"id": f"receive {name}", "permission": "allow", "flows": ["egress"], "messages": ["put"], "key_exprs": reads},
+        ]
+        if puts:
+            own.append({"id": f"put {name}", "permission": "allow", "flows": ["ingress"], "messages": ["put"], "key_exprs": puts})
         own.append({"id": f"token {name}", "permission": "allow", "flows": ["ingress"], "messages": ["liveliness_token"], "key_exprs": tokens})
         if role == "recorder":
             own.append({"id": f"answer {name}", "permission": "allow", "flows": ["ingress"], "messages": ["declare_queryable", "reply"], "key_exprs": [keys.recorded_all(run)]})
