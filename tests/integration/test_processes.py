@@ -239,8 +239,11 @@ def test_a_full_disk_or_a_read_only_folder_is_one_line_and_nothing_half_written(
     text = (tmp_path / "launcher.log").read_text()
     assert code == 1, text[-3000:]
     assert "Traceback" not in text and "panicked" not in text, text[-3000:]
-    (line,) = [x for x in text.splitlines() if x.startswith("zswarm run:")]
-    assert "No space left on device" in line and str(out) in line, line
+    said = [x for x in text.splitlines() if x.startswith("zswarm run:")]
+    # The recorder's death told when it happened (issue 50), then the one line of the problem.
+    assert len(said) == 2 and said[0].startswith("zswarm run: recorder exited with 1 at t = ") and said[0].endswith("nothing more of it is recorded"), said
+    line = said[1]
+    assert "No space left on device" in line and str(out) in line and "the run itself ran" in line, line
     rec_log = (out / "logs" / "recorder.log").read_text()
     assert "Traceback" not in rec_log and "No space left on device" in rec_log, rec_log[-2000:]
     assert not [c for c in kids if pid_alive(c["pid"])]  # every process stopped
