@@ -26,6 +26,14 @@ from typing import Any
 import numpy as np
 
 from agent.inbox import MAX_NEIGHBOR_EVENTS, Inbox, step_ends
+
+# An in-neighbour whose token is up but whose newest message is stamped more than this long
+# ago (world time; or SILENT_PERIODS of this agent's own period, if longer) is lost
+# (AgentNode.check_silent): 200 ticks at 100 Hz, far beyond a dropout of 0.5 or a delay of
+# a few hundred ms, short beside a run.  Only told (log, stats events); the stale policy
+# deals with old data as before.
+SILENT_S = 2.0
+SILENT_PERIODS = 20
 from agent.tick_view import TickView
 from zswarm.math.kernels import finite_f8
 from zswarm.scenario.algorithm import AlgorithmSpec, Part, Publish, jumps
@@ -148,7 +156,8 @@ class AgentNode:
         # the 1 s lease) is marked lost at once; its terms are stale from then until its token
         # is back (the stale policy decides: "drop" leaves them out, "hold" keeps the last
         # message), and a restarted neighbour's first message is used at once (LinkCounter).
-        self.lost: dict[int, float] = {}  # in-neighbour -> world time its token went
+        self.lost: dict[int, float] = {}  # in-neighbour -> world time its token went (or it fell silent)
+        self.silent: set[int] = set()  # in-neighbours lost to silence while their token was up (check_silent)
         self.neighbor_events: list[tuple[int, float, bool]] = []  # (j, world time, token up), the first MAX_NEIGHBOR_EVENTS
         self.pub_est = bus.publisher(keys.est(run, agent_id))
         self.pub_cmd = bus.publisher(keys.cmd(run, agent_id)) if self.aspec.command else None
@@ -449,6 +458,32 @@ class AgentNode:
             c["agent_jumps"] = self.agent_jump_count
         return c
 
+    def check_silent(self, t_world: float) -> None:
+        """Mark lost an in-neighbour whose token is up but whose messages stopped SILENT_S ago
+        (world time, by their stamps), and back when they come again.  A token is a key any
+        peer can declare: one that copied a neighbour's (its tag included) hid the
+        neighbour's death from its token alone; messages stamped with the run's time keep
+        coming only from a process that runs (issue 50).  Called once a second (run_realtime)."""
+        for j in self.program.neighbors:
+            m = self.inbox.get(f"{j}->{self.id}")
+            if m is None:
+                continue  # nothing yet: its first message decides
+            quiet = t_world - m.t
+            if j in self.silent and quiet <= max(SILENT_S, SILENT_PERIODS / self.program.clock.rate):
+                self.silent.discard(j)
+                self.lost.pop(j, None)
+                log.info("agent %d: in-neighbour %d is sending again at t = %.3f s", self.id, j, t_world)
+                self._neighbor_event(j, t_world, True)
+            elif j not in self.lost and quiet > max(SILENT_S, SILENT_PERIODS / self.program.clock.rate) and not self.run_over():
+                self.silent.add(j)
+                self.lost[j] = t_world
+                log.warning("agent %d: in-neighbour %d lost: silent for %.1f s while its liveliness token is up (a copied token, or a hung process) at t = %.3f s", self.id, j, quiet, t_world)
+                self._neighbor_event(j, t_world, False)
+
+    def _neighbor_event(self, j: int, t: float, up: bool) -> None:
+        if len(self.neighbor_events) < MAX_NEIGHBOR_EVENTS:
+            self.neighbor_events.append((j, t, up))
+
     def publish_stats(self, t_world: float, final: bool = False) -> None:
         counters = self.counters()
         counters["final"] = final
@@ -468,5 +503,6 @@ def run_realtime(node: AgentNode, now: Callable[[], float], sleep_until: Callabl
         t, missed = node.clock.next_tick(now())
         node.missed += missed
         if t >= next_stats:
+            node.check_silent(now())
             node.publish_stats(t)
             next_stats += stats_every

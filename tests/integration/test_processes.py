@@ -267,7 +267,8 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     ctl/stop (agents and recorder stopped, the world ran on, the run read completed), an
     early ctl/start with time scale 1e-3, and liveliness tokens for processes: a killed agent
     was never seen to go.  `zswarm run` now hands its children a secret: run control is
-    signed and tokens are tagged, so none of it takes."""
+    signed and tokens are tagged, so none of it takes.  A copy of a tagged token (issue 50)
+    hides nothing either: the neighbour sees the silence, the launcher its child's exit."""
     import os
 
     import zenoh
@@ -283,6 +284,12 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
         # Tokens for every agent, the recorder and the world, as a peer would declare them.
         fakes = [peer.liveliness().declare_token(f"zswarm/{run}/alive/{r}/{i}") for r, i in [("recorder", 0), ("world", 0), *(("agent", k) for k in range(1, 9))]]
         wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+        # And copies of the real ones, their secret tags included, as the peer sees them (issue 50).
+        seen: set[str] = set()
+        watch = peer.liveliness().declare_subscriber(f"zswarm/{run}/alive/**", lambda sample: seen.add(str(sample.key_expr)), history=True)
+        wait_for(lambda: sum(1 for k in seen if "/alive/agent/" in k) >= 8, 30, "the agents' tokens seen")
+        fakes += [peer.liveliness().declare_token(k) for k in sorted(seen)]
+        watch.undeclare()
         time.sleep(2.0)
         peer.put(keys.ctl(run, "start"), wire.encode("start", 0, 0, 0.0, epoch=time.time(), time_scale=1e-3, duration=8.0, seed=1, run=run))
         peer.put(keys.ctl(run, "stop"), wire.encode("stop", 0, 0, 2.0, reason="forged"))
@@ -300,8 +307,10 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     for i, a in s["agents"].items():
         if i != "3":  # every other agent ran to the end: the forged stop at ~2 s did not take
             assert a["alive_at_end"] and a["last_estimate_t"] > 7.5, (i, a)
-    assert not s["agents"]["3"]["alive_at_end"]
-    assert "in-neighbour 3 lost (liveliness)" in (out / "logs" / "agent-4.log").read_text()
+    assert not s["agents"]["3"]["alive_at_end"] and s["agents"]["3"]["fate"] == "killed by signal 9"
+    # Its copied token stayed up: agent 4 saw it go from its silence, the launcher from its PID.
+    assert "in-neighbour 3 lost: silent for" in (out / "logs" / "agent-4.log").read_text()
+    assert "zswarm run: agent-3 killed by signal 9 at t = " in log
     assert s["malformed_in_recording"] >= 2  # the forged start and stop: recorded, counted as not the run's
 
 
