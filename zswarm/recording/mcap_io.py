@@ -280,7 +280,7 @@ class ViewerOut(_McapOut):
             wire.check_stream(stream, m)  # filed under its key's process, or not at all
         except wire.MessageError as exc:
             self.malformed += 1
-            if self.malformed <= 10 or self.malformed % 1000 == 0:
+            if self.malformed <= 10 or _tenfold(self.malformed):
                 log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
             size = len(payload) if isinstance(payload, bytes) else len(wire.encode_message(payload)) if isinstance(payload, wire.Message) else len(_dumps(payload))
             self.junk(stream[:256], str(exc)[:256], size, t)
@@ -398,7 +398,7 @@ class RawOut(_McapOut):
     def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
         if self.max_bytes is not None and isinstance(payload, bytes) and len(payload) > self.max_bytes:
             self.malformed += 1
-            if self.malformed <= 10 or self.malformed % 1000 == 0:
+            if self.malformed <= 10 or _tenfold(self.malformed):
                 log.warning("dropped an oversized payload on %s (%d bytes; %d malformed so far)", stream, len(payload), self.malformed)
             desc = {"stream": stream[:256], "reason": f"payload of {len(payload)} bytes, over the {self.max_bytes} a message of this run can be", "size": len(payload)}
             payload, stream = msgpack.packb(desc), MALFORMED_CHANNEL
@@ -499,6 +499,14 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
     tmp.replace(out)
     raw.unlink()
     return vo.malformed
+
+
+def _tenfold(n: int) -> bool:
+    """100, 1000, 10 000 ...: when a count of dropped messages is worth a log line again
+    (a flood of 245 000 logged 245 lines at every thousandth)."""
+    while n >= 10 and n % 10 == 0:
+        n //= 10
+    return n == 1
 
 
 def _int(x: Any) -> int:
