@@ -236,9 +236,10 @@ MAX_FAILED_STEPS_SHARE = 0.5
 def run_problems(
     sc: Scenario, rec: Recording, agents: Mapping[str, Mapping[str, Any]], recording: Mapping[str, Any], duration: float, exit_codes: Mapping[str, int | None] | None
 ) -> list[str]:
-    """Why the run is not ``completed`` (summary.json ``problems``; empty: completed): the
-    world's stop missing from the recording, a recording that ends short of the run, the
-    world or the recorder not exiting cleanly, an agent that failed most of its steps."""
+    """Why the run is not ``completed`` (summary.json ``problems``; empty: completed): a
+    damaged recording file, the world's stop missing from the recording, a recording that
+    ends short of the run or has a hole in its middle, the world or the recorder not exiting
+    cleanly, an agent that failed most of its steps."""
     out = [f"the recording is damaged: {x}" for x in rec.lost]
     if not rec.stop_seen:
         out.append("the world's stop is not in the recording (the run was stopped early, or its recording was cut)")
