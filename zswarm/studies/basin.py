@@ -310,8 +310,7 @@ def run_basin(
                         rows_ = got if isinstance(got, list) else [got]
                     except Exception as exc:  # a failed draw (chunk) is recorded, not fatal
                         rows_ = [{"draw": d, "kind": _kind(d, near), "status": "failed", "error": f"{type(exc).__name__}: {exc}"[:300]} for d in ds]
-                    for row in rows_:
-                        rows.append(f, w, {k: row.get(k) for k in cols})
+                    rows.append(f, w, *({k: row.get(k) for k in cols} for row in rows_))
                     finished_n += len(rows_)
                     if advance is not None:
                         advance(len(done) + finished_n)
