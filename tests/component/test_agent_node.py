@@ -294,3 +294,40 @@ def test_the_inbox_is_bounded_under_a_flood():
     bus.put(keys.sense("t", 3), sense_for(sc, 3, 0.0, np.eye(3)))
     node.tick(0.0)
     assert node.steps == 1 and not node.inbox._pending  # and it goes on
+
+
+def _edge_from(sc, j, t):
+    return wire.encode("edge", j, int(round(t * 100)), t, t_local=t, R_hat=np.eye(3), p_hat=np.array(sc.agent(j).p), b=np.array([0.0, 0.0, 1.0]))
+
+
+def test_a_neighbour_silent_while_its_token_stands_is_lost_and_back_when_it_speaks(caplog):
+    """Issue 50: a token is a key any peer can declare, its tag included; one that copied agent
+    1's kept agent 1's death from agent 3.  Messages stamped with the run's time come only from
+    a process that runs: 2 s (SILENT_S) without one, and the neighbour is lost; back when they
+    come again.  Whatever the tokens say: here they are never touched."""
+    from agent.runtime import SILENT_S
+
+    caplog.set_level("INFO")
+    sc, bus, clock, node, _got = setup()
+    for t in np.arange(0.0, 1.0, 0.01):
+        bus.put(keys.edge("t", 1, 3), _edge_from(sc, 1, float(t)))
+        bus.put(keys.edge("t", 2, 3), _edge_from(sc, 2, float(t)))
+    last = 0.99
+    for t in (1.0, 2.0, last + SILENT_S):  # agent 1 says nothing more; agent 2 goes on
+        bus.put(keys.edge("t", 2, 3), _edge_from(sc, 2, t))
+        node.check_silent(t)
+        assert 1 not in node.lost and 2 not in node.lost, (t, node.lost)  # quiet for at most SILENT_S
+    t = last + SILENT_S + 0.01
+    bus.put(keys.edge("t", 2, 3), _edge_from(sc, 2, t))
+    node.check_silent(t)
+    assert set(node.lost) == {1} and node.silent == {1}
+    assert "in-neighbour 1 lost: silent for 2.0 s while its liveliness token is up" in caplog.text
+    node.check_silent(t + 1.0)  # told once
+    assert caplog.text.count("in-neighbour 1 lost") == 1
+    bus.put(keys.edge("t", 1, 3), _edge_from(sc, 1, t + 1.5))
+    node.check_silent(t + 1.5)
+    assert node.lost == {} and node.silent == set() and "in-neighbour 1 is sending again" in caplog.text
+    assert [(j, up) for j, _t, up in node.neighbor_events] == [(1, False), (1, True)]
+    node.run_over = lambda: True  # at the run's end a silence is the end, not a loss
+    node.check_silent(t + 10.0)
+    assert node.lost == {}

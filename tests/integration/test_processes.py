@@ -276,7 +276,9 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     from zswarm.transport import wire
 
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    # 14 s: agent 3 is killed at ~4-6 s, and its silence is seen 2-3 s later (check_silent), with
+    # room to spare on a loaded machine (at 8 s the run ended first once on CI).
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "14", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     info = json.loads((out / "processes.json").read_text())
     run, ep = info["run_id"], info["router"]["endpoint"]
@@ -291,7 +293,7 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
         fakes += [peer.liveliness().declare_token(k) for k in sorted(seen)]
         watch.undeclare()
         time.sleep(2.0)
-        peer.put(keys.ctl(run, "start"), wire.encode("start", 0, 0, 0.0, epoch=time.time(), time_scale=1e-3, duration=8.0, seed=1, run=run))
+        peer.put(keys.ctl(run, "start"), wire.encode("start", 0, 0, 0.0, epoch=time.time(), time_scale=1e-3, duration=14.0, seed=1, run=run))
         peer.put(keys.ctl(run, "stop"), wire.encode("stop", 0, 0, 2.0, reason="forged"))
         time.sleep(1.0)
         # Agent 3 SIGKILLed while a token of its name stands: agent 4 (its out-neighbour) must see it go.
@@ -306,10 +308,13 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     assert s["completed"], s["problems"]
     for i, a in s["agents"].items():
         if i != "3":  # every other agent ran to the end: the forged stop at ~2 s did not take
-            assert a["alive_at_end"] and a["last_estimate_t"] > 7.5, (i, a)
+            assert a["alive_at_end"] and a["last_estimate_t"] > 13.5, (i, a)
     assert not s["agents"]["3"]["alive_at_end"] and s["agents"]["3"]["fate"] == "killed by signal 9"
-    # Its copied token stayed up: agent 4 saw it go from its silence, the launcher from its PID.
-    assert "in-neighbour 3 lost: silent for" in (out / "logs" / "agent-4.log").read_text()
+    # Agent 4 saw it go: from its silence while its copied token stood (AgentNode.check_silent;
+    # tests/component/test_agent_node.py), or from the real token's going where Zenoh told that
+    # apart from the copy (both happened on this machine).  The launcher, from its child's exit.
+    a4 = (out / "logs" / "agent-4.log").read_text()
+    assert "in-neighbour 3 lost: silent for" in a4 or "in-neighbour 3 lost (liveliness)" in a4, a4[-2000:]
     assert "zswarm run: agent-3 killed by signal 9 at t = " in log
     assert s["malformed_in_recording"] >= 2  # the forged start and stop: recorded, counted as not the run's
 

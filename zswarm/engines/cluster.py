@@ -41,14 +41,16 @@ class Runner:
     where: str  # "3 local processes", "the cluster at tcp://...: 4 worker threads"
 
 
-def worker_init() -> None:
+def worker_init(parent: int | None = None) -> None:
     """Local workers leave signals to the parent: Ctrl-C reaches the whole process group, and
     the parent, not each worker, decides what is kept (it kills them)."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
     # A parent killed with SIGKILL cannot kill them, and a spawned worker waiting for its next
     # task never learns (it holds its own end of the task queue): it would wait for ever.
-    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), name="zswarm-parent-watch", daemon=True).start()
+    # ``parent``: the pool owner's PID, given by it: read here, the parent could already be gone
+    # (a kill while the worker was still starting) and its adopter taken for it.
+    threading.Thread(target=_exit_with_parent, args=(os.getppid() if parent is None else parent,), name="zswarm-parent-watch", daemon=True).start()
 
 
 def _exit_with_parent(ppid: int) -> None:
@@ -64,7 +66,7 @@ def executor(jobs: int, cluster: str | None = None) -> Iterator[Runner]:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        pool = ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=worker_init)
+        pool = ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"), initializer=worker_init, initargs=(os.getpid(),))
 
         def kill() -> None:
             for proc in list((getattr(pool, "_processes", None) or {}).values()):  # the executor's own workers
