@@ -464,17 +464,18 @@ class AgentNode:
         peer can declare: one that copied a neighbour's (its tag included) hid the
         neighbour's death from its token alone; messages stamped with the run's time keep
         coming only from a process that runs (issue 50).  Called once a second (run_realtime)."""
+        limit = max(SILENT_S, SILENT_PERIODS / self.program.clock.rate)
         for j in self.program.neighbors:
             m = self.inbox.get(f"{j}->{self.id}")
             if m is None:
                 continue  # nothing yet: its first message decides
             quiet = t_world - m.t
-            if j in self.silent and quiet <= max(SILENT_S, SILENT_PERIODS / self.program.clock.rate):
+            if j in self.silent and quiet <= limit:
                 self.silent.discard(j)
                 self.lost.pop(j, None)
                 log.info("agent %d: in-neighbour %d is sending again at t = %.3f s", self.id, j, t_world)
                 self._neighbor_event(j, t_world, True)
-            elif j not in self.lost and quiet > max(SILENT_S, SILENT_PERIODS / self.program.clock.rate) and not self.run_over():
+            elif j not in self.lost and quiet > limit and not self.run_over():
                 self.silent.add(j)
                 self.lost[j] = t_world
                 log.warning("agent %d: in-neighbour %d lost: silent for %.1f s while its liveliness token is up (a copied token, or a hung process) at t = %.3f s", self.id, j, quiet, t_world)

@@ -246,6 +246,7 @@ class ViewerOut(_McapOut):
         self.count = 0
         self.malformed = 0
         self._described: dict[str, int] = {}  # junk described one by one, per key
+        self._described_n = 0  # and in all (a sum over the keys for every junk message was O(keys) in a flood)
         self._junk: dict[str, list[Any]] = {}  # key -> [count, bytes, first reason] not yet written
         self._junk_due: int | None = None  # log time to write those counts at
         self._channels: dict[str, Any] = {}
@@ -295,8 +296,9 @@ class ViewerOut(_McapOut):
         """``count`` malformed messages on ``stream`` at log time ``t``: described on
         /events/malformed while few, else counted per key (see DESCRIBE_PER_KEY)."""
         n = self._described.get(stream, 0)
-        if count == 1 and n < DESCRIBE_PER_KEY and len(self._described) < DESCRIBE_IN_ALL and sum(self._described.values()) < DESCRIBE_IN_ALL:
+        if count == 1 and n < DESCRIBE_PER_KEY and self._described_n < DESCRIBE_IN_ALL:
             self._described[stream] = n + 1
+            self._described_n += 1
             self.log_json(MALFORMED_CHANNEL, MALFORMED_SCHEMA, {"stream": stream, "reason": reason, "size": size}, t)
             return
         key = stream if stream in self._junk or len(self._junk) < MAX_JUNK_KEYS else OTHER_KEYS

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
 
 from zswarm.transport import procutil
+from zswarm.util import files
 
 
 def report(args: argparse.Namespace) -> int:
@@ -36,10 +36,9 @@ def report(args: argparse.Namespace) -> int:
     prev: dict[str, Any] = {}
     if (args.results / "summary.json").exists():
         try:
-            prev = json.loads((args.results / "summary.json").read_text(encoding="utf-8"))
-        except (ValueError, UnicodeDecodeError) as exc:
-            print(f"warning: {args.results / 'summary.json'}: not JSON ({exc}); made again from the recording", file=sys.stderr)
-        prev = prev if isinstance(prev, dict) else {}
+            prev = files.read_json_object(args.results / "summary.json")
+        except ValueError as exc:
+            print(f"warning: {args.results / 'summary.json'}: not a summary ({exc}); made again from the recording", file=sys.stderr)
     engine = prev.get("engine", "run")
     duration = float(prev.get("duration_s", start["duration"] if start else sc.duration))
     scale = float(prev.get("time_scale", start["time_scale"] if start else 1.0))

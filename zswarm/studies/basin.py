@@ -482,10 +482,8 @@ def command(args: argparse.Namespace) -> int:
     spec_path = out / "basin_def.json"
     if spec_path.exists():
         try:
-            old = json.loads(spec_path.read_text(encoding="utf-8"))
-            if not isinstance(old, dict):
-                raise ValueError("not a JSON object")
-        except (ValueError, UnicodeDecodeError) as exc:
+            old = files.read_json_object(spec_path)
+        except ValueError as exc:
             procutil.fail_usage(f"{spec_path}: not a basin check's definition ({exc}); use another --out")
         diff = sorted(k for k in spec if k not in ("topology", "measure") and old.get(k, [] if k == "set" else None) != spec[k])
         if diff:

@@ -167,7 +167,12 @@ def _column(v: Vary) -> str:
 
 def read_done(path: Path) -> dict[str, dict[str, str]]:
     """The whole rows of an existing sweep.csv by run id (a torn row is left out: zswarm.util.rows)."""
-    return {r["run_id"]: r for r in rows.read(path).rows if r.get("run_id") and r.get("status") in ("ok", "failed")}
+    return _done(rows.read(path).rows)
+
+
+def _done(table_rows: list[dict[str, str]]) -> dict[str, dict[str, str]]:
+    """The finished runs (ok or failed) among sweep.csv's whole rows, by run id."""
+    return {r["run_id"]: r for r in table_rows if r.get("run_id") and r.get("status") in ("ok", "failed")}
 
 
 def _median(xs: list[float]) -> float | None:
@@ -342,7 +347,7 @@ def _open(out: Path, jobs: list[Job], varies: Sequence[Vary], result: Sequence[s
     f, w, table = rows.open_append(csv_path, header)
     if table.torn:
         print(rows.torn_text(csv_path, table.torn), file=sys.stderr)
-    done = {r["run_id"]: r for r in table.rows if r.get("run_id") and r.get("status") in ("ok", "failed")}
+    done = _done(table.rows)
     todo = [j for j in jobs if j.run_id not in done]
     prog = Progress(len(jobs), len(jobs) - len(todo))
     prog.failed = sum(1 for r in done.values() if r["status"] == "failed")

@@ -86,10 +86,8 @@ def command(args: argparse.Namespace) -> int:
     spec_path = out / "sweep.json"
     if spec_path.exists():
         try:
-            old = json.loads(spec_path.read_text(encoding="utf-8"))
-            if not isinstance(old, dict):
-                raise ValueError("not a JSON object")
-        except (ValueError, UnicodeDecodeError) as exc:
+            old = files.read_json_object(spec_path)
+        except ValueError as exc:
             procutil.fail_usage(f"{spec_path}: not a sweep's definition ({exc}); use another --out to start a new sweep")
         # The engines whose rows agree (batched and sim: tests/component/test_sweep.py) may resume each other's sweeps.
         same_rows = {old.get("engine"), spec.get("engine")} <= {"auto", "batched", "sim"}

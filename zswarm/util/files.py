@@ -13,6 +13,7 @@ import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 
 @contextmanager
@@ -47,6 +48,20 @@ def save_png(fig: object, path: Path) -> None:
     """A matplotlib figure as a PNG at ``path``, whole or not at all."""
     with whole(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")  # type: ignore[attr-defined]
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """The JSON object in ``path``; ValueError naming the problem when the file holds none
+    (not UTF-8, not JSON, or JSON of another shape)."""
+    import json
+
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ValueError(str(exc)) from None
+    if not isinstance(obj, dict):
+        raise ValueError("not a JSON object")
+    return obj
 
 
 class RecordingError(Exception):
