@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import ROOT, TOPO
-from tests.integration.conftest import wait_for, zswarm
+from tests.integration.conftest import _children, pid_alive, wait_for, zswarm
 from zswarm.engines.launch import free_port
 from zswarm.recording import mcap_io
 from zswarm.transport import keys
@@ -59,11 +59,9 @@ def _pids_using(path: Path) -> list[int]:
             try:
                 with open(f"/proc/{d}/cmdline", "rb") as f:
                     cmd = f.read()
-                with open(f"/proc/{d}/stat") as f:
-                    state = f.read().rsplit(")", 1)[1].split()[0]
             except OSError:
                 continue
-            if needle in cmd and state != "Z":
+            if needle in cmd and pid_alive(int(d)):
                 out.append(int(d))
     return out
 
@@ -86,24 +84,10 @@ def _descendants(pid: int) -> set[int]:
     out: set[int] = set()
     todo = [pid]
     while todo:
-        p = todo.pop()
-        try:
-            for tid in os.listdir(f"/proc/{p}/task"):
-                with open(f"/proc/{p}/task/{tid}/children") as f:
-                    kids = [int(x) for x in f.read().split()]
-                out.update(kids)
-                todo.extend(kids)
-        except OSError:
-            continue
+        kids = _children(todo.pop())
+        out.update(kids)
+        todo.extend(kids)
     return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def _kill_at(cmd: list[str], delay: float, log: Path) -> int | None:
@@ -120,7 +104,7 @@ def _kill_at(cmd: list[str], delay: float, log: Path) -> int | None:
             os.kill(p.pid, signal.SIGKILL)
             p.wait()
             deadline = time.monotonic() + 60
-            while (left := [k for k in kids if _alive(k)]) and time.monotonic() < deadline:
+            while (left := [k for k in kids if pid_alive(k)]) and time.monotonic() < deadline:
                 time.sleep(0.1)
             for k in left:
                 os.kill(k, signal.SIGKILL)
@@ -165,7 +149,8 @@ def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed
     final = rows.read(out / csv_name)
     assert final.torn == []
     assert _by(final, key) == want  # every run once, whole, as uninterrupted
-    # The moments must have hit the commands at work, not only after they had finished.
+    # The moments must have hit the commands at work, not only after they had finished: most
+    # of them (a command that ends before its kill tests nothing of a kill).
     assert finished_early < N_KILLS // 2, f"{finished_early} of {N_KILLS} commands ended before their kill"
 
 
@@ -209,4 +194,6 @@ def test_a_recorder_killed_at_20_moments_leaves_readable_recordings(procs, tmp_p
                 p = subprocess.run(zswarm("report", str(out)), cwd=ROOT, capture_output=True, text=True, timeout=300)
                 assert p.returncode == 1 and "Traceback" not in p.stderr + p.stdout, (k, delay, p.stderr)
                 assert "NOT COMPLETED" in p.stdout
+        # Most kills came after the recorder's start-up (~1 s of the 0.5-4 s moments): at least half
+        # left a recording to read, else the test would check little.
         assert read_any >= N_KILLS // 2, f"only {read_any} of {N_KILLS} recordings held messages"

@@ -78,7 +78,9 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
         time.sleep(2.0)
         for sub in subs:
             sub.undeclare()
-    assert got.get(keys.sense(run, 4), 0) > 50 and got.get(keys.edge(run, 3, 4), 0) > 50, got  # 2 s of 100 Hz
+    # 2 s of wall time at time scale 0.5: 100 sensor packets (100 Hz of world time) and 100 edge
+    # messages expected; half of that proves the subscriptions work, whatever the machine's load.
+    assert got.get(keys.sense(run, 4), 0) > 50 and got.get(keys.edge(run, 3, 4), 0) > 50, got
     assert not [k for k in got if k.split(f"/{run}/", 1)[1].split("/")[0] in ("truth", "est", "cmd", "stats") or k == keys.sense(run, 3)], got
     # zswarm echo and hz on the secured run through its results folder (the recorder's certificate).
     echo = subprocess.run(zswarm("echo", "est/5", "--results", str(out), "--count", "2"), capture_output=True, text=True, timeout=60)
