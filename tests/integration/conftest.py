@@ -37,15 +37,17 @@ def pid_alive(pid: int) -> bool:
         return False
 
 
-def kill_group(p: subprocess.Popen, timeout: float) -> None:
+def kill_group(p: subprocess.Popen, timeout: float) -> bool:
     """SIGKILL to ``p``'s process group (started with ``start_new_session``) if it still
-    runs, then reap ``p`` by PID, waiting at most ``timeout`` s."""
-    if p.poll() is None:
+    runs, then reap ``p`` by PID, waiting at most ``timeout`` s.  True if it had to kill."""
+    killed = p.poll() is None
+    if killed:
         try:
             os.killpg(p.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
     p.wait(timeout)
+    return killed
 
 
 class Procs:
@@ -74,8 +76,14 @@ class Procs:
         the launcher, so any of those still alive is reported.
         """
         leftovers = []
-        for p in self.started:
-            kill_group(p, 10)
+        killed = [kill_group(p, 10) for p in self.started]
+        if any(killed):
+            # A launcher killed here (a failed test) could not reap its children: they die
+            # with it (the group's SIGKILL, PR_SET_PDEATHSIG), which takes a moment.  A
+            # launcher that ended by itself must have reaped them already: no grace then.
+            deadline = time.monotonic() + 10
+            while any(pid_alive(pid) for pid in self.extra_pids) and time.monotonic() < deadline:
+                time.sleep(0.05)
         for pid in self.extra_pids:
             if pid_alive(pid):
                 leftovers.append(pid)
@@ -208,6 +216,12 @@ def wait_for(pred, timeout: float, what: str, step: float = 0.05, fail=None):
             return v
         time.sleep(step)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}" + (f"; last seen: {fail()}" if fail is not None else ""))
+
+
+def world_started(out: Path, timeout: float = 60) -> None:
+    """Wait until the world of the run in results folder ``out`` has started (its log's "start:")."""
+    log = out / "logs" / "world.log"
+    wait_for(lambda: log.exists() and "start:" in log.read_text(), timeout, "world started")
 
 
 def not_alive(out: Path, s: dict) -> str:

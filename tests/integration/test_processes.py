@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import wait_for, zswarm
+from tests.integration.conftest import wait_for, world_started, zswarm
 from zswarm.engines.launch import free_port
 from zswarm.report import load_recording
 from zswarm.transport import keys
@@ -168,7 +168,7 @@ def test_a_sigkilled_recorder_leaves_a_report_of_what_was_on_disk(procs, tmp_pat
     p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     rec_pid = next(c["pid"] for c in kids if c["role"] == "recorder")
-    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    world_started(out)
     time.sleep(5.0)
     os.kill(rec_pid, signal.SIGKILL)
     wait_for(lambda: not pid_alive(rec_pid), 10, "recorder gone")
@@ -285,7 +285,7 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     with zenoh.open(zenoh_config("client", connect=[ep])) as peer:
         # Tokens for every agent, the recorder and the world, as a peer would declare them.
         fakes = [peer.liveliness().declare_token(f"zswarm/{run}/alive/{r}/{i}") for r, i in [("recorder", 0), ("world", 0), *(("agent", k) for k in range(1, 9))]]
-        wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+        world_started(out)
         # And copies of the real ones, their secret tags included, as the peer sees them (issue 50).
         seen: set[str] = set()
         watch = peer.liveliness().declare_subscriber(f"zswarm/{run}/alive/**", lambda sample: seen.add(str(sample.key_expr)), history=True)
@@ -327,7 +327,7 @@ def test_a_run_whose_world_died_is_not_completed(procs, tmp_path):
     out = tmp_path / "out"
     p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out)), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
-    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    world_started(out)
     time.sleep(3.0)
     os.kill(next(c["pid"] for c in kids if c["role"] == "world"), signal.SIGKILL)
     assert p.wait(120) == 1
@@ -349,7 +349,7 @@ def test_a_recorder_stopped_mid_run_leaves_a_hole_that_is_a_problem(procs, tmp_p
     p = procs.start(zswarm("run", TOPOLOGY, "--duration", "10", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     rec = next(c["pid"] for c in kids if c["role"] == "recorder")
-    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    world_started(out)
     time.sleep(3.0)
     os.kill(rec, signal.SIGSTOP)
     try:

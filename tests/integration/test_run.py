@@ -11,7 +11,7 @@ import time
 import pytest
 
 from tests.conftest import ROOT, TOPO
-from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, zswarm
+from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, world_started, zswarm
 from zswarm.recording.mcap_io import read
 from zswarm.report import load_recording
 from zswarm.scenario import load as load_scenario
@@ -127,7 +127,7 @@ def test_ctrl_c_stops_everything_and_writes_results(procs, tmp_path, sig, want):
     out = tmp_path / "out"
     p = procs.start(zswarm("run", str(TOPO / "thesis-3.2-fixed8.toml"), "--duration", "30", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
-    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    world_started(out)
     time.sleep(2.0)
     t0 = time.monotonic()
     p.send_signal(sig)
@@ -183,7 +183,7 @@ def test_a_killed_launcher_takes_its_children_with_it(procs, tmp_path, when):
     p = procs.start(zswarm("run", str(TOPO / "thesis-3.2-fixed8.toml"), "--duration", "60", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     if when == "running":
-        wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+        world_started(out)
         time.sleep(1.0)
     os.kill(p.pid, signal.SIGKILL)
     p.wait(10)

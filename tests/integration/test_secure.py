@@ -16,7 +16,7 @@ import pytest
 import zenoh
 
 from tests.conftest import TOPO
-from tests.integration.conftest import unconfirmed, wait_for, zswarm
+from tests.integration.conftest import unconfirmed, wait_for, world_started, zswarm
 from zswarm.engines.launch import free_port
 from zswarm.math import so3
 from zswarm.recording.mcap_io import ensure_recording, read
@@ -40,7 +40,7 @@ def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
     info = json.loads((out / "processes.json").read_text())
     ep, run = info["router"]["endpoint"], info["run_id"]
     assert ep.startswith("tls/")
-    wait_for(lambda: (out / "logs" / "world.log").exists() and "start:" in (out / "logs" / "world.log").read_text(), 60, "world started")
+    world_started(out)
     certs = out / "secure"
 
     # A stranger: no client certificate (mTLS), or one signed by another CA.
@@ -151,3 +151,47 @@ def test_secure_router_started_by_hand(procs, tmp_path):
             wait_for(lambda: OWN_INC + 1 in got[keys.edge(run, 4, 5)], 30, "the second batch delivered")
         sub.undeclare()
     assert keys.edge(run, 3, 4) not in got  # not one spoofed message delivered
+
+
+def test_only_agent_i_certificate_declares_agent_i_token(procs, tmp_path):
+    """Issue 50: under --secure a copied liveliness token hides nothing.  An insider with agent
+    8's certificate re-declares every token it has seen (their secret tags included) and
+    agents 3 and 8 are SIGKILLed.  The router's access control drops the copy of agent 3's
+    token (not agent 8's certificate): everyone sees agent 3 go at once, its out-neighbour 4 by
+    liveliness rather than by its silence.  Agent 8's own certificate may declare agent 8's
+    token, so that copy stands and agent 8 is not seen to go: the control that shows the
+    copies were declared and that the access control is what tells them apart (without
+    --secure agent 3's copy stands too: test_processes.py)."""
+    import os
+    import signal
+
+    out = tmp_path / "out"
+    p = procs.start(zswarm("run", T32, "--duration", "10", "--out", str(out), "--quiet", "--secure"), log=tmp_path / "launcher.log")
+    kids = {c["name"]: c["pid"] for c in wait_for(lambda: procs.adopt(out), 60, "processes.json")}
+    info = json.loads((out / "processes.json").read_text())
+    ep, run, certs = info["router"]["endpoint"], info["run_id"], str(out / "secure")
+    world_started(out)
+    events: list[tuple[str, str]] = []  # (kind, role/id) of every liveliness sample
+
+    def on(sample):
+        events.append((str(sample.kind).rsplit(".", 1)[-1], "/".join(str(sample.key_expr).split("/alive/", 1)[1].split("/")[:2])))
+
+    with zenoh.open(zenoh_config("client", connect=[ep], secure=(certs, "recorder"))) as watcher, zenoh.open(zenoh_config("client", connect=[ep], secure=(certs, "agent-8"))) as insider:
+        seen: set[str] = set()
+        watcher.liveliness().declare_subscriber(keys.alive_all(run), lambda sample: (seen.add(str(sample.key_expr)), on(sample)), history=True)
+        # The 8 agents', the world's and the recorder's tokens.
+        wait_for(lambda: len(seen) >= 10, 30, "every token seen", fail=lambda: sorted(seen))
+        copies = [insider.liveliness().declare_token(k) for k in sorted(seen)]
+        time.sleep(1.0)  # the copies reach the router (a round trip on localhost)
+        os.kill(kids["agent-3"], signal.SIGKILL)
+        os.kill(kids["agent-8"], signal.SIGKILL)
+        # A killed process's TCP link closes at once: its tokens go when the router sees that
+        # (the 1 s lease bounds it for a link that stays half-open); 10 s leaves room on a busy machine.
+        wait_for(lambda: ("DELETE", "agent/3") in events, 10, "agent 3's token gone", fail=lambda: events[10:])
+        time.sleep(2.0)  # twice the lease: had agent 8's token gone, it would be seen by now
+        assert ("DELETE", "agent/8") not in events, events[10:]
+        for c in copies:
+            c.undeclare()
+    assert p.wait(120) == 0, (tmp_path / "launcher.log").read_text()[-2000:]
+    a4 = (out / "logs" / "agent-4.log").read_text()
+    assert "in-neighbour 3 lost (liveliness)" in a4, a4[-2000:]
