@@ -155,32 +155,34 @@ def test_most_steps_failed_is_not_a_completed_run(tmp_path):
 def test_junk_payloads_do_not_reach_the_disk(tmp_path, fixed8):
     """300 payloads of 1 MB on est/3 grew the run recorder's raw file by 300 MB in a second.
     The recorder writes a payload as it came only up to what a message of the run can be
-    (record.max_payload); a bigger one is described (stream, size) and counted malformed,
-    in the viewer recording and in summary.json."""
+    (wire.max_payload, by kind: 16 KiB for an estimate); a bigger one is described
+    (stream, size) and counted malformed, in the viewer recording and in summary.json.  Half
+    the junk is 200 KB, which the single 256 KiB limit before 2026-12-07 let through."""
     from zswarm.recording.capture import Recorder
-    from zswarm.recording.mcap_io import max_payload, read, transcode
+    from zswarm.recording.mcap_io import read, transcode
     from zswarm.transport import keys
     from zswarm.transport.bus import MemoryBus
+    from zswarm.transport.wire import max_payload
 
     sc, msgs = fixed8
     bus = MemoryBus()
     path = tmp_path / "recording.raw.mcap"
     rec = Recorder(bus, "r", path, now_ns=lambda: 0, scenario=sc, raw=True)
-    junk = np.random.default_rng(1).bytes(1 << 20)
-    for _ in range(300):
-        bus.put(keys.est("r", 3), junk)
+    big, small = np.random.default_rng(1).bytes(1 << 20), np.random.default_rng(2).bytes(200_000)
+    for k in range(300):
+        bus.put(keys.est("r", 3), big if k % 2 else small)
     edge = wire.encode("edge", 1, 0, 0.5, t_local=0.5, R_hat=np.eye(3), p_hat=np.zeros(3), b=np.array([0.0, 0.0, 1.0]))
     bus.put(keys.edge("r", 1, 3), edge)  # a real message beside them is written
     rec.close()
     assert path.stat().st_size < 100_000 and rec.malformed == 300
-    assert max_payload(8) < len(junk)
+    assert max_payload(8, "est/3") < len(small) < 256 << 10 < len(big)  # the single limit before 2026-12-07: 256 KiB
     assert transcode(path, tmp_path / "recording.mcap", sc) == 300
     got = list(read(tmp_path / "recording.mcap"))
     bad = [m for s, m, _ in got if s == "events/malformed"]
     # The first ten described, the rest counted on their key in one entry (issue 50: a flood
     # left an entry a message); the sizes add up either way.
     assert len(bad) == 11 and all(m["stream"] == "est/3" for m in bad) and bad[-1]["count"] == 290
-    assert sum(m.get("count", 1) for m in bad) == 300 and sum(m["size"] for m in bad) == 300 << 20
+    assert sum(m.get("count", 1) for m in bad) == 300 and sum(m["size"] for m in bad) == 150 * ((1 << 20) + 200_000)
     assert [s for s, _, _ in got if not s.startswith("events/")] == ["edge/1/3"]
     # The report counts what the recorder described (summary.json said 0: the count was dropped).
     assert load_recording([*msgs, *got]).malformed == 300

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import threading
@@ -13,7 +14,7 @@ from typing import Any
 
 import msgpack
 
-from zswarm.recording.mcap_io import ALIVE_CHANNEL, HOLD_RECORDED_S, RECENT_STATS_S, RawOut, ViewerOut, decode, max_payload, unpack
+from zswarm.recording.mcap_io import ALIVE_CHANNEL, HOLD_RECORDED_S, RECENT_STATS_S, RawOut, ViewerOut, decode, unpack
 from zswarm.scenario import Scenario
 from zswarm.transport import keys, run_control, wire
 from zswarm.transport.bus import Bus
@@ -82,13 +83,15 @@ class Recorder:
         meta = dict(metadata or {})
         meta.setdefault("log_time", "world time (ns from 0)" if now_ns is not None else "Unix time (ns), at the recorder's arrival")
         if raw and self.path is not None and live is None:
-            self.out = RawOut(self.path, meta, None if scenario is None else max_payload(len(scenario.ids)))
+            self.out = RawOut(self.path, meta, None if scenario is None else len(scenario.ids))
         elif self.path is not None or live is not None:
             self.out = ViewerOut(self.path, live, scenario, meta, server_name=f"zswarm {run}")
         # A real bus: samples copied and stamped on arrival by the bus's thread, taken by
         # poll() (no callback contending for the GIL with the decoding); in-process: callbacks,
         # stamped at the virtual time they are delivered.
-        self._drain = bus.subscribe_polled(keys.everything(run), self.now_ns) if hasattr(bus, "subscribe_polled") else None
+        # A payload bigger than any message of its kind is junk: only its size is kept.
+        too_big = None if scenario is None else functools.partial(_too_big, run, len(scenario.ids))
+        self._drain = bus.subscribe_polled(keys.everything(run), self.now_ns, too_big=too_big) if hasattr(bus, "subscribe_polled") else None
         if self._drain is None:
             # In-process: the skipped streams are not even delivered (MemoryBus's exclude).
             bus.subscribe(keys.everything(run), self._on_data, exclude=self._skip_keys)
@@ -253,6 +256,11 @@ class Recorder:
                             self.out.message(stream, payload, t)
                     self.count = self.out.count
                 self.out.close()
+
+
+def _too_big(run: str, n_agents: int, key: str, size: int) -> bool:
+    """Is a payload of ``size`` bytes on ``key`` over :func:`zswarm.transport.wire.max_payload` of its stream?"""
+    return size > wire.SMALL_PAYLOAD and size > wire.max_payload(n_agents, keys.stream_of(run, key))
 
 
 def _drop(query: Any) -> None:

@@ -283,7 +283,7 @@ class ViewerOut(_McapOut):
             self.malformed += 1
             if self.malformed <= 10 or _tenfold(self.malformed):
                 log.warning("dropped a malformed message on %s (%d so far): %s", stream, self.malformed, exc)
-            size = len(payload) if isinstance(payload, bytes) else len(wire.encode_message(payload)) if isinstance(payload, wire.Message) else len(_dumps(payload))
+            size = wire.size_of(payload) if isinstance(payload, bytes) else len(wire.encode_message(payload)) if isinstance(payload, wire.Message) else len(_dumps(payload))
             self.junk(stream[:256], str(exc)[:256], size, t)
             self.count += 1
             return None
@@ -347,16 +347,6 @@ class ViewerOut(_McapOut):
 RAW_SUFFIX = ".raw.mcap"
 
 
-def max_payload(n_agents: int) -> int:
-    """The largest payload the run recorder writes as it came (bytes) for a run of
-    ``n_agents``: 256 KiB plus 512 bytes per agent.  A message of the shipped schemes is far
-    smaller (an estimate or an edge message under 2 KB, truth and the sensor maps under 300
-    bytes per agent, stats counters under 200 bytes per link); a bigger payload is described
-    on ``/events/malformed`` (its size) and not written: 300 junk payloads of 1 MB on est/3
-    had grown the raw file by 300 MB in a second."""
-    return (256 << 10) + 512 * max(n_agents, 1)
-
-
 @functools.cache
 def _raw_schema() -> Any:
     """msgpack is self-describing: the schema of a raw channel only names the wire format."""
@@ -370,7 +360,9 @@ class RawOut(_McapOut):
     file (the format :func:`read` reads as "earlier recordings"); :func:`transcode`
     makes the viewer recording of it."""
 
-    def __init__(self, path: Path, metadata: dict[str, str] | None = None, max_bytes: int | None = None) -> None:
+    def __init__(self, path: Path, metadata: dict[str, str] | None = None, n_agents: int | None = None) -> None:
+        """``n_agents``: a payload over :func:`zswarm.transport.wire.max_payload` of its
+        stream is described, not written (None: every payload is written)."""
         import foxglove
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
@@ -394,15 +386,17 @@ class RawOut(_McapOut):
         self._channels: dict[str, Any] = {}
         self.count = 0
         self.malformed = 0  # oversized ones here; the others are counted when transcoded
-        self.max_bytes = max_bytes
+        self.n_agents = n_agents
         self.live_port = None
 
     def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
-        if self.max_bytes is not None and isinstance(payload, bytes) and len(payload) > self.max_bytes:
+        if isinstance(payload, bytes) and (isinstance(payload, wire.Oversized) or (self.n_agents is not None and len(payload) > wire.SMALL_PAYLOAD and len(payload) > wire.max_payload(self.n_agents, stream))):
+            size = wire.size_of(payload)
             self.malformed += 1
             if self.malformed <= 10 or _tenfold(self.malformed):
-                log.warning("dropped an oversized payload on %s (%d bytes; %d malformed so far)", stream, len(payload), self.malformed)
-            desc = {"stream": stream[:256], "reason": f"payload of {len(payload)} bytes, over the {self.max_bytes} a message of this run can be", "size": len(payload)}
+                log.warning("dropped an oversized payload on %s (%d bytes; %d malformed so far)", stream, size, self.malformed)
+            most = "" if self.n_agents is None else f", over the {wire.max_payload(self.n_agents, stream)} a message of this run's {stream.split('/', 1)[0]} can be"
+            desc = {"stream": stream[:256], "reason": f"payload of {size} bytes{most}", "size": size}
             payload, stream = msgpack.packb(desc), MALFORMED_CHANNEL
         ch = self._channels.get(stream)
         if ch is None:

@@ -203,7 +203,14 @@ class MemorySession:
 
 # --------------------------------------------------------------------------- Zenoh
 
-_POLLED_FIFO = 1024  # samples in Zenoh's FIFO of subscribe_polled (its thread empties it as they come)
+MAX_MESSAGE = 8 << 20  # bytes: what wire.max_payload allows a message of a run of 8000 agents
+# Samples in Zenoh's FIFO of subscribe_polled (its thread empties it as they come).  They wait
+# there only while that thread gets no CPU or no GIL; a full FIFO makes Zenoh wait (the kernel's
+# socket buffer and the router's queue take the backlog: ~5000 messages of a run), nothing is
+# lost for it.  With up to MAX_MESSAGE a sample, it bounds what a flood can pile up there:
+# 16 x 8 MiB.  It was 1024: with a core kept busy, 200 KB junk payloads piled up there (the
+# recorder's RSS +131 MiB) before the thread could reduce them to their size.
+_POLLED_FIFO = 16
 LEASE_MS = 1000  # Zenoh's session lease here (Zenoh's default is 10 s): see zenoh_config
 
 
@@ -243,6 +250,14 @@ def zenoh_config(
     # batches (the maximum) absorb such stalls; DROP still bounds the latency.
     for prio in ("real_time", "data"):
         conf.insert_json5(f"transport/link/tx/queue/size/{prio}", "16")
+    # A message over MAX_MESSAGE is dropped by Zenoh while it reassembles it (by default it
+    # would reassemble up to 1 GiB).  Zenoh's shared memory off: no message of a run comes
+    # near its 3 KiB threshold (truth at 20 agents would), and with it on a peer's big
+    # payloads made the recorder map the peer's 16 MiB pools (34 MiB of /dev/shm in its RSS
+    # after 300 junk payloads of 1 MiB, measured 2026-12-07); it is no use across hosts or
+    # containers either.
+    conf.insert_json5("transport/link/rx/max_message_size", str(MAX_MESSAGE))
+    conf.insert_json5("transport/shared_memory/enabled", "false")
     if secure is not None:  # (certificate folder, this process's name): zswarm/transport/secure.py
         from pathlib import Path
 
@@ -310,7 +325,7 @@ class ZenohBus:
         self._objs.append(self.session.declare_subscriber(key_expr, handler))
 
     def subscribe_polled(
-        self, key_expr: str, stamp: Callable[[], int], capacity: int = 1 << 18, max_bytes: int = 64 << 20
+        self, key_expr: str, stamp: Callable[[], int], capacity: int = 1 << 18, max_bytes: int = 64 << 20, too_big: Callable[[str, int], bool] | None = None
     ) -> Callable[[], list[tuple[str, bytes, int]]]:
         """Samples of ``key_expr`` as ``(key, payload, stamp())``, copied off Zenoh's receive
         buffers as they arrive by a thread of this bus; the returned function takes what
@@ -331,6 +346,10 @@ class ZenohBus:
         stops taking them, Zenoh's FIFO (a few batches) fills, Zenoh waits, and the router
         drops for this subscriber only (DROP congestion control).  (300 junk payloads of
         1 MB in a second took the recorder from 72 to 338 MB.)
+
+        A payload ``too_big(key, size)`` is not copied: a :class:`zswarm.transport.wire.Oversized`
+        (its size) stands for it, so junk bigger than any message of its kind costs nothing
+        while it waits and never stops the thread.
         """
         sub = self.session.declare_subscriber(key_expr, self._z.handlers.FifoChannel(_POLLED_FIFO))
         self._objs.append(sub)
@@ -344,8 +363,9 @@ class ZenohBus:
                     sample = fifo.recv()
                 except Exception:  # noqa: BLE001 - ZError "channel is empty and closed": the bus closed
                     return
-                payload = sample.payload.to_bytes()
-                arrived.append((str(sample.key_expr), payload, stamp()))
+                key, n = str(sample.key_expr), len(sample.payload)
+                payload = wire.Oversized(n) if too_big is not None and too_big(key, n) else sample.payload.to_bytes()
+                arrived.append((key, payload, stamp()))
                 size[0] += len(payload)
                 del sample  # its receive batch goes back to Zenoh now, not at the next sample
                 while (len(arrived) >= capacity or size[0] - size[1] >= max_bytes) and not self._closed:

@@ -282,3 +282,43 @@ def check_stream(stream: str, m: Mapping[str, Any] | Msg) -> None:
         raise MessageError(f"src {m.get('src')!r} on {stream}, whose sender is {k.src}")
     if k.kind == "stats" and m.get("role") != k.role:
         raise MessageError(f"role {m.get('role')!r} on {stream}")
+
+
+class Oversized(bytes):
+    """What :meth:`zswarm.transport.bus.ZenohBus.subscribe_polled` hands on for a payload
+    over its ``max_sample``: no bytes (the payload is never copied out of Zenoh's buffers,
+    which go back at once), only its :attr:`size`.  Empty, so it decodes as nothing: a
+    malformed message."""
+
+    size: int
+
+    def __new__(cls, size: int) -> Oversized:
+        o = super().__new__(cls, b"")
+        o.size = size
+        return o
+
+
+def size_of(payload: bytes) -> int:
+    """A payload's size in bytes, an :class:`Oversized` one's as it came."""
+    return payload.size if isinstance(payload, Oversized) else len(payload)
+
+
+# The largest payload of a message, by kind.  In the shipped schemes (measured on the shipped
+# scenarios, 5-8 agents, 2026-12-07) an estimate is under 350 bytes, an edge message under 300,
+# a command under 120, run control under 110; truth about 160 bytes an agent, a sensor packet
+# under 360, stats under 1.4 KB (their counters grow with the links into an agent).
+SMALL_PAYLOAD = 16 << 10  # est, edge, cmd, ctl, events: 45x the largest seen
+PER_AGENT_PAYLOAD = 1 << 10  # truth, sense, stats: SMALL_PAYLOAD + this an agent
+SCALED_KINDS = frozenset({"truth", "sense", "stats"})
+
+
+def max_payload(n_agents: int, stream: str | None = None) -> int:
+    """The largest payload (bytes) of ``stream`` (``est/3``, ``truth``, …; None: of any stream)
+    in a run of ``n_agents``: what the run recorder writes as it came.  A bigger payload is
+    junk: described on ``/events/malformed`` (its size), counted, never written, and never
+    copied out of Zenoh (:class:`Oversized`).  Until 2026-12-07 one
+    limit of 256 KiB held for every stream: 3000 junk payloads of 200 KB on est/3 were written
+    (1.8 GB of raw recording) and took the recorder to 490 MiB."""
+    if stream is None or stream.split("/", 1)[0] in SCALED_KINDS:
+        return SMALL_PAYLOAD + PER_AGENT_PAYLOAD * max(n_agents, 1)
+    return SMALL_PAYLOAD
