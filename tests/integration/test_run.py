@@ -155,11 +155,12 @@ def test_a_run_that_cannot_keep_up_says_so(procs, tmp_path):
     s = json.loads((out / "summary.json").read_text())
     # Every process ran to the end.  So overloaded a run may also leave the recorder behind: the
     # router drops what its queue to the recorder cannot hold (congestion control DROP) and the
-    # recording ends short of the run (CI, 2026-12-06: at 2.52 s of 3), which the run reports as
-    # NOT COMPLETED with exit 1.  That is a true report of this machine, not a failure of the run:
-    # accepted when it is the only problem.
+    # recording ends short of the run (CI, 2026-12-06: at 2.52 s of 3) or has holes in it (with a
+    # core kept busy: 1-10 holes of 0.1 s, with the recorder's FIFO at 16 samples as at 1024; or a
+    # world descheduled that long), which the run reports as NOT COMPLETED with exit 1.  That is a
+    # true report of this machine, not a failure of the run: accepted when it is the only problem.
     assert all(v == 0 for v in s["exit_codes"].values()), (s["exit_codes"], log)
-    assert code == 0 or (code == 1 and s["problems"] and all("recording ends at" in p for p in s["problems"])), log
+    assert code == 0 or (code == 1 and s["problems"] and all("recording ends at" in p or "the recording has" in p and "hole" in p for p in s["problems"])), log
     ov = s["overload"]
     assert ov["overloaded"] and ov["reasons"], ov
     # Which process fell behind is the machine's (here the agents missed 11-90 % of their ticks
