@@ -286,7 +286,7 @@ def check_stream(stream: str, m: Mapping[str, Any] | Msg) -> None:
 
 class Oversized(bytes):
     """What :meth:`zswarm.transport.bus.ZenohBus.subscribe_polled` hands on for a payload
-    over its ``max_sample``: no bytes (the payload is never copied out of Zenoh's buffers,
+    its ``too_big`` refuses: no bytes (the payload is never copied out of Zenoh's buffers,
     which go back at once), only its :attr:`size`.  Empty, so it decodes as nothing: a
     malformed message."""
 
@@ -316,9 +316,9 @@ def max_payload(n_agents: int, stream: str | None = None) -> int:
     """The largest payload (bytes) of ``stream`` (``est/3``, ``truth``, …; None: of any stream)
     in a run of ``n_agents``: what the run recorder writes as it came.  A bigger payload is
     junk: described on ``/events/malformed`` (its size), counted, never written, and never
-    copied out of Zenoh (:class:`Oversized`).  Until 2026-12-07 one
-    limit of 256 KiB held for every stream: 3000 junk payloads of 200 KB on est/3 were written
-    (1.8 GB of raw recording) and took the recorder to 490 MiB."""
+    copied out of Zenoh (:class:`Oversized`).  Until 2026-12-07 one limit of 256 KiB held for
+    every stream: 3000 junk payloads of 200 KB on est/3 were written (1.8 GB of raw
+    recording) and took the recorder to 490 MiB."""
     if stream is None or stream.split("/", 1)[0] in SCALED_KINDS:
         return SMALL_PAYLOAD + PER_AGENT_PAYLOAD * max(n_agents, 1)
     return SMALL_PAYLOAD
