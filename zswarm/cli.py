@@ -461,7 +461,7 @@ def main(argv: list[str] | None = None) -> int:
         return run(args)
     except KeyboardInterrupt:  # Ctrl-C where the command does not stop on it by itself (sim writes what it simulated first)
         print(f"zswarm {args.cmd}: interrupted", file=sys.stderr)
-        return 130
+        return procutil.interrupted_code()  # 130, or 143 for a SIGTERM the command caught
     except BrokenPipeError:  # its output piped into `head`, which has read enough: not a failure
         import os
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import heapq
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -52,6 +53,7 @@ def simulate(
     keep: list[tuple[str, bytes, int]] | None = None,
     times: dict[str, float] | None = None,
     rerun: str | None = None,
+    stop: threading.Event | None = None,
 ) -> Path | list[tuple[str, bytes, int]]:
     """Run ``scenario`` for ``duration`` s of world time; return the recording path.
 
@@ -69,6 +71,8 @@ def simulate(
     need not read the file back; left empty otherwise.  ``times``: filled with the wall
     time of the run (``run_s``) and of writing the recording after it (``record_s``).
     ``rerun``: stream the run to the Rerun viewer at that URL as it is simulated.
+    ``stop``: once set (looked at every second of world time), what was simulated is written
+    and KeyboardInterrupt raised, as Ctrl-C does by itself.
     """
     t_start = time.perf_counter()
     bus = MemoryBus(objects=objects)
@@ -164,6 +168,8 @@ def simulate(
                 next_flush += 1.0
                 if progress:
                     progress(t)
+                if stop is not None and stop.is_set():
+                    raise KeyboardInterrupt
     except BaseException:
         # Ctrl-C (KeyboardInterrupt) or a failure: what was simulated up to here is written
         # (the recorder holds it until close), then the exception goes on.
@@ -210,8 +216,12 @@ def command(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     kept: list[tuple[str, bytes, int]] = []
     times: dict[str, float] = {}
+    # Ctrl-C and SIGTERM set an event the loop looks at, rather than Ctrl-C's KeyboardInterrupt
+    # landing wherever the main thread is: on CI (2026-12-07) a sim SIGINTed 1 s after its start
+    # ran on for 60 s until SIGKILLed (the interrupt taken inside a library, it seems, and lost).
+    stop = procutil.stop_on_signals()
     try:
-        recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times, rerun=args.rerun)
+        recorded = simulate(sc, out, duration, seed, progress=None if args.quiet else progress, lean=args.lean, record=not args.no_recording, keep=kept, times=times, rerun=args.rerun, stop=stop)
     finally:
         bar.close()  # the next line (the table, or "interrupted") on its own
     wall = time.perf_counter() - t0
