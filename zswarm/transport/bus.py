@@ -205,11 +205,13 @@ class MemorySession:
 
 MAX_MESSAGE = 8 << 20  # bytes: what wire.max_payload allows a message of a run of 8000 agents
 # Samples in Zenoh's FIFO of subscribe_polled (its thread empties it as they come).  They wait
-# there only while that thread gets no CPU or no GIL; a full FIFO makes Zenoh wait (the kernel's
-# socket buffer and the router's queue take the backlog: ~5000 messages of a run), nothing is
-# lost for it.  With up to MAX_MESSAGE a sample, it bounds what a flood can pile up there:
-# 16 x 8 MiB.  It was 1024: with a core kept busy, 200 KB junk payloads piled up there (the
-# recorder's RSS +131 MiB) before the thread could reduce them to their size.
+# there only while that thread gets no CPU or no GIL, or has max_bytes waiting; a full FIFO
+# makes Zenoh stop reading the link (the kernel's socket buffer and the router's queue take
+# the backlog: ~5000 messages of a run), nothing is lost for it unless that lasts past the
+# lease (1 s: keep-alives unread, the link is closed).  With up to MAX_MESSAGE a sample, it
+# bounds what a flood can pile up there: 16 x 8 MiB.  It was 1024: with a core kept busy,
+# 200 KB junk payloads piled up there (the recorder's RSS +131 MiB) before the thread could
+# reduce them to their size.
 _POLLED_FIFO = 16
 LEASE_MS = 1000  # Zenoh's session lease here (Zenoh's default is 10 s): see zenoh_config
 
