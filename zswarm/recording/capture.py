@@ -260,7 +260,7 @@ class Recorder:
 
 def _too_big(run: str, n_agents: int, key: str, size: int) -> bool:
     """Is a payload of ``size`` bytes on ``key`` over :func:`zswarm.transport.wire.max_payload` of its stream?"""
-    return size > wire.SMALL_PAYLOAD and size > wire.max_payload(n_agents, keys.stream_of(run, key))
+    return wire.over_limit(n_agents, keys.stream_of(run, key), size)
 
 
 def _drop(query: Any) -> None:

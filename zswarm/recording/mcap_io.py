@@ -390,7 +390,7 @@ class RawOut(_McapOut):
         self.live_port = None
 
     def message(self, stream: str, payload: bytes | dict[str, Any], t: int) -> None:
-        if isinstance(payload, bytes) and (isinstance(payload, wire.Oversized) or (self.n_agents is not None and len(payload) > wire.SMALL_PAYLOAD and len(payload) > wire.max_payload(self.n_agents, stream))):
+        if isinstance(payload, bytes) and (isinstance(payload, wire.Oversized) or (self.n_agents is not None and wire.over_limit(self.n_agents, stream, len(payload)))):
             size = wire.size_of(payload)
             self.malformed += 1
             if self.malformed <= 10 or _tenfold(self.malformed):

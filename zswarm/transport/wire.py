@@ -322,3 +322,9 @@ def max_payload(n_agents: int, stream: str | None = None) -> int:
     if stream is None or stream.split("/", 1)[0] in SCALED_KINDS:
         return SMALL_PAYLOAD + PER_AGENT_PAYLOAD * max(n_agents, 1)
     return SMALL_PAYLOAD
+
+
+def over_limit(n_agents: int, stream: str, size: int) -> bool:
+    """Is a payload of ``size`` bytes on ``stream`` over :func:`max_payload`?  (Most are far
+    under SMALL_PAYLOAD: the stream is looked at only past it.)"""
+    return size > SMALL_PAYLOAD and size > max_payload(n_agents, stream)
