@@ -161,13 +161,13 @@ def test_the_recorders_memory_under_junk_floods_stays_bounded_and_junk_is_counte
     see docs/development.md."""
     import threading
 
-    from zswarm.transport.bus import _POLLED_FIFO, MAX_MESSAGE
+    from zswarm.transport.bus import _POLLED_FIFO, MAX_MESSAGE, POLLED_MAX_BYTES
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     procs.start(zswarm("router", "--listen", ep), log=tmp_path / "router.log")
     out, sc = tmp_path / "out", load(T32)
     alive: set = set()
-    bound_mib = 64 + (_POLLED_FIFO + 1) * MAX_MESSAGE / 2**20 + 2 * 4 + 16
+    bound_mib = (POLLED_MAX_BYTES + (_POLLED_FIFO + 1) * MAX_MESSAGE) / 2**20 + 2 * 4 + 16
     floods = [(1_000_000, 300), (200_000, 3000), (16_000, 20_000), (20_000_000, 10)]
     assert wire.max_payload(len(sc.ids), "est/3") < 200_000 and 16_000 < wire.max_payload(len(sc.ids), "est/3") and MAX_MESSAGE < 20_000_000
     with ZenohBus(zenoh_config("client", connect=[ep])) as bus:

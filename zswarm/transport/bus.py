@@ -213,6 +213,7 @@ MAX_MESSAGE = 8 << 20  # bytes: what wire.max_payload allows a message of a run 
 # 200 KB junk payloads piled up there (the recorder's RSS +131 MiB) before the thread could
 # reduce them to their size.
 _POLLED_FIFO = 16
+POLLED_MAX_BYTES = 64 << 20  # payload bytes subscribe_polled's thread holds at most before it stops taking samples
 LEASE_MS = 1000  # Zenoh's session lease here (Zenoh's default is 10 s): see zenoh_config
 
 
@@ -327,7 +328,7 @@ class ZenohBus:
         self._objs.append(self.session.declare_subscriber(key_expr, handler))
 
     def subscribe_polled(
-        self, key_expr: str, stamp: Callable[[], int], capacity: int = 1 << 18, max_bytes: int = 64 << 20, too_big: Callable[[str, int], bool] | None = None
+        self, key_expr: str, stamp: Callable[[], int], capacity: int = 1 << 18, max_bytes: int = POLLED_MAX_BYTES, too_big: Callable[[str, int], bool] | None = None
     ) -> Callable[[], list[tuple[str, bytes, int]]]:
         """Samples of ``key_expr`` as ``(key, payload, stamp())``, copied off Zenoh's receive
         buffers as they arrive by a thread of this bus; the returned function takes what
