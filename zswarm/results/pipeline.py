@@ -152,7 +152,7 @@ def summarize(
         # Alive at the end: from its exit status where the launcher knew it (an agent that
         # exited 0 finished, whether or not a dead recorder got its final stats), else from
         # its final counters being recorded (which a killed process never sends).
-        fate = _fate(bool(st.get("final")), exit_codes, f"agent-{a.id}")
+        fate = _fate(bool(st.get("final")), exit_codes, newest_process(exit_codes, f"agent-{a.id}"))
         alive = fate.startswith("finished") if fate is not None else bool(st.get("final"))
         agents[str(a.id)] = {
             "role": a.role,
@@ -212,6 +212,16 @@ def summarize(
         "recording": recording,
         "malformed_in_recording": rec.malformed,
     } | ({"warnings": list(sc.warnings) + extra.get("warnings", [])} if sc.warnings or extra.get("warnings") else {})
+
+
+def newest_process(exit_codes: Mapping[str, int | None] | None, name: str) -> str:
+    """The launcher's name of the newest process of ``name`` (``agent-3``): ``name`` itself while
+    it runs to the end, else the killed one of the highest number (``agent-3~killed2``: the
+    launcher renames a process a ``kill`` fault ends, zswarm/engines/launch.py FaultRunner)."""
+    if exit_codes is None or name in exit_codes:
+        return name
+    killed = [(int(k.rsplit("~killed", 1)[1]), k) for k in exit_codes if k.startswith(f"{name}~killed") and k.rsplit("~killed", 1)[1].isdigit()]
+    return max(killed)[1] if killed else name
 
 
 def _fate(final: bool, exit_codes: Mapping[str, int | None] | None, name: str) -> str | None:
