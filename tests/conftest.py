@@ -8,6 +8,10 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+# tests/keepup.py: reruns only for a run this machine could not keep up with (on the exception's
+# type), and every skip a failure; pytester: the tests of that plugin run pytest inside pytest.
+pytest_plugins = ["tests.keepup", "pytester"]
+
 ROOT = Path(__file__).resolve().parents[1]
 TOPO = ROOT / "topologies"
 
@@ -53,43 +57,6 @@ def fixed8_text() -> str:
 # against 23.6 of 25.3 without it) and make test took 31.0 min instead of 30.6, so it stays in
 # the component layer.
 BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py"})
-
-
-# In CI (CI=true) a skipped test is a failure: the tests that skip are those whose real part
-# (a Docker engine, network namespaces, Chromium) could not be had, and CI's machine must have
-# them; a green with one of them skipped would say that Docker or netns works when nothing
-# checked it.  On a developer's machine a skip stays a skip, with its reason.
-IN_CI = os.environ.get("CI") == "true"
-# A check that an overloaded real-time run could not make (the run did not keep up, so its
-# numbers are not the equations' alone) is recorded on the test's report under this name
-# (tests/integration/conftest.py, fixture `downgrade`) and counted at the end of the run.
-DOWNGRADED = "downgraded_by_overload"
-
-
-@pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_makereport(item, call):
-    outcome = yield
-    rep = outcome.get_result()
-    if IN_CI and rep.skipped and not hasattr(rep, "wasxfail"):
-        reason = rep.longrepr[2] if isinstance(rep.longrepr, tuple) else str(rep.longrepr)
-        rep.outcome = "failed"
-        rep.longrepr = f"skipped in CI (CI=true), where every real part this test needs must be there: {reason}"
-
-
-def pytest_terminal_summary(terminalreporter):
-    """The count of checks that overloaded runs could not make (0 on a machine that keeps up)."""
-    reports = [r for cat in terminalreporter.stats.values() for r in cat if getattr(r, "when", None) == "call"]
-    if not any("tests/integration/" in r.nodeid for r in reports):
-        return
-    notes = [(r.nodeid, v) for r in reports for k, v in getattr(r, "user_properties", ()) if k == DOWNGRADED]
-    terminalreporter.write_line(f"checks downgraded by overload: {len(notes)}")
-    for nodeid, why in notes:
-        terminalreporter.write_line(f"  {nodeid}: {why}")
-    # The runs made again because the machine did not keep up (tests/layers.sh, --only-rerun), with why.
-    reruns = terminalreporter.stats.get("rerun", [])
-    terminalreporter.write_line(f"tests run again after an overloaded run: {len(reruns)}")
-    for r in reruns:
-        terminalreporter.write_line(f"  {r.nodeid}: {str(r.longrepr).strip().splitlines()[-1][:300]}")
 
 
 def pytest_collection_modifyitems(config, items):

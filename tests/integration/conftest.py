@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import ROOT
+from tests.keepup import MachineDidNotKeepUp
 
 pytestmark = pytest.mark.integration
 
@@ -289,11 +290,23 @@ beside ``stress-ng --cpu 1`` (2026-12-03/05), the runs that call it keep up."""
 
 
 def fail_if_overloaded(s: dict, what: str) -> None:
-    """Fail the test when the run ``s`` (summary.json) did not keep up: ``what`` (the equations'
-    checks the test exists for) cannot be judged on it."""
+    """Raise :class:`~tests.keepup.MachineDidNotKeepUp` when the run ``s`` (summary.json) did not
+    keep up: ``what`` (the equations' checks the test exists for) cannot be judged on it.  The
+    test runs again (tests/keepup.py) and fails, naming ``what``, if it never keeps up."""
     ov = s["overload"]
     if ov["overloaded"]:
-        pytest.fail(f"this machine did not keep up with the run ({'; '.join(ov['reasons'])}), so {what} could not be checked against the equations", pytrace=False)
+        raise MachineDidNotKeepUp(f"this machine did not keep up with the run ({'; '.join(ov['reasons'])}), so {what} could not be checked against the equations")
+
+
+def require_kept_up(s: dict, what: str) -> None:
+    """Raise :class:`~tests.keepup.MachineDidNotKeepUp` when the run ``s`` did not keep up or its
+    sensor packets came late (``overload.late``, from the world's own lateness): ``what``, a check
+    of the machine's capacity (a publishing rate, a command's age), could not be made on it.  Call
+    it after the checks that hold on any run, so that a real failure among them is not rerun."""
+    ov = s["overload"]
+    why = ov["reasons"] + ov.get("late", [])
+    if why:
+        raise MachineDidNotKeepUp(f"this machine did not keep up with the run ({'; '.join(why)}), so {what} could not be checked")
 
 
 def assert_run_matches_sim(s: dict, ss: dict, keys: tuple[str, ...], launcher_log: Path) -> None:
@@ -310,20 +323,6 @@ def assert_run_matches_sim(s: dict, ss: dict, keys: tuple[str, ...], launcher_lo
         # pose observer's mean attitude error 9.5e-7 on sim, 1.1e-6 to 4.8e-6 over runs that
         # kept up).  The convergence study takes the same 1e-5 (test_convergence_study).
         assert max(a, b) < FLOOR or max(a, b) / max(min(a, b), 1e-300) <= SIM_RUN_TOL, (k, a, b, ov)
-
-
-@pytest.fixture
-def downgrade(request):
-    """``downgrade(what, s)``: record that the check ``what`` was not made because the run ``s``
-    did not keep up (a check of the machine's capacity, not of the equations: a publishing
-    rate, a command's age).  The records are counted at the end of the run (tests/conftest.py)."""
-    from tests.conftest import DOWNGRADED
-
-    def note(what: str, s: dict) -> None:
-        ov = s["overload"]
-        request.node.user_properties.append((DOWNGRADED, f"{what} ({'; '.join(ov['reasons'] + ov.get('late', []))})"))
-
-    return note
 
 
 # A run's ``sim`` reference, computed while the run runs.  The real-time run leaves most of

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from tests.conftest import ROOT, TOPO
-from tests.integration.conftest import assert_run_matches_sim, not_alive, pid_alive, stop_tail, unconfirmed, wait_for, world_started, zswarm
+from tests.integration.conftest import assert_run_matches_sim, not_alive, require_kept_up, pid_alive, stop_tail, unconfirmed, wait_for, world_started, zswarm
 from zswarm.recording.mcap_io import read
 from zswarm.report import load_recording
 from zswarm.scenario import load as load_scenario
@@ -28,7 +28,7 @@ def run_and_load(procs, tmp_path, name, duration, extra=()):
 
 
 @pytest.mark.parametrize("name", ["thesis-3.2-fixed8", "thesis-3.2-fixed8-filtered"])
-def test_run_converges_and_agrees_with_sim(procs, sim_reference, downgrade, tmp_path, name):
+def test_run_converges_and_agrees_with_sim(procs, sim_reference, tmp_path, name):
     # Time scale 1.  Beside `stress-ng --cpu 1` (2026-12-03, after issue 28's cheaper ticks)
     # the agents keep up (≤ 0.1 % missed ticks).  The world, which skipped a sample whenever
     # it woke more than one 5 ms period late, dropped 0.4-3.9 % of them in four runs (3.9 %
@@ -45,15 +45,7 @@ def test_run_converges_and_agrees_with_sim(procs, sim_reference, downgrade, tmp_
     assert not unconfirmed(out)  # every agent and the world had the recorder's word before closing
     # Neighbours leaving at the run's end is not a loss: no warning of one in a clean run (issue 50).
     assert not [p.name for p in (out / "logs").glob("agent-*.log") if "lost (liveliness)" in p.read_text(errors="replace")]
-    kept_up = not s["overload"]["overloaded"] and not s["overload"]["late"]
-    if not kept_up:
-        downgrade("the agents' step rates", s)
     for i, a in s["agents"].items():
-        if kept_up:
-            # A run that kept up (≤ 2 % missed ticks and skipped samples) and whose sensor
-            # packets came in time (≤ 2 % idle ticks) publishes at the configured rate less its
-            # missed and idle ticks: 97-99.9 Hz measured.
-            assert a["step_rate_hz"] == pytest.approx(a["configured_rate_hz"], rel=0.05), i
         if a["role"] == "follower":
             assert a["attitude_error_final"] < 1e-2, (i, a)
             assert a["position_error_final"] < 0.1, (i, a)
@@ -85,6 +77,13 @@ def test_run_converges_and_agrees_with_sim(procs, sim_reference, downgrade, tmp_
     # sim on the same scenario and seed: final errors within SIM_RUN_TOL (an overloaded run fails here, saying so).
     ss = ref.summary()
     assert_run_matches_sim(s, ss, ("mean_attitude_error_final", "mean_position_error_final"), tmp_path / "launcher.log")
+    # The machine's capacity, last: a run that kept up (≤ 2 % missed ticks and skipped samples)
+    # and whose sensor packets came in time (≤ 2 % idle ticks) publishes at the configured rate
+    # less its missed and idle ticks: at least 100 - 2 - 2 = 96 % of it; 5 % leaves 1 % for the
+    # ticks before the first sensor packet (97-99.9 Hz measured).  Otherwise the run reruns.
+    require_kept_up(s, "the agents' step rates")
+    for i, a in s["agents"].items():
+        assert a["step_rate_hz"] == pytest.approx(a["configured_rate_hz"], rel=0.05), i
 
 
 def test_killed_agent_others_continue(procs, tmp_path):

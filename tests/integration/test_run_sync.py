@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import fail_if_overloaded, not_alive, stop_tail, wait_for, zswarm
+from tests.integration.conftest import fail_if_overloaded, not_alive, require_kept_up, stop_tail, wait_for, zswarm
 from zswarm.scenario import load
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import ZenohBus, zenoh_config
@@ -44,7 +44,7 @@ def _bad_commands(run: str) -> list[tuple[str, bytes]]:
     ]
 
 
-def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_reference, downgrade, tmp_path):
+def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_reference, tmp_path):
     sc = load(TOPO / f"{NAME}.toml")
     out = tmp_path / "run"
     ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", lean=True)  # computed while the run runs
@@ -85,13 +85,9 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
     assert len(cmd) == 7
     for link, v in cmd.items():
-        _assert_commands_sent(s, link, v, sc.duration, 0.95, downgrade)
+        _assert_commands_delivered(s, link, v)
         assert v["latency_p50_ms"] < 20, v
     ov = s["overload"]
-    if not ov["overloaded"]:  # a run that kept up: no command outlived its max_age at the world
-        assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values()), s["commands"]
-    else:
-        downgrade("no command expired at the world", s)
 
     ss = ref.summary()
     sy, sy_sim = s["synchronization"], ss["synchronization"]
@@ -120,23 +116,28 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
         assert abs(got - ref) <= 0.25 * ref, (key, got, ref)  # run vs sim (the issue's criterion)
         assert abs(got - notes) <= 0.25 * notes, (key, got, notes)  # run vs READING-NOTES
     assert all(e["relative_attitude_error_final"] < 0.01 for e in s["edges"].values())
+    # The machine's capacity, last (an overloaded run reruns; the checks above were made on it).
+    require_kept_up(s, "the command rates and ages")
+    for link, v in cmd.items():
+        _assert_command_rate(link, v, sc.duration, 0.95)
+    assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values()), s["commands"]  # none outlived its max_age at the world
 
 
-def _assert_commands_sent(s: dict, link: str, v: dict, duration: float, share: float, downgrade) -> None:
+def _assert_commands_delivered(s: dict, link: str, v: dict) -> None:
     """Agent i -> world: a command per step that computed one (all but the steps before the first
-    measurements), none lost in between, only the stop's tail undelivered; at the configured
-    100 Hz when the run kept up (a run that did not skips ticks: the report flags it, and the
-    rate check is counted as downgraded)."""
+    measurements), none lost in between, only the stop's tail undelivered (on any run)."""
     a = s["agents"][link.split("->")[0]]
     assert 0.9 * a["steps"] <= v["sent"] <= a["steps"], (link, v, a["steps"])
     assert v["dropped"] == 0 and v["delivered"] >= v["sent"] - stop_tail(100.0), (link, v)
-    if not s["overload"]["overloaded"]:
-        assert v["sent"] > share * duration * 100, (link, v)
-    else:
-        downgrade(f"{link} sent at the configured rate", s)
 
 
-def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, downgrade, tmp_path):
+def _assert_command_rate(link: str, v: dict, duration: float, share: float) -> None:
+    """At the configured 100 Hz on a run that kept up: more than ``share`` of duration × 100
+    commands (the steps before the first measurements and the start-up are the rest)."""
+    assert v["sent"] > share * duration * 100, (link, v)
+
+
+def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     """The velocity-free law (no gyro) over real processes, first 15 s: every ξ_k and every ζ_i
     jumps 0 -> 0.9π at the start (§5.6: Q̃_i(0) = Ra(π, e3) too), the filter (Q_i, ζ_i) then
     tracks R_i (|Q̃_i|_I < 0.1 after 5 s; READING-NOTES: ≈ 0.05), and torques reach the world.
@@ -163,9 +164,18 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, downgrade, t
         assert j["t"] < 0.1 and j["zeta_before"] == pytest.approx(0.0, abs=1e-9) and j["zeta_after"] == pytest.approx(0.9 * math.pi)
         assert a["Q_tilde_max_after_5s"] < 0.1, a
     fail_if_overloaded(s, "the jump counts")  # stale data move the jumps
-    assert s["jumps_total"] <= 14 and s["zeta_jumps_total"] <= 14
+    # sim has, in the first 15 s, 8 ξ-jumps (six at the start, then 7.6 s and 9.8 s) and 7 ζ-jumps
+    # (one per agent at the start): docs/studies/chapter5.md, test_sim_sync.  As in the hybrid
+    # test above, data 0-15 ms old over Zenoh take damping off, so an R̄_k (or a Q̃_i) that swings
+    # back through its δ band may jump once more a swing: one more per edge (6) and per agent (7)
+    # than sim's.  Chattering, the failure this exists for, shows as hundreds.
+    n_edges, n_agents = len(s["edges"]), len(s["agents"])
+    assert s["jumps_total"] <= 8 + n_edges and s["zeta_jumps_total"] <= 7 + n_agents, (s["jumps_total"], s["zeta_jumps_total"])
     cmd = {k: v for k, v in s["links"].items() if k.endswith("->world")}
     assert len(cmd) == 7
     for link, v in cmd.items():
-        _assert_commands_sent(s, link, v, 15.0, 0.9, downgrade)  # 15 s: the start-up is a larger share
+        _assert_commands_delivered(s, link, v)
     assert s["commands"]["malformed"] == 0
+    require_kept_up(s, "the command rates")
+    for link, v in cmd.items():
+        _assert_command_rate(link, v, 15.0, 0.9)  # 15 s: the start-up is a larger share
