@@ -251,7 +251,7 @@ def table_lines(summary: dict[str, Any]) -> list[str]:
         + (f", ζ jumps: {summary['zeta_jumps_total']}" if "zeta_jumps_total" in summary else "")
     )
     lines.append(
-        f"commands: {sent} sent, {dropped} lost, {expired} expired ({summary['commands']['policy']}), {summary['commands']['malformed']} malformed"
+        f"commands: {'>= ' if any(v.get('sent_is_lower_bound') for v in cmd_links.values()) else ''}{sent} sent, {dropped} lost, {expired} expired ({summary['commands']['policy']}), {summary['commands']['malformed']} malformed"
     )
     return lines
 

@@ -58,6 +58,9 @@ def footer_lines(summary: dict[str, Any]) -> list[str]:
     fates = [f"agent {i}: {a['fate']}" for i, a in (summary.get("agents") or {}).items() if a.get("fate", "finished") != "finished"]
     if fates:  # how the processes ended, from their exit status (the launcher's)
         lines.append("ended: " + "; ".join(fates) + ("" if all(a.get("fate") != "finished; final stats not recorded" for a in summary["agents"].values()) else " (their counts are from their last recorded stats)"))
+    lower = [k for k, v in (summary.get("links") or {}).items() if v.get("sent_is_lower_bound")]
+    if lower:  # a sender killed: what it sent after its last recorded stats is not counted
+        lines.append(f"sent counts are lower bounds on links {', '.join(lower)} (a sender was killed: its last counts were not recorded)")
     if summary.get("problems"):
         lines.append("NOT COMPLETED: " + "; ".join(summary["problems"]))
     if ov.get("late"):

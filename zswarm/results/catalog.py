@@ -171,7 +171,8 @@ def format_info(d: dict[str, Any]) -> str:
         for link in sorted(s["links"], key=keys.natural):
             c = s["links"][link]
             p50, p99 = (_ms(c.get(f"latency_{q}_ms")) for q in ("p50", "p99"))
-            lines.append(f"  {link:<12} {c.get('sent', 0):>8} {c.get('delivered', 0):>10} {c.get('dropped', 0):>8} {c.get('reordered', 0):>9} {p50:>8} {p99:>8}")
+            sent = f"{'>=' if c.get('sent_is_lower_bound') else ''}{c.get('sent', 0)}"  # a killed sender's last counts were not recorded
+            lines.append(f"  {link:<12} {sent:>8} {c.get('delivered', 0):>10} {c.get('dropped', 0):>8} {c.get('reordered', 0):>9} {p50:>8} {p99:>8}")
     return "\n".join(lines)
 
 
