@@ -85,7 +85,9 @@ def simulate(
         run,
         rec_path if record else None,
         now_ns=lambda: int(round(t_now[0] * 1e9)),
-        metadata={"engine": "sim", "scenario": scenario.name},
+        # What the run was, where a remade summary finds it even when the start message is lost
+        # (zswarm report; the metadata is written before the first chunk).
+        metadata={"engine": "sim", "scenario": scenario.name, "duration": repr(float(duration)), "seed": str(seed), "time_scale": "0.0"},
         skip=LEAN_SKIP if lean else (),
         scenario=scenario,
         defer=DEFER_MESSAGES if record else 0,

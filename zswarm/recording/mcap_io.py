@@ -431,13 +431,9 @@ def transcode(raw: Path, out: Path, scenario: Scenario | None) -> int:
 
     A raw file with no message is kept and nothing is written (:class:`EmptyRecording`):
     an empty viewer file in its place would lose what a better reader could still get."""
-    from mcap.reader import make_reader
+    from zswarm.recording.mcap_read import metadata
 
-    with open(raw, "rb") as f:
-        try:
-            meta = {k: v for m in make_reader(f).iter_metadata() if m.name == "zswarm" for k, v in m.metadata.items()}
-        except Exception:  # noqa: BLE001 - a file cut short has no summary: read it without metadata
-            meta = {}
+    meta = metadata(raw)  # in file order: a raw file cut by a SIGKILL keeps it too (it has no summary)
     meta["transcoded_from"] = raw.name
     tmp = out.with_name(out.name + ".part")
     try:

@@ -158,6 +158,37 @@ def records(path: str | Path, lost: list[Lost]) -> Iterator[tuple[Channel, Messa
             lost.append(Lost(path, -1, "in all", f"{summary.messages - n} of its {summary.messages} messages lost (the count in its statistics)"))
 
 
+def metadata(path: str | Path, name: str = "zswarm") -> dict[str, str]:
+    """The entries of the metadata records called ``name``, read in file order from the start
+    up to the first damaged or cut record (the writers put theirs before the first chunk, so a
+    file cut short or with a damaged chunk keeps them; ``mcap``'s reader finds them only through
+    the summary of a file that ended whole).  Chunks are skipped, not read.  {} for a file that
+    is not MCAP or has none."""
+    from mcap.records import Metadata
+
+    out: dict[str, str] = {}
+    with open(path, "rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        if f.read(8) != MAGIC:
+            return out
+        pos = 8
+        while pos + _HEAD.size <= size:
+            f.seek(pos)
+            opcode, length = _HEAD.unpack(f.read(_HEAD.size))
+            end = pos + _HEAD.size + length
+            if opcode not in _KNOWN or length > MAX_RECORD or end > size or opcode in (Opcode.DATA_END, Opcode.FOOTER):
+                break
+            if opcode == Opcode.METADATA:
+                try:
+                    m = Metadata.read(ReadDataStream(io.BytesIO(f.read(length))))
+                except Exception:  # noqa: BLE001 - a damaged record ends what can be trusted
+                    break
+                if m.name == name:
+                    out.update(m.metadata)
+            pos = end
+    return out
+
+
 def _why(exc: BaseException) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return f"{type(exc).__name__}: {text}"[:160]

@@ -22,7 +22,9 @@ def s(x: float | None) -> str:
 
 
 def title(summary: dict[str, Any]) -> str:
-    return f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {summary['duration_s']:g} s, seed {summary['seed']})"
+    d, seed = summary["duration_s"], summary["seed"]
+    when = "duration unknown" if d is None else f"{d:g} s"
+    return f"{summary['scenario']} ({summary['algorithm']}, engine={summary['engine']}, {when}, seed {'unknown' if seed is None else seed})"
 
 
 def agent_rows(summary: dict[str, Any]) -> list[str]:

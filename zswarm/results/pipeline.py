@@ -397,9 +397,9 @@ def make_report_parts(
     out_dir: Path,
     sc: Scenario,
     engine: str,
-    duration: float,
-    time_scale: float,
-    seed: int,
+    duration: float | None,
+    time_scale: float | None,
+    seed: int | None,
     exit_codes: dict[str, int | None] | None = None,
     plots: bool = True,
     thresholds: tuple[float, float] = THRESHOLDS,
@@ -414,6 +414,12 @@ def make_report_parts(
     recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean).  ``keep``: entries of an
     earlier summary.json that only the launcher knew (``zswarm report`` keeps them)."""
     rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
+    known = duration is not None
+    if duration is None:
+        # Not known (zswarm report of a folder that does not tell it): the recording's last truth
+        # sample is taken as the run's end for the errors and measures, and summary.json says
+        # null (the scenario's duration, used before, was a guess: 40 s for a run of 3).
+        duration = float(rec.truth_t[-1])
     errs = errors(rec)
     fam = family.of(sc)
     m = fam.metrics(sc, rec)
@@ -421,6 +427,8 @@ def make_report_parts(
     if sc.faults:
         t_grid, att, _pos = fam.series(sc, errs, m, duration)
         summary["faults"] = faults.summary(sc, rec, engine, t_grid, att, summary["convergence"]["measure"] + " (attitude)")
+    if not known:
+        summary["duration_s"] = None
     summary.update(keep or {})
     write_errors_csv(out_dir / "errors.csv", errs)
     fam.write(out_dir, sc, rec, m)

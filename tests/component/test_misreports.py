@@ -1,0 +1,88 @@
+"""Summaries and files that say what they cannot know (issue 61, item 7), on ``zswarm sim``
+folders: a summary remade without summary.json gives the engine and duration the folder ran
+with (or "unknown"), a full disk leaves no truncated recording.mcap, and a run far beyond
+reason is refused with one line naming its cost."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from tests.conftest import ROOT, TOPO
+from zswarm.recording import mcap_io
+
+T33 = TOPO / "thesis-3.3-moving5.toml"  # five agents, scenario.duration = 30 s
+
+
+def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "zswarm", *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory) -> Path:
+    """A sim of 6 s (not the scenario's 30) with seed 7 (not its 1): its recording is three
+    chunks long (measured: 1.08 MB, 1.07 MB, 42 kB), so that the first one can be lost."""
+    out = tmp_path_factory.mktemp("sim") / "run"
+    p = _cli("sim", str(T33), "--duration", "6", "--seed", "7", "--no-plots", "--quiet", "--out", str(out))
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+def _remade(src: Path, dst: Path) -> tuple[subprocess.CompletedProcess[str], dict]:
+    """``zswarm report`` on a copy of a folder whose summary.json was lost."""
+    (dst / "summary.json").unlink()
+    p = _cli("report", str(dst))
+    return p, json.loads((dst / "summary.json").read_text())
+
+
+def _lose_first_chunk(path: Path) -> None:
+    """Damage the end of the recording's first chunk (as a bad sector would): its messages,
+    ctl/start among them, are lost; the rest is read on past it."""
+    with open(path, "rb") as f:
+        start, length = min((c.chunk_start_offset, c.chunk_length) for c in make_reader(f).get_summary().chunk_indexes)
+    with open(path, "r+b") as f:
+        f.seek(start + length - 300)
+        f.write(b"\xde\xad" * 100)
+
+
+def test_a_remade_summary_of_a_sim_folder_says_sim_and_its_duration(sim_dir, tmp_path):
+    d = shutil.copytree(sim_dir, tmp_path / "d")
+    p, s = _remade(sim_dir, d)
+    assert p.returncode == 0, p.stderr
+    assert (s["engine"], s["duration_s"], s["seed"], s["time_scale"]) == ("sim", 6.0, 7, 0.0), s
+    assert p.stdout.splitlines()[0].startswith("thesis-3.3-moving5 (bearing_pose_moving, engine=sim, 6 s, seed 7)"), p.stdout
+
+
+def test_a_remade_summary_of_a_damaged_sim_recording_keeps_the_runs_duration(sim_dir, tmp_path):
+    """The start message lost with the first chunk: the duration used to be the scenario's 30 s
+    (and every estimate after 6 s "missing"); the recording's metadata, written before any
+    chunk, still says what the run was."""
+    d = shutil.copytree(sim_dir, tmp_path / "d")
+    _lose_first_chunk(d / "recording.mcap")
+    p, s = _remade(sim_dir, d)
+    assert p.returncode == 1, p.stderr  # a damaged recording: not completed
+    assert (s["engine"], s["duration_s"], s["seed"]) == ("sim", 6.0, 7), s
+    assert not s["recording"]["cut_short"], s["recording"]  # it ends at 6 s, the run's end
+
+
+def test_a_remade_summary_says_unknown_where_the_folder_does_not_tell(sim_dir, tmp_path):
+    """Neither the start message (its chunk lost), nor zswarm's metadata (a foreign name on it),
+    nor a launcher's processes.json or world log: the engine and duration are unknown, and the
+    summary says so instead of "run" and the scenario's 30 s."""
+    d = shutil.copytree(sim_dir, tmp_path / "d")
+    _lose_first_chunk(d / "recording.mcap")
+    data = bytearray((d / "recording.mcap").read_bytes())
+    at = data.index(b"zswarm", 0, 4096)  # the metadata record's name, before the first chunk
+    data[at : at + 6] = b"xswarm"
+    (d / "recording.mcap").write_bytes(bytes(data))
+    p, s = _remade(sim_dir, d)
+    assert p.returncode == 1, p.stderr
+    assert s["engine"] == "unknown" and s["duration_s"] is None and s["seed"] is None, {k: s[k] for k in ("engine", "duration_s", "seed")}
+    assert s["remade"]["duration_s"].startswith("unknown"), s["remade"]
+    assert "engine=unknown, duration unknown, seed unknown" in p.stdout.splitlines()[0], p.stdout
