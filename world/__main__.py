@@ -113,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
                 world.skip_to(now)
                 if world.next_time() > duration + 1e-9:
                     break
+            world.lateness(now - world.next_time())
             world.sample()
             if world.k % max(1, round(program.sensor_rate)) == 0:
                 world.publish_stats(t)

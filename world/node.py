@@ -162,6 +162,11 @@ class World:
         self.seq = 0
         self.samples = 0
         self.late = 0  # samples the real-time loop had to skip
+        # Samples taken more than one sensor period after their due time, and the most late one
+        # (s): the real-time loop's own lateness, which an agent's tick without a new packet
+        # comes from on a machine short of CPU (results.overload: the late sensor data named).
+        self.taken_late = 0
+        self.max_lateness = 0.0
 
     @property
     def period(self) -> float:
@@ -195,6 +200,12 @@ class World:
         self.k += 1
         return t
 
+    def lateness(self, late_s: float) -> None:
+        """Count the next sample as taken ``late_s`` wall seconds (in world time) after it was due."""
+        if late_s > self.period:
+            self.taken_late += 1
+        self.max_lateness = max(self.max_lateness, late_s)
+
     def skip_to(self, t: float) -> int:
         """Skip sample indices whose time is before ``t`` (the loop fell behind); return how many."""
         k_new = max(self.k, int(math.floor(t / self.period + 1e-9)))
@@ -204,7 +215,13 @@ class World:
         return skipped
 
     def counters(self) -> dict[str, object]:
-        c: dict[str, object] = {"samples": self.samples, "late": self.late, "sent": {f"world->{i}": self.seq for i in self.ids}}
+        c: dict[str, object] = {
+            "samples": self.samples,
+            "late": self.late,
+            "taken_late": self.taken_late,
+            "max_lateness_s": round(self.max_lateness, 6),
+            "sent": {f"world->{i}": self.seq for i in self.ids},
+        }
         if self.commands is not None:
             c.update(self.commands.counters())
         return c

@@ -300,11 +300,15 @@ def fail_if_overloaded(s: dict, what: str) -> None:
 
 def require_kept_up(s: dict, what: str) -> None:
     """Raise :class:`~tests.keepup.MachineDidNotKeepUp` when the run ``s`` did not keep up or its
-    sensor packets came late (``overload.late``, from the world's own lateness): ``what``, a check
+    sensor packets came late (``overload.late``: the world's and the packets' measured lateness
+    account for the agents' idle ticks, a machine short of CPU): ``what``, a check
     of the machine's capacity (a publishing rate, a command's age), could not be made on it.  Call
     it after the checks that hold on any run, so that a real failure among them is not rerun."""
     ov = s["overload"]
-    why = ov["reasons"] + ov.get("late", [])
+    # Idle ticks that the measured lateness (the world's, the packets') does not account for are
+    # no machine's doing: a defect, failed at once (results.overload, late_explained).
+    assert ov["late_explained"], ov
+    why = ov["reasons"] + ov["late"]
     if why:
         raise MachineDidNotKeepUp(f"this machine did not keep up with the run ({'; '.join(why)}), so {what} could not be checked")
 

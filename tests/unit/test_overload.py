@@ -37,7 +37,7 @@ def test_idle_ticks_are_named_where_they_can_only_mean_late_packets():
     # 60 idle ticks of 1000 scheduled (940 steps) = 6 %: over the threshold, for a watched agent only.
     ov = overload(agents(0, 0, steps=940, idle=60), {"samples": 2000, "late": 0}, watch_idle=("2",))
     assert ov["agents_idle_pct"] == {"2": 6.0}
-    assert ov["late"] == [f"1 of 2 agents found no new sensor packet at more than {OVERLOAD_PCT:g} % of their ticks (worst: agent 2, 6.0 %): the world's packets came late"]
+    assert ov["late"][0].startswith(f"1 of 2 agents found no new sensor packet at more than {OVERLOAD_PCT:g} % of their ticks (worst: agent 2, 6.0 %): ")
     assert not ov["overloaded"] and ov["reasons"] == []  # late data, not errors that are not the algorithm's
     assert overload(agents(0, 0, steps=940, idle=60), {"samples": 2000, "late": 0})["late"] == []  # nobody watched
     assert overload(agents(0, idle=20), {}, watch_idle=("1",))["late"] == []  # 20 of 1000: at the threshold, not over it
@@ -62,3 +62,16 @@ def test_which_agents_idle_ticks_mean_late_packets(tmp_path):
         assert idle_means_late(load(f)) == [], why
     f.write_text(text.replace("sensor_rate = 200.0", "sensor_rate = 150.0"))
     assert idle_means_late(load(f)) == [], "fewer than two samples a tick"
+
+
+def test_late_sensor_data_names_its_measured_lateness_and_whether_it_accounts_for_the_idle_ticks():
+    # 60 idle ticks of 1000 (6 %): two packets a tick, so over 1 % of agent 2's packets came more
+    # than one sensor period (5 ms) late, and its p99 latency must be over 5 ms to account for it.
+    world = {"samples": 2000, "late": 0, "taken_late": 60, "max_lateness_s": 0.043}
+    ov = overload(agents(0, 0, steps=940, idle=60), world, watch_idle=("2",), links={"world->2": {"latency_p99_ms": 31.0}}, sensor_period_s=0.005)
+    assert ov["late_explained"] and ov["late_evidence"] == {"world_taken_late_pct": 3.0, "world_max_lateness_ms": 43.0, "sensor_latency_p99_ms": {"2": 31.0}}
+    assert "the world took 3 % of its samples more than a sensor period late (worst 43 ms)" in ov["late"][0] and "reached 31 ms" in ov["late"][0]
+    # Packets on time (p99 2 ms) cannot leave 6 % of ticks idle: said, and late_explained false.
+    ov = overload(agents(0, 0, steps=940, idle=60), world, watch_idle=("2",), links={"world->2": {"latency_p99_ms": 2.0}}, sensor_period_s=0.005)
+    assert not ov["late_explained"] and ov["late"][0].endswith("which does not account for these idle ticks")
+    assert overload(agents(0), world, watch_idle=("2",))["late_explained"]  # nothing idle: nothing to account for
