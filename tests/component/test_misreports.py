@@ -86,3 +86,28 @@ def test_a_remade_summary_says_unknown_where_the_folder_does_not_tell(sim_dir, t
     assert s["engine"] == "unknown" and s["duration_s"] is None and s["seed"] is None, {k: s[k] for k in ("engine", "duration_s", "seed")}
     assert s["remade"]["duration_s"].startswith("unknown"), s["remade"]
     assert "engine=unknown, duration unknown, seed unknown" in p.stdout.splitlines()[0], p.stdout
+
+
+@pytest.fixture
+def full_disk(tmp_path):
+    """A 1 MiB tmpfs (as tests/integration/test_processes.py's small_disk): room for the
+    scenario, not for the 6 s sim's 2.2 MB recording; unmounted at the end whatever happens."""
+    d = tmp_path / "full"
+    d.mkdir()
+    subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(d)], check=True)
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", "-l", str(d)], check=False)
+
+
+def test_a_sim_on_a_full_disk_leaves_no_truncated_recording(full_disk):
+    """It left recording.mcap cut at the disk's end (1 044 480 bytes, not one message readable)
+    under its final name, where a report or a viewer takes it for the run's recording."""
+    out = full_disk / "s"
+    p = _cli("sim", str(T33), "--duration", "6", "--no-plots", "--quiet", "--out", str(out))
+    assert p.returncode == 1, p.stderr
+    said = [x for x in p.stderr.splitlines() if x.startswith("zswarm sim: ")]
+    assert len(said) == 1 and f"{out / 'recording.mcap'}: cannot write the recording: No space left on device" in said[0] and "Traceback" not in p.stderr, p.stderr
+    left = {f.name: f.stat().st_size for f in out.iterdir()}
+    assert "recording.mcap" not in left and not any(n.endswith(".part") for n in left), left  # the partial file removed: the disk has its room back

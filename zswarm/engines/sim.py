@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import heapq
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -20,6 +21,7 @@ from zswarm.scenario.programs import agent_program, world_program
 from zswarm.transport import keys, procutil, run_control
 from zswarm.transport.bus import MemoryBus
 from zswarm.util import files, plugins
+from zswarm.util.files import RecordingError
 from zswarm.util.progress import Progress
 
 LEAN_SKIP = ("sense/", "edge/", "cmd/")
@@ -78,12 +80,16 @@ def simulate(
     bus = MemoryBus(objects=objects)
     t_now = [0.0]
     rec_path = out_dir / "recording.mcap"
+    # Written under a temporary name and renamed once closed whole: a full disk left the file
+    # cut at the disk's end under its final name (not one message readable), for a report or
+    # a viewer to take as the run's recording.
+    part = rec_path.with_name(rec_path.name + ".part")
     if rerun is not None:
         from zswarm.recording import rerun_view
     recorder = Recorder(
         bus,
         run,
-        rec_path if record else None,
+        part if record else None,
         now_ns=lambda: int(round(t_now[0] * 1e9)),
         # What the run was, where a remade summary finds it even when the start message is lost
         # (zswarm report; the metadata is written before the first chunk).
@@ -172,10 +178,13 @@ def simulate(
                     progress(t)
                 if stop is not None and stop.is_set():
                     raise KeyboardInterrupt
-    except BaseException:
+    except BaseException as exc:
         # Ctrl-C (KeyboardInterrupt) or a failure: what was simulated up to here is written
-        # (the recorder holds it until close), then the exception goes on.
-        recorder.close()
+        # (the recorder holds it until close), then the exception goes on; a recording that
+        # could not be written (a full disk) is removed instead.
+        if isinstance(exc, RecordingError):
+            raise _not_written(exc, part, rec_path) from None
+        _close_whole(recorder, part, rec_path)
         raise
 
     t_now[0] = duration
@@ -185,13 +194,33 @@ def simulate(
         a.publish_stats(duration, final=True)
     bus.declare_token(keys.alive(run, "recorder", 0))
     t_run = time.perf_counter()
-    recorder.close()
+    _close_whole(recorder, part, rec_path)
     bus.close()
     if keep is not None and record and recorder.complete:
         keep.extend(recorder.messages)
     if times is not None:
         times.update(run_s=t_run - t_start, record_s=time.perf_counter() - t_run)
     return rec_path if record else recorder.messages
+
+
+def _close_whole(recorder: Recorder, part: Path, path: Path) -> None:
+    """Close ``recorder`` (writing what it holds into ``part``) and rename ``part`` to ``path``;
+    if the writing fails, ``part`` is removed and the error goes on (RecordingError, naming it)."""
+    try:
+        recorder.close()
+    except RecordingError as exc:
+        raise _not_written(exc, part, path) from None
+    except BaseException:
+        part.unlink(missing_ok=True)
+        raise
+    if part.exists():
+        os.replace(part, path)
+
+
+def _not_written(exc: RecordingError, part: Path, path: Path) -> RecordingError:
+    """``part`` removed; the error told of ``path``, the file the user asked for."""
+    part.unlink(missing_ok=True)
+    return RecordingError(f"{str(exc).replace(str(part), str(path), 1)} (nothing of it is kept)")
 
 
 # --------------------------------------------------------------------------- the command (zswarm.cli dispatches here)
