@@ -7,15 +7,20 @@ For each of the three §5.6 laws (continuous, hybrid, velocity-free) and each co
 the delay and loss on the agent→world command links (``links.commands``); with loss each draw
 loses its own commands.  Each cell is a basin folder under ``--out`` (an existing one
 resumes), then one figure (the fraction that synchronizes with its 95 % Wilson interval, and
-the settle-time median with its 10-90 % band, against the delay) and a Markdown table::
+the settle-time median with its 10-90 % band, against the delay), the table's rows as CSV
+(``--csv``) and the Markdown table printed from them (:func:`markdown`, which
+tests/component/test_publications.py holds the page's table to)::
 
-    .venv/bin/python docs/examples/basin_under_delay.py --draws 1001 --out basins/delay --figure docs/figures/basin-delay-5.6.png
+    .venv/bin/python docs/examples/basin_under_delay.py --draws 1001 --out basins/delay \\
+        --figure docs/figures/basin-delay-5.6.png --csv docs/data/basin-delay-5.6.csv
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
+import math
 import resource
 import subprocess
 import sys
@@ -56,6 +61,58 @@ def summary(d: Path) -> dict:
     return json.loads((d / "basin.json").read_text())
 
 
+# The table's columns: a cell (law, delay, loss), its counts, the Wilson interval in percent, the
+# settle-time quantiles of the synchronized draws (blank: none), the ξ-jump quantiles, and where
+# the cell's per-draw rows are (its basin folder).
+COLUMNS = ("law", "delay_ms", "loss", "drawn", "synchronized", "ci95_lo_pct", "ci95_hi_pct", "settle_p10_s", "settle_median_s", "settle_p90_s", "jumps_median", "jumps_max", "rows")
+
+
+def row(d: Path, law: str, delay: float, loss: float) -> dict:
+    """A cell's row of the table, from its basin.json."""
+    s = summary(d)
+    ci = s.get("fraction_95ci") or [math.nan, math.nan]
+    st = s.get("settle_s") or {}
+    j = s.get("jumps") or {}
+    return {
+        "law": law.removeprefix("thesis-5.6-").removesuffix("7"),
+        "delay_ms": f"{delay:g}",
+        "loss": f"{loss:g}",
+        "drawn": s["drawn"],
+        "synchronized": s["synchronized"],
+        "ci95_lo_pct": 100 * ci[0],
+        "ci95_hi_pct": 100 * ci[1],
+        **{f"settle_{q}_s": st.get(q, "") for q in ("p10", "median", "p90")},
+        "jumps_median": j.get("median", ""),
+        "jumps_max": j.get("max", ""),
+        "rows": str(d / "basin.csv"),
+    }
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def markdown(rows: list[dict]) -> str:
+    """The Markdown table of the rows (as written or as read back from the CSV): times to 0.1 s,
+    the interval to 0.1 %, "–" where no draw synchronized and for the continuous law's jumps (it
+    has no ξ)."""
+
+    def f1(x: object) -> str:
+        return "–" if x in ("", None) else f"{float(x):.1f}"
+
+    lines = [
+        "| law | command delay (ms) | loss | synchronized | 95 % CI | settle < 0.01: p10 / median / p90 (s) | ξ jumps, median / max |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        settle = "–" if r["settle_median_s"] in ("", None) else " / ".join(f1(r[f"settle_{q}_s"]) for q in ("p10", "median", "p90"))
+        jumps = "–" if r["law"] == "continuous" else f"{float(r['jumps_median']):g} / {float(r['jumps_max']):g}"
+        ci = f"{f1(r['ci95_lo_pct'])}–{f1(r['ci95_hi_pct'])} %"
+        lines.append(f"| {r['law']} | {r['delay_ms']} | {r['loss']} | {r['synchronized']} of {r['drawn']} | {ci} | {settle} | {jumps} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=1000)
@@ -65,6 +122,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=None)
     ap.add_argument("--out", type=Path, default=Path("basins/delay"))
     ap.add_argument("--figure", type=Path, default=Path("basin-delay-5.6.png"))
+    ap.add_argument("--csv", type=Path, default=None, help="write the table's rows there too (docs/data/basin-delay-5.6.csv)")
     a = ap.parse_args()
     delays = [float(x) for x in a.delays.split(",")]
     losses = [float(x) for x in a.losses.split(",")]
@@ -76,9 +134,17 @@ def main() -> None:
                 cpu += run(a.out, law, delay, loss, a.draws, a.jobs)
     print(f"CPU of this invocation: {cpu:.0f} s ({cpu / 3600:.2f} h)", file=sys.stderr)
 
+    table = [row(cell(a.out, law, delay, loss), law, delay, loss) for law in laws for loss in losses for delay in delays]
+    print(markdown(table))
+    if a.csv is not None:
+        a.csv.parent.mkdir(parents=True, exist_ok=True)
+        with open(a.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, COLUMNS, lineterminator="\n")
+            w.writeheader()
+            w.writerows(table)
+        print(f"table: {a.csv}", file=sys.stderr)
+
     fig, axes = plt.subplots(2, len(laws), figsize=(4.2 * len(laws), 6.4), sharex=True, squeeze=False)
-    print("| law | command delay (ms) | loss | synchronized | 95 % CI | settle < 0.01: p10 / median / p90 (s) | jumps, median / max |")
-    print("|---|---|---|---|---|---|---|")
     for c, law in enumerate(laws):
         for loss, style in zip(losses, ("o-", "s--", "^:"), strict=False):
             frac, lo, hi, med, p10, p90 = [], [], [], [], [], []
@@ -93,11 +159,6 @@ def main() -> None:
                 med.append(st.get("median", np.nan))
                 p10.append(st.get("p10", np.nan))
                 p90.append(st.get("p90", np.nan))
-                j = s.get("jumps") or {}
-                print(
-                    f"| {law.removeprefix('thesis-5.6-').removesuffix('7')} | {delay:g} | {loss:g} | {k} of {n} | {100 * ci[0]:.1f}–{100 * ci[1]:.1f} % | "
-                    f"{st.get('p10', float('nan')):.1f} / {st.get('median', float('nan')):.1f} / {st.get('p90', float('nan')):.1f} | {j.get('median', float('nan')):g} / {j.get('max', float('nan')):g} |"
-                )
             x = np.array(delays)
             f = np.array(frac)
             axes[0, c].errorbar(x, f, yerr=[f - np.array(lo), np.array(hi) - f], fmt=style, capsize=3, label=f"loss {loss:g}")
