@@ -38,6 +38,11 @@ def _common_run_args(p: argparse.ArgumentParser) -> None:
         dest="faults",
         help="one more [[faults]] entry, e.g. --fault kill,agent=5,at=10,restart_at=15; stop,agent=3,at=5,duration=2; router,at=8,duration=1; cut,link=1->3,at=4,duration=3 (repeatable)",
     )
+    p.add_argument(
+        "--allow-long",
+        action="store_true",
+        help="run even when the run's estimated CPU time (from its world steps and agent ticks) is over a day; without it such a run is refused with one line naming the estimate (exit 2)",
+    )
 
 
 def _rerun_arg(p: argparse.ArgumentParser, what: str) -> None:
@@ -476,9 +481,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from zswarm.engines import launch
+    from zswarm.engines import cost, launch
 
     sc = procutil.load_args(args)
+    cost.refuse_if_too_long(sc, args.topology, args.duration, args.allow_long)  # before anything is printed or started
     procutil.warn_notes(sc)
     procutil.check_faults_in_run(sc, sc.duration if args.duration is None else args.duration, args.duration is not None)
     secure = None if args.secure is None else Path(args.secure) if args.secure else True

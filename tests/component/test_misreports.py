@@ -111,3 +111,56 @@ def test_a_sim_on_a_full_disk_leaves_no_truncated_recording(full_disk):
     assert len(said) == 1 and f"{out / 'recording.mcap'}: cannot write the recording: No space left on device" in said[0] and "Traceback" not in p.stderr, p.stderr
     left = {f.name: f.stat().st_size for f in out.iterdir()}
     assert "recording.mcap" not in left and not any(n.endswith(".part") for n in left), left  # the partial file removed: the disk has its room back
+
+
+T32 = TOPO / "thesis-3.2-fixed8.toml"  # eight agents, no loader note on stderr
+LONG = ("--set", "world.step=1e-6", "--duration", "1e5")  # 1e11 world steps (issue 61)
+
+
+def _refused(*args: str) -> tuple[int, str]:
+    """Exit code and stderr of a command that must end at once; one that runs on is killed after
+    60 s (loading the scenario takes 1-2 s here; 60 leaves a loaded machine 30 times that)."""
+    p = subprocess.Popen([sys.executable, "-m", "zswarm", *args], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _out, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        _out, err = p.communicate()
+        return -1, f"still running after 60 s (killed); stderr: {err[-2000:]}"
+    return p.returncode, err
+
+
+@pytest.mark.parametrize("cmd", ["sim", "run"])
+def test_a_run_far_beyond_reason_is_refused_with_its_cost(tmp_path, cmd):
+    """It started silently and ran until killed.  Now one line naming the estimate, exit 2, and
+    nothing started or made (no results folder)."""
+    out = tmp_path / "out"
+    code, err = _refused(cmd, str(T32), *LONG, "--quiet", "--out", str(out))
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1, (code, err)
+    # 1e5 s / 1e-6 s steps for 8 agents at 0.2 µs an agent-step (zswarm/engines/cost.py) is 44.4 h,
+    # and 8e7 ticks at 0.15 ms 3.3 h more: 47.8 h.
+    want = f"error: {T32}: --duration 100000 at world.step = 1e-06 s is 1e+11 world steps for 8 agents and 8e+07 agent ticks: at least 47.8 h of CPU"
+    assert lines[0].startswith(want) and "--allow-long" in lines[0], lines[0]
+    assert not out.exists()
+
+
+def test_allow_long_runs_it_anyway(tmp_path):
+    """With --allow-long the same sim starts (its results folder made), and stops on SIGTERM."""
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "-m", "zswarm", "sim", str(T32), *LONG, "--allow-long", "--quiet", "--no-plots", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60  # as _refused: 30 times the start here
+        while not (out / "scenario.toml").exists() and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        running = p.poll() is None and (out / "scenario.toml").exists()
+        p.send_signal(signal.SIGTERM)
+        _o, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert running and p.returncode == 143, (p.returncode, err[-2000:])

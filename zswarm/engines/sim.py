@@ -232,7 +232,10 @@ def command(args: argparse.Namespace) -> int:
     from zswarm.engines.launch import results_dir
     from zswarm.engines.sim import LEAN_SKIP, simulate
 
+    from zswarm.engines import cost
+
     sc = procutil.load_args(args)
+    cost.refuse_if_too_long(sc, args.topology, args.duration, args.allow_long)  # before anything is printed or made
     procutil.warn_notes(sc)
     duration = sc.duration if args.duration is None else args.duration
     procutil.check_faults_in_run(sc, duration, args.duration is not None)
