@@ -235,7 +235,8 @@ def summarize(
     for link, c in links.items():
         src = link.split("->")[0]
         sender = ("world", 0) if src == "world" else ("agent", int(src)) if src.isdigit() else None
-        c["sent_is_lower_bound"] = not whole.get(sender, False) if sender is not None else True
+        if sender is None or not whole.get(sender, False):  # said only where it holds, as sent_by_incarnation
+            c["sent_is_lower_bound"] = True
     fam = family.of(sc)
     extra = fam.summary(sc, rec, m, agents, duration)
     recording = recording_section(sc, rec, duration, not_recorded)
