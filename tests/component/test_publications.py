@@ -460,3 +460,46 @@ def test_uniform_basin_draws_of_the_observers_run_again():
     for got in basin.run_chunk(str(ROOT / "topologies" / f"{law}.toml"), 1, draws, 30.0, 0.01):
         cells = {k: str(rows_io.cell(v)) for k, v in got.items() if k not in ("wall_s", "final_max")}
         assert cells == {k: want[str(got["draw"])][k] for k in cells}, got["draw"]
+
+
+# --------------------------------------------------------------------------- decarli.md's communication sweeps
+
+
+def test_the_decarli_communication_numbers_are_its_sweeps():
+    """decarli.md's numbers on its two 15-run sweeps (each stage's late max error, ``*_late_max_mean``,
+    and its settle time), from their sweep.csv files.  Nothing is run again here: a row is a 30 s
+    run of eight agents at 200 Hz on ``sim`` (the batched engine has no De Carli family), 27 s of
+    CPU."""
+    page = DOCS / "studies" / "decarli.md"
+    text = " ".join(page.read_text().split())
+
+    def by_point(name: str, prefix: str) -> dict[tuple[str, str], dict[str, str]]:
+        return {(r[f"{prefix}delay_ms"], r[f"{prefix}drop"]): r for r in read_csv(FIGURES / f"sweep-decarli-{name}.csv")}
+
+    def e(x: str) -> str:
+        """Below 0.1 as the page writes it, 4.5e-2."""
+        m, ex = f"{float(x):.1e}".split("e")
+        return f"{m}e{int(ex)}"
+
+    edges, cmds = by_point("edges", "links."), by_point("commands", "links.commands.")
+    ten, fifty, hundred = edges["10", "0"], edges["50", "0"], edges["100", "0"]
+    quoted = [
+        f"raises its floor from {sig(float(edges['0', '0']['rel_late_max_mean']), 1)} to {e(ten['rel_late_max_mean'])}",
+        f"no longer stays below 0.05 after {float(ten['rel_settle_s']):.1f} s",
+        f"the common-frame yaw is at {e(ten['yaw_late_max_mean'])}, the position at {e(ten['pos_late_max_mean'])} m "
+        f"and the formation at {e(ten['form_late_max_mean'])} m",
+        f"hover at their thresholds ({float(fifty['yaw_late_max_mean']):.3f}, {float(fifty['pos_late_max_mean']):.2f} m)",
+        f"relative yaw {float(hundred['rel_late_max_mean']):.2f}, yaw {float(hundred['yaw_late_max_mean']):.2f}, "
+        f"position {float(hundred['pos_late_max_mean']):.2f} m, formation {float(hundred['form_late_max_mean']):.2f} m",
+        f"25 % gives {e(edges['0', '0.25']['rel_late_max_mean'])} relative yaw and {e(edges['0', '0.25']['form_late_max_mean'])} m formation, "
+        f"50 % gives {e(edges['0', '0.5']['rel_late_max_mean'])} and {e(edges['0', '0.5']['form_late_max_mean'])} m",
+        f"10 ms leaves the relative yaw at {e(cmds['10', '0']['rel_late_max_mean'])} and the formation at {e(cmds['10', '0']['form_late_max_mean'])} m",
+        f"it ends {float(cmds['100', '0.25']['form_late_max_mean']):.1f}–{float(cmds['100', '0.5']['form_late_max_mean']):.1f} m off",
+    ]
+    for q in quoted:
+        assert q in text, q
+    upto20 = [r for (d, _), r in edges.items() if float(d) <= 20]
+    for col, unit in (("yaw_settle_s", 2), ("pos_settle_s", 1), ("form_settle_s", 1)):
+        v = [float(r[col]) for r in upto20]
+        assert f"{min(v):.{unit}f}–{max(v):.{unit}f}" in text, col
+    assert not any(r["form_settle_s"] for (d, _), r in cmds.items() if d == "50")  # "at 50 ms the formation never gets below 0.1 m"
