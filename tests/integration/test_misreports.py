@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import time
 
 import pytest
@@ -56,6 +57,13 @@ def test_a_killed_sender_counts_sent_as_a_lower_bound_and_a_killed_agent_has_its
     # The table says which counts are lower bounds.
     said = [x for x in log.splitlines() if x.startswith("sent counts are lower bounds")]
     assert len(said) == 1 and all(n in said[0] for n in ("3->4", "3->5", "4->5")) and "1->3" not in said[0], said
+    # Its summary lost, the report made again says what the folder ran with: the recorder's
+    # metadata (copied from its raw file into recording.mcap) and the start message.
+    (out / "summary.json").unlink()
+    r = subprocess.run(zswarm("report", str(out)), capture_output=True, text=True, timeout=300)
+    s2 = json.loads((out / "summary.json").read_text())
+    assert (s2["engine"], s2["duration_s"], s2["time_scale"]) == ("run", 7.0, 1.0), r.stderr[-2000:]
+    assert s2["remade"] == {"engine": "recording metadata", "duration_s": "recording ctl/start", "time_scale": "recording ctl/start", "seed": "recording ctl/start"}, s2["remade"]
 
 
 def test_a_dead_world_is_not_put_down_to_late_sensor_data(procs, tmp_path):
