@@ -503,3 +503,46 @@ def test_the_decarli_communication_numbers_are_its_sweeps():
         v = [float(r[col]) for r in upto20]
         assert f"{min(v):.{unit}f}–{max(v):.{unit}f}" in text, col
     assert not any(r["form_settle_s"] for (d, _), r in cmds.items() if d == "50")  # "at 50 ms the formation never gets below 0.1 m"
+
+
+# --------------------------------------------------------------------------- the near-start basins
+
+
+RADII = ["1e-1", "1e-2", "1e-3", "1e-4", "1e-6", "1e-8"]
+
+
+def _radii(start: str) -> list[str]:
+    """The --near radii of a row's start ("0.01 rad from its own", "1e-04 to 1e-08 rad (each)"), as
+    the folders name them."""
+
+    def name(x: str) -> str:
+        m, e = f"{float(x):.0e}".split("e")
+        return f"{m}e{int(e)}"
+
+    words = start.split()
+    if words[1] == "to":
+        lo, hi = RADII.index(name(words[0])), RADII.index(name(words[2]))
+        return RADII[lo : hi + 1]
+    return [name(words[0])]
+
+
+NEAR_HEADER = "| scenario | start | synchronized | below threshold, min / median / max (s) |"
+
+
+@pytest.mark.parametrize(("header", "agents"), [(NEAR_HEADER + " below 0.1", "7"), (NEAR_HEADER + " below 0.9", "5")])
+def test_the_near_start_tables_are_their_folders(header, agents):
+    """chapter5.md's tables of starts ε from the undesired equilibrium, from the basin.json of
+    docs/figures/basins/near-<law><agents>-<ε>/; a row that stands for several radii ("each")
+    holds for every one of them."""
+    for cells in md_table(CHAPTER5, header):
+        law = cells[0].removeprefix("thesis-5.6-").removeprefix("thesis-4.5-").removesuffix(agents)
+        for r in _radii(cells[1]):
+            s = json.loads((FIGURES / "basins" / f"near-{law}{agents}-{r}" / "basin.json").read_text())
+            st, left, j = s["settle_s"], s["left_s"], s["jumps"]
+            got = [f"{s['synchronized']} of {s['drawn']}", f"{st['min']:.1f} / {st['median']:.1f} / {st['max']:.1f}"]
+            if agents == "7":
+                got += [f"{s['settle_01_s']['median']:.1f}", f"{left['min']:.2f} / {left['median']:.2f} / {left['max']:.2f}"]
+            else:
+                got += [f"{left['median']:.1f}"]
+            got += [f"{j['median']:g} / {j['max']:g}"]
+            assert cells[2:] == got, (cells[:2], r)
