@@ -15,7 +15,6 @@ import pytest
 from mcap.reader import make_reader
 
 from tests.conftest import ROOT, TOPO
-from zswarm.recording import mcap_io
 
 T33 = TOPO / "thesis-3.3-moving5.toml"  # five agents, scenario.duration = 30 s
 
@@ -34,7 +33,7 @@ def sim_dir(tmp_path_factory) -> Path:
     return out
 
 
-def _remade(src: Path, dst: Path) -> tuple[subprocess.CompletedProcess[str], dict]:
+def _remade(dst: Path) -> tuple[subprocess.CompletedProcess[str], dict]:
     """``zswarm report`` on a copy of a folder whose summary.json was lost."""
     (dst / "summary.json").unlink()
     p = _cli("report", str(dst))
@@ -53,7 +52,7 @@ def _lose_first_chunk(path: Path) -> None:
 
 def test_a_remade_summary_of_a_sim_folder_says_sim_and_its_duration(sim_dir, tmp_path):
     d = shutil.copytree(sim_dir, tmp_path / "d")
-    p, s = _remade(sim_dir, d)
+    p, s = _remade(d)
     assert p.returncode == 0, p.stderr
     assert (s["engine"], s["duration_s"], s["seed"], s["time_scale"]) == ("sim", 6.0, 7, 0.0), s
     assert p.stdout.splitlines()[0].startswith("thesis-3.3-moving5 (bearing_pose_moving, engine=sim, 6 s, seed 7)"), p.stdout
@@ -65,7 +64,7 @@ def test_a_remade_summary_of_a_damaged_sim_recording_keeps_the_runs_duration(sim
     chunk, still says what the run was."""
     d = shutil.copytree(sim_dir, tmp_path / "d")
     _lose_first_chunk(d / "recording.mcap")
-    p, s = _remade(sim_dir, d)
+    p, s = _remade(d)
     assert p.returncode == 1, p.stderr  # a damaged recording: not completed
     assert (s["engine"], s["duration_s"], s["seed"]) == ("sim", 6.0, 7), s
     assert not s["recording"]["cut_short"], s["recording"]  # it ends at 6 s, the run's end
@@ -81,7 +80,7 @@ def test_a_remade_summary_says_unknown_where_the_folder_does_not_tell(sim_dir, t
     at = data.index(b"zswarm", 0, 4096)  # the metadata record's name, before the first chunk
     data[at : at + 6] = b"xswarm"
     (d / "recording.mcap").write_bytes(bytes(data))
-    p, s = _remade(sim_dir, d)
+    p, s = _remade(d)
     assert p.returncode == 1, p.stderr
     assert s["engine"] == "unknown" and s["duration_s"] is None and s["seed"] is None, {k: s[k] for k in ("engine", "duration_s", "seed")}
     assert s["remade"]["duration_s"].startswith("unknown"), s["remade"]
