@@ -8,9 +8,13 @@ CSV).  Two kinds of test per table:
 * **the page is its file**: the table is parsed from the Markdown and compared with what its file
   gives, cell by cell, so that editing either alone fails;
 * **the file is what the code computes**: a few of its rows or draws, picked here with a fixed
-  seed, are run again (the batched engine where the study used it, the same code path, so the
-  cells must be equal as written: six significant digits for sweep.csv, every digit for
-  basin.csv), and one row of the §3.2 sweep on ``sim`` as well, a different engine.
+  seed, are run again on the engine the study used (the same code path, so the cells must be
+  equal as the file writes them, six significant digits, rows.cell), and one row of the §3.2
+  sweep on ``sim`` as well, a different engine.
+
+Where a study's per-draw rows were not kept (the delayed cells of the basin under delay, the
+sensor-side basin) a re-run draw can only be held to its cell's verdict where the cell is
+unanimous; decarli.md's sweeps are held to their files but not re-run (27 s of CPU a row on sim).
 
 The re-runs are CPU-bound simulations that keep no real time and have no wall-clock limit: a
 batch of 150 s §5.6 runs costs 10-15 s of one core, whether it holds one run or four (the
@@ -20,9 +24,9 @@ per-call cost of the engine dominates at a few draws).
 from __future__ import annotations
 
 import csv
-import json
 import importlib.util
 import itertools
+import json
 import random
 from pathlib import Path
 
