@@ -298,6 +298,29 @@ def fail_if_overloaded(s: dict, what: str) -> None:
         raise MachineDidNotKeepUp(f"this machine did not keep up with the run ({'; '.join(ov['reasons'])}), so {what} could not be checked against the equations")
 
 
+def _machine_problems_only(problems: list[str]) -> bool:
+    """Every problem of a run is one a machine that stood still makes: a hole in the recording or
+    a recording that ends short (the recorder or the world not run for longer than 0.1 s)."""
+    return bool(problems) and all(("the recording has " in p and " hole" in p) or "recording ends at" in p for p in problems)
+
+
+def assert_run_exit_ok(code: int | None, out: Path, log: Path) -> dict:
+    """A ``zswarm run`` with results in ``out`` and its output in ``log`` exited 0; its summary.
+
+    A run that did not keep up (its own overload figures) may have stood still long enough for
+    a hole in its recording, which the run rightly calls a problem (exit 1): the test's checks
+    cannot be made on it, and it raises :class:`~tests.keepup.MachineDidNotKeepUp` (a rerun).
+    Any other non-zero exit, overloaded or not, fails at once."""
+    text = log.read_text(errors="replace") if log.exists() else "(no launcher log)"
+    f = out / "summary.json"
+    s = json.loads(f.read_text()) if f.exists() else None
+    if code == 1 and s is not None and s["overload"]["overloaded"] and _machine_problems_only(s["problems"]):
+        raise MachineDidNotKeepUp(f"this machine did not keep up with the run ({'; '.join(s['overload']['reasons'])}), which exited 1 on what that leaves: {'; '.join(s['problems'])}")
+    assert code == 0, text[-3000:]
+    assert s is not None, f"exit 0 and no summary.json in {out}"
+    return s
+
+
 def require_kept_up(s: dict, what: str) -> None:
     """Raise :class:`~tests.keepup.MachineDidNotKeepUp` when the run ``s`` did not keep up or its
     sensor packets came late (``overload.late``: the world's and the packets' measured lateness

@@ -4,12 +4,12 @@ long real-time runs of the suite (a busy machine left agents missing ticks at 1)
 
 from __future__ import annotations
 
-import json
+import math
 
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import fail_if_overloaded, not_alive, wait_for, zswarm
+from tests.integration.conftest import SIM_RUN_TOL, assert_run_exit_ok, fail_if_overloaded, not_alive, wait_for, zswarm
 from zswarm.transport.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
@@ -28,6 +28,11 @@ DETECT_BOUND_S = 1.0
 HUNG_BOUND_S = 0.5 * (1.25 * LEASE_MS / 1000 + 0.25)
 
 
+# sim of the killed-agent case (above): reconvergence 4.6 s after the restart, peak / level 10.0.
+SIM_RECONVERGENCE_S = 4.6
+SIM_PEAK_OVER_LEVEL = 10.0
+
+
 def _run(procs, tmp_path, duration, *faults):
     out = tmp_path / "out"
     extra = [a for f in faults for a in ("--fault", f)]
@@ -36,8 +41,7 @@ def _run(procs, tmp_path, duration, *faults):
     code = p.wait(duration / 0.5 + 120)
     procs.adopt(out)  # a restarted agent is in processes.json too
     log = (tmp_path / "launcher.log").read_text()
-    assert code == 0, log[-3000:]
-    return json.loads((out / "summary.json").read_text()), out, log
+    return assert_run_exit_ok(code, out, tmp_path / "launcher.log"), out, log
 
 
 def test_a_killed_agent_is_flagged_rejoins_and_the_team_reconverges(procs, tmp_path):
@@ -61,9 +65,14 @@ def test_a_killed_agent_is_flagged_rejoins_and_the_team_reconverges(procs, tmp_p
     r = f["reconvergence"]
     assert not s["overload"]["overloaded"] or "OVERLOADED" in log
     fail_if_overloaded(s, "the team's reconvergence")  # then its errors are not the algorithm's alone
-    # sim reconverges 4.6 s after the restart (same scenario, tests/component/test_faults.py);
-    # here the restarted process also needs 2–4 s to start and join.
-    assert r["reconvergence_s"] is not None and r["reconvergence_s"] < 12, r
+    # sim, same scenario and fault (zswarm sim --fault kill,agent=5,at=10,restart_at=15,
+    # 2026-12-07): the mean error peaks at 0.158 after the restart and is back below its level
+    # before the kill, 0.0158, 4.6 s after it: a decay of ln(10) in 4.6 s.  Over Zenoh the team
+    # ends within SIM_RUN_TOL (3x) of sim's errors when it keeps up; at sim's decay rate a factor 3
+    # is 4.6·ln(3)/ln(10) = 2.2 s.  And the new process first has to start and join: agent 6
+    # marked it back d6["back_after_end_s"] after the restart (imports, session, warm-up).
+    bound = d6["back_after_end_s"] + SIM_RECONVERGENCE_S * (1 + math.log(SIM_RUN_TOL) / math.log(SIM_PEAK_OVER_LEVEL))
+    assert r["reconvergence_s"] is not None and r["reconvergence_s"] < bound, (r, bound)
     # The axes alone make a 15.6 kB PNG; with the curves and the shading 73-76 kB.
     assert (out / "plots" / "attitude_error.png").stat().st_size > 30_000
 

@@ -22,13 +22,12 @@ thresholds within 25 %.
 
 from __future__ import annotations
 
-import json
 import math
 
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import not_alive, stop_tail, zswarm
+from tests.integration.conftest import assert_run_exit_ok, not_alive, stop_tail, zswarm
 
 pytestmark = pytest.mark.integration
 
@@ -41,8 +40,7 @@ def run(procs, tmp_path, sets, duration, scale=1.0):
     p = procs.start(zswarm("run", str(FIXED8), *args, "--duration", str(duration), "--time-scale", str(scale), "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
     code = p.wait(duration / scale * 3 + 90)
     procs.adopt(out)
-    assert code == 0, (tmp_path / "launcher.log").read_text()
-    s = json.loads((out / "summary.json").read_text())
+    s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")
     assert s["completed"]
     assert not (why := not_alive(out, s)), why
     return out, s

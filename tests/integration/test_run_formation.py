@@ -26,12 +26,10 @@ What is compared, and why these bounds:
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import not_alive, zswarm
+from tests.integration.conftest import assert_run_exit_ok, not_alive, zswarm
 
 pytestmark = pytest.mark.integration
 NAME = "decarli-8-formation"
@@ -47,8 +45,7 @@ def test_decarli_over_zenoh_matches_sim(procs, sim_reference, tmp_path):
     )
     code = p.wait(DURATION / SCALE * 2 + 120)
     procs.adopt(out)
-    assert code == 0, (tmp_path / "launcher.log").read_text()
-    s = json.loads((out / "summary.json").read_text())
+    s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")
     assert s["completed"]
     assert not (why := not_alive(out, s)), why
     ss = ref.summary()

@@ -14,7 +14,6 @@ to be below the thresholds on both, and the final errors within a factor 3
 from __future__ import annotations
 
 import csv
-import json
 import math
 from collections import defaultdict
 
@@ -22,7 +21,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import assert_run_matches_sim, not_alive, zswarm
+from tests.integration.conftest import assert_run_exit_ok, assert_run_matches_sim, not_alive, zswarm
 from zswarm.scenario import load
 
 pytestmark = pytest.mark.integration
@@ -36,8 +35,7 @@ def run(procs, sim_reference, tmp_path, name, time_scale=1.0):
     p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), "--out", str(out), "--time-scale", f"{time_scale:g}", "--quiet"), log=tmp_path / "launcher.log")
     code = p.wait(sc.duration / time_scale * 3 + 90)
     procs.adopt(out)
-    assert code == 0, (tmp_path / "launcher.log").read_text()
-    s = json.loads((out / "summary.json").read_text())
+    s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")
     assert s["completed"]
     assert not (why := not_alive(out, s)), why
     assert all(c["dropped"] == 0 for c in s["links"].values()), s["links"]

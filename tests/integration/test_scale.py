@@ -35,7 +35,7 @@ from collections import defaultdict
 
 import pytest
 
-from tests.integration.conftest import not_alive, pid_alive, zswarm
+from tests.integration.conftest import assert_run_exit_ok, not_alive, pid_alive, zswarm
 from zswarm.recording.mcap_io import read
 from zswarm.studies.generate import generate
 from zswarm.transport.bus import LEASE_MS
@@ -53,8 +53,7 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     p = procs.start(zswarm("run", str(topo), "--out", str(out), "--time-scale", "0.5", "--quiet"), log=tmp_path / "launcher.log")
     code = p.wait(DURATION * 2 * 4 + 120)  # time scale 0.5: twice DURATION of wall time, ×4 as before, + start-up
     procs.adopt(out)
-    assert code == 0, (tmp_path / "launcher.log").read_text()[-3000:]
-    s = json.loads((out / "summary.json").read_text())
+    s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")
     assert s["completed"]
     assert not (why := not_alive(out, s)), why
     assert all(v == 0 for v in s["exit_codes"].values()), s["exit_codes"]
