@@ -82,7 +82,7 @@ def pytest_make_collect_report(collector: pytest.Collector) -> object:
     return None
 
 
-def pytest_terminal_summary(terminalreporter) -> None:  # noqa: ANN001 (pytest's TerminalReporter)
+def pytest_terminal_summary(terminalreporter) -> None:
     """The tests run again because the machine did not keep up, each with its reason."""
     reruns = terminalreporter.stats.get("rerun", [])
     if not reruns and not any("tests/integration/" in r.nodeid for cat in terminalreporter.stats.values() for r in cat if hasattr(r, "nodeid")):
