@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo docs test test-fast fuzz bench bench-sim bench-capacity bench-batched bench-links soak sim clean golden
+.PHONY: demo docs test test-fast fuzz bench bench-sim bench-capacity bench-batched bench-links soak sim clean golden golden-spread
 
 DEMO   := $(VENV)/.installed-demo
 DOCS   := $(VENV)/.installed-docs
@@ -89,3 +89,9 @@ clean:
 ## result; commit the file with the reason its numbers changed; tests/golden.py says what it holds)
 golden: $(STAMP)
 	$(PY) -m tests.write_golden
+
+## make golden-spread: measure how far the golden runs move under every kernel and SIMD setting this machine
+## can force (OpenBLAS, numpy dispatch, libm, compiled loops) and how far a 1e-6 gain change moves them; writes
+## tests/data/golden_spread.json, which tests/golden.py's bound is derived from (~7 min of one core, at nice 19)
+golden-spread: $(STAMP)
+	nice -n 19 $(PY) -m tests.measure_golden_spread

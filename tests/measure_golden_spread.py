@@ -1,0 +1,233 @@
+"""``make golden-spread``: measure how far the golden sim runs' numbers move on this machine
+under every kernel and SIMD setting that can be forced here, and how far a gain changed by a
+millionth moves them, and write it to tests/data/golden_spread.json (tests/golden.py derives
+its bound from it; tests/component/test_golden_sim.py holds the bound to it).  It writes; it
+tests nothing and reports no test result.
+
+    python -m tests.measure_golden_spread            (every setting below; ~5 min of one core, `make golden-spread`)
+    python -m tests.measure_golden_spread --margins  (the margins anew from the numbers kept, after the bound's constants changed)
+    python -m tests.measure_golden_spread --child OUT   (one setting: the one in the environment)
+
+Each setting is a set of environment variables read at process start, so each runs in an
+interpreter of its own (the ``--child``):
+
+- OpenBLAS's kernel (``OPENBLAS_CORETYPE``): the build is DYNAMIC_ARCH, and of the names it
+  accepts, these load a kernel of their own here (threadpoolctl's name in the file: Prescott
+  reports "Katmai", its alias in a 64-bit build; Core2 is Prescott's too, Zen and Cooperlake
+  Haswell's and SkylakeX's, Atom Nehalem's; an unknown name is the CPU's own);
+- numpy's dispatch (``NPY_DISABLE_CPU_FEATURES``): the AVX512_SPR target alone (what the
+  reference's machine had), the whole AVX-512 family (tests/layers.sh's OTHER), and every
+  dispatch target down to the X86_V2 baseline (no AVX2, no FMA in numpy's loops);
+- the C library's own paths (``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``): glibc's sin, cos,
+  exp, atan2, ... have FMA builds chosen at load time; this turns them off (measured: other bits);
+- zswarm's compiled loops: off (``ZSWARM_KERNELS=0``, numpy's code) and the default clone
+  alone (``-DZSWARM_DEFAULT_ONLY``, what a CPU without AVX2 runs; ``ZSWARM_KERNELS_FILE``);
+- combinations: tests/layers.sh's OTHER exactly, and the oldest machine this can fake (Prescott,
+  numpy at its baseline, glibc without FMA, the default clone).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from tests import golden
+
+SPREAD = golden.ROOT / "tests" / "data" / "golden_spread.json"
+_AVX512 = "AVX512F,AVX512CD,AVX512_SKX,AVX512_CLX,AVX512_CNL,AVX512_ICL,AVX512_SPR,X86_V4"  # tests/layers.sh's OTHER
+_BASELINE = "X86_V3,X86_V4,AVX512_ICL,AVX512_SPR"  # every dispatch target of numpy 2.x above X86_V2
+_NO_FMA_LIBM = "glibc.cpu.hwcaps=-AVX2,-FMA"
+DEFAULT_BUILD = "@default-build"  # replaced by the path of the -DZSWARM_DEFAULT_ONLY build
+
+SETTINGS: dict[str, dict[str, str]] = {
+    "default": {},
+    "openblas=Prescott": {"OPENBLAS_CORETYPE": "Prescott"},
+    "openblas=Nehalem": {"OPENBLAS_CORETYPE": "Nehalem"},
+    "openblas=Sandybridge": {"OPENBLAS_CORETYPE": "Sandybridge"},
+    "openblas=Haswell": {"OPENBLAS_CORETYPE": "Haswell"},
+    "numpy-AVX512_SPR": {"NPY_DISABLE_CPU_FEATURES": "AVX512_SPR"},
+    "numpy-AVX512": {"NPY_DISABLE_CPU_FEATURES": _AVX512},
+    "numpy-baseline": {"NPY_DISABLE_CPU_FEATURES": _BASELINE},
+    "libm-FMA": {"GLIBC_TUNABLES": _NO_FMA_LIBM},
+    "kernels-off": {"ZSWARM_KERNELS": "0"},
+    "kernels-default-build": {"ZSWARM_KERNELS_FILE": DEFAULT_BUILD},
+    "layers-OTHER": {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": _AVX512},
+    "oldest": {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": _BASELINE, "GLIBC_TUNABLES": _NO_FMA_LIBM, "ZSWARM_KERNELS_FILE": DEFAULT_BUILD},
+}
+
+# The gain changes the comparison must catch: every gain of one scenario of each chapter's
+# schemes, times 1 + 1e-6.  A gain given per agent is changed where it is given (§3.3's k_R).
+GAIN_CHANGE = 1e-6
+GAINS: dict[str, dict[str, float]] = {
+    "thesis-3.2-fixed8": {"algorithm.gains.k_R": 1.0, "algorithm.gains.k_p": 1.0},
+    "thesis-3.3-moving5": {"algorithm.gains.k_p": 1.0, "agents[2].gains.k_R": 10.0, "agents[3].gains.k_R": 5.0, "agents[4].gains.k_R": 3.0},
+    "thesis-4.5-hybrid-pose5": {"algorithm.gains.k_R": 1.1, "algorithm.gains.k_xi": 3.5, "algorithm.gains.k_p": 1.0},
+    "thesis-5.6-hybrid7": {"algorithm.gains.k_R": 0.4, "algorithm.gains.k_omega": 0.1, "algorithm.gains.k_xi": 20.0},
+}
+# Measured too (not in the live test): the two runs whose bound is widened (tests/golden.py AMPLIFIED).
+GAINS_ALSO: dict[str, dict[str, float]] = {
+    "thesis-4.5-continuous5": {"algorithm.gains.k_R": 1.1},
+    "thesis-5.6-velocity-free7": {"algorithm.gains.k_R": 0.4, "algorithm.gains.k_Q": 30.0},
+}
+
+
+def changed(field: str, value: float) -> str:
+    """The ``--set`` of ``field`` at ``value`` times 1 + GAIN_CHANGE."""
+    return f"{field}={value * (1 + GAIN_CHANGE)!r}"
+
+
+def build_default_clone(where: Path) -> Path:
+    """zswarm/math/_kernels.c built with its default clone alone (as tests/unit/test_kernels.py does)."""
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        raise SystemExit("measure_golden_spread: gcc is needed for the default build of zswarm/math/_kernels.c")
+    so = where / "_kernels_default.so"
+    flags = ["-O2", "-ffp-contract=off", "-fno-math-errno", "-Wno-psabi", "-DZSWARM_DEFAULT_ONLY", "-shared", "-fPIC"]
+    source = golden.ROOT / "zswarm" / "math" / "_kernels.c"
+    subprocess.run([gcc, *flags, "-I", sysconfig.get_paths()["include"], str(source), "-o", str(so), "-lm"], check=True, timeout=300)
+    return so
+
+
+def child(out: Path) -> None:
+    """Every golden scenario and every gain change, under this process's setting: their numbers."""
+    runs: dict[str, Any] = {}
+    perturbed: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as d:
+        for name in golden.SCENARIOS:
+            where = Path(d) / name
+            where.mkdir()
+            runs[name] = golden.run(name, where)["summary"]
+        for name, gains in (GAINS | GAINS_ALSO).items():
+            for field, value in gains.items():
+                where = Path(d) / f"{name} {field}"
+                where.mkdir()
+                perturbed[f"{name} {field}"] = golden.run(name, where, (changed(field, value),))["summary"]
+    from zswarm.math import kernels
+
+    loaded = getattr(kernels._lib, "__file__", None)
+    out.write_text(json.dumps({"fingerprint": golden.fingerprint(), "kernels_file": loaded, "runs": runs, "perturbed": perturbed}))
+
+
+def moved(got: dict[str, Any], want: dict[str, Any]) -> dict[str, Any]:
+    """The numbers of a run's summary that differ from the reference's (NaN equal to NaN)."""
+    out = {}
+    for k, w in want.items():
+        g = got.get(k)
+        if g != w and not (isinstance(g, float) and isinstance(w, float) and math.isnan(g) and math.isnan(w)):
+            out[k] = g
+    return out
+
+
+def _run(want: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
+    """A run rebuilt from the reference and the numbers that moved."""
+    return {"summary": {**want["summary"], **values}, "csv_sha256": None, "scale": want["scale"]}
+
+
+def margins(settings: dict[str, Any], reference: dict[str, Any]) -> dict[str, Any]:
+    """For each setting: the largest |Δ|/bound of each scenario's numbers (below 1/SAFETY is what
+    the bound promises), and for each gain change the largest |Δ|/bound and how many numbers
+    are beyond their bound (the comparison fails where that is > 0)."""
+    out: dict[str, Any] = {}
+    for setting, m in settings.items():
+        spread = {}
+        for name, values in m["moved"].items():
+            want = reference[name]
+            got = _run(want, values)
+            tol = golden.bounds(name, got, want)
+            worst = max(((abs(got["summary"][k] - want["summary"][k]) / tol[k], k) for k in values if k in tol), default=(0.0, None))
+            unequal = sorted(k for k in values if k not in tol and k not in golden.ADDED)
+            spread[name] = {"worst_over_bound": worst[0], "worst": worst[1], "unequal": unequal}
+        gains = {}
+        for change, values in m["gain_changes"].items():
+            name = change.split()[0]
+            want = reference[name]
+            got = _run(want, values)
+            tol = golden.bounds(name, got, want)
+            ratios = sorted(((abs(got["summary"][k] - want["summary"][k]) / tol[k], k) for k in values if k in tol), reverse=True)
+            gains[change] = {
+                "largest_over_bound": ratios[0][0] if ratios else 0.0,
+                "largest": ratios[0][1] if ratios else None,
+                "beyond_bound": sum(r > 1 for r, _ in ratios),
+                "fails": bool(golden.compare(got, want, False, name)),
+            }
+        out[setting] = {"spread": spread, "gain_changes": gains}
+    return out
+
+
+def write(settings: dict[str, Any], machine: str) -> None:
+    reference = golden.reference()
+    doc = {
+        "about": (
+            "The golden sim runs (tests/data/golden_sim.json) under each kernel and SIMD setting of this machine: the numbers that "
+            "moved from the reference (moved), and the numbers of each run with a gain times 1 + 1e-6 that differ from the reference "
+            "(gain_changes).  margins: each scenario's largest |Δ|/bound (the bound promises <= 1/SAFETY) and each gain change's "
+            "largest |Δ|/bound and count of numbers beyond their bound.  Written by `python -m tests.measure_golden_spread`; "
+            "tests/golden.py derives its bound from it."
+        ),
+        "machine": machine,
+        "reference_fingerprint": reference["fingerprint"],
+        "gain_change": GAIN_CHANGE,
+        "bound": {"SAFETY": golden.SAFETY, "K_ULPS": golden.K_ULPS, "C_TRACE": golden.C_TRACE, "AMPLIFIED": golden.AMPLIFIED},
+        "settings": settings,
+        "margins": margins(settings, reference["scenarios"]),
+    }
+    SPREAD.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+
+
+def _cpu() -> str:
+    for line in Path("/proc/cpuinfo").read_text().splitlines() if Path("/proc/cpuinfo").exists() else []:
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return "unknown"
+
+
+def main(argv: list[str]) -> int:
+    if argv[:1] == ["--child"]:
+        child(Path(argv[1]))
+        return 0
+    if argv[:1] == ["--margins"]:  # the bound's constants changed: the margins anew from the numbers kept
+        doc = json.loads(SPREAD.read_text())
+        write(doc["settings"], doc["machine"])
+        print(f"wrote {SPREAD.relative_to(golden.ROOT)} (margins only)")
+        return 0
+    reference = golden.reference()
+    if reference.get("fingerprint") is None:
+        print("measure_golden_spread: no reference (make golden first)", file=sys.stderr)
+        return 2
+    want = reference["scenarios"]
+    settings: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as d:
+        so = build_default_clone(Path(d))
+        for name, env in SETTINGS.items():
+            real = {k: (str(so) if v == DEFAULT_BUILD else v) for k, v in env.items()}
+            out = Path(d) / f"{len(settings)}.json"
+            t = time.perf_counter()
+            argv = [sys.executable, "-m", "tests.measure_golden_spread", "--child", str(out)]
+            subprocess.run(argv, env={**os.environ, **real}, cwd=golden.ROOT, check=True, timeout=3600)
+            r = json.loads(out.read_text())
+            if env.get("ZSWARM_KERNELS_FILE") == DEFAULT_BUILD and r["kernels_file"] != str(so):
+                raise SystemExit(f"measure_golden_spread: {name}: the default build was not loaded ({r['kernels_file']})")
+            settings[name] = {
+                "env": env,
+                "fingerprint": r["fingerprint"],
+                "kernels_file": DEFAULT_BUILD if r["kernels_file"] == str(so) else r["kernels_file"] and Path(r["kernels_file"]).name,
+                "moved": {n: moved(v, want[n]["summary"]) for n, v in r["runs"].items()},
+                "gain_changes": {c: moved(v, want[c.split()[0]]["summary"]) for c, v in r["perturbed"].items()},
+            }
+            print(f"  {name}: {time.perf_counter() - t:.0f} s", flush=True)
+    write(settings, _cpu())
+    print(f"wrote {SPREAD.relative_to(golden.ROOT)}: {len(settings)} settings")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
