@@ -56,7 +56,9 @@ def fixed8_text() -> str:
 # background layer then ended with the integration layer (26.3 of 26.5 min beside stress-ng,
 # against 23.6 of 25.3 without it) and make test took 31.0 min instead of 30.6, so it stays in
 # the component layer.
-BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py"})
+# test_publications.py joined on 2026-12-07: its re-runs of published rows and draws are ~140 s
+# of one core of sim and batched runs, no real time.
+BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py", "test_publications.py"})
 
 
 def pytest_collection_modifyitems(config, items):
