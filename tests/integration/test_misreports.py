@@ -16,7 +16,7 @@ import time
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import assert_run_exit_ok, wait_for, world_started, zswarm
+from tests.integration.conftest import assert_run_exit_ok, stop_tail, wait_for, world_started, zswarm
 
 pytestmark = pytest.mark.integration
 T33 = str(TOPO / "thesis-3.3-moving5.toml")
@@ -56,6 +56,20 @@ def test_a_killed_sender_counts_sent_as_a_lower_bound_and_a_killed_agent_has_its
     # The table says which counts are lower bounds.
     said = [x for x in log.splitlines() if x.startswith("sent counts are lower bounds")]
     assert len(said) == 1 and all(n in said[0] for n in ("3->4", "3->5", "4->5")) and "1->3" not in said[0], said
+    # The receiving side.  Agent 3 ran as two processes, each counting from 0: link 1->3's
+    # delivered is their sum (the newest alone read 339 of 698 sent), what the first received in
+    # its last second is not in it, and 1->3 says both.  Agent 4, killed for good, likewise.
+    into3 = links["1->3"]
+    assert len(into3["delivered_by_incarnation"]) == 2 and into3["delivered"] == sum(into3["delivered_by_incarnation"].values()), into3
+    # Sent at 100 Hz for 7 s; lost: agent 3's second of death and its restart (the token came
+    # back fault["token"]["back_at"] - 3 s after it), plus a second of counts at each kill.
+    back = next(f for f in s["faults"] if f.get("agent") == 3)["token"]["back_at"]
+    assert into3["sent"] - into3["delivered"] <= 100 * ((back - 2.0) + 1.0) + stop_tail(100.0), (into3, back)
+    for name in ("1->3", "2->3", "2->4", "3->4"):
+        assert links[name].get("delivered_is_lower_bound") is True, (name, links[name])
+    assert "delivered_is_lower_bound" not in links["world->5"] and "delivered_is_lower_bound" not in links["4->5"], (links["world->5"], links["4->5"])
+    said = [x for x in log.splitlines() if x.startswith("delivered counts are lower bounds")]
+    assert len(said) == 1 and all(n in said[0] for n in ("1->3", "3->4")) and "4->5" not in said[0], said
     # Its summary lost, the report made again says what the folder ran with: the recorder's
     # metadata (copied from its raw file into recording.mcap) and the start message.
     (out / "summary.json").unlink()

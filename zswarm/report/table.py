@@ -63,6 +63,9 @@ def footer_lines(summary: dict[str, Any]) -> list[str]:
     lower = [k for k, v in (summary.get("links") or {}).items() if v.get("sent_is_lower_bound")]
     if lower:  # a sender killed: what it sent after its last recorded stats is not counted
         lines.append(f"sent counts are lower bounds on links {', '.join(lower)} (a sender was killed: its last counts were not recorded)")
+    lower_rx = [k for k, v in (summary.get("links") or {}).items() if v.get("delivered_is_lower_bound")]
+    if lower_rx:  # a receiver killed: what it received after its last recorded stats is not counted
+        lines.append(f"delivered counts are lower bounds on links {', '.join(lower_rx)} (a receiver was killed: its last counts were not recorded)")
     if summary.get("problems"):
         lines.append("NOT COMPLETED: " + "; ".join(summary["problems"]))
     if ov.get("late"):
