@@ -92,6 +92,8 @@ golden: $(STAMP)
 
 ## make golden-spread: measure how far the golden runs move under every kernel and SIMD setting this machine
 ## can force (OpenBLAS, numpy dispatch, libm, compiled loops) and how far a 1e-6 gain change moves them; writes
-## tests/data/golden_spread.json, which tests/golden.py's bound is derived from (~7 min of one core, at nice 19)
+## tests/data/golden_spread.json, which tests/golden.py's bound is derived from, and tests/data/golden_growth.json
+## (the same runs at other lengths; how much a run grows a turned initial estimate): ~10 min of one core, at nice 19
 golden-spread: $(STAMP)
 	nice -n 19 $(PY) -m tests.measure_golden_spread
+	nice -n 19 $(PY) -m tests.measure_golden_spread --growth

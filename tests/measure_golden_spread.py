@@ -6,6 +6,8 @@ tests nothing and reports no test result.
 
     python -m tests.measure_golden_spread            (every setting below; ~5 min of one core, `make golden-spread`)
     python -m tests.measure_golden_spread --margins  (the margins anew from the numbers kept, after the bound's constants changed)
+    python -m tests.measure_golden_spread --growth   (tests/data/golden_growth.json: the runs at other lengths, and how
+                                                     much a run grows an initial estimate turned by 1e-12 rad; ~3 min)
     python -m tests.measure_golden_spread --child OUT   (one setting: the one in the environment)
 
 Each setting is a set of environment variables read at process start, so each runs in an
@@ -163,6 +165,65 @@ def margins(settings: dict[str, Any], reference: dict[str, Any]) -> dict[str, An
     return out
 
 
+FLOOR_BELOW = 1e-3  # a measure this small is read for its floor: K·u·(1 + w) at K = 64 is < 0.02 ulps of its square 2w·Δ
+
+
+def _pow2(x: float) -> int:
+    return 1 << max(0, math.ceil(math.log2(x))) if x > 0 else 1
+
+
+def derived(settings: dict[str, Any], reference: dict[str, Any]) -> dict[str, Any]:
+    """The measured quantities the bound's constants are SAFETY times (tests/golden.py), each with
+    where it was measured, over every setting and every per-agent or per-edge number (a mean or
+    maximum is bound by its terms):
+
+    - C: the most the square of a measure below FLOOR_BELOW moved, in ulps (|g² − w²|/u);
+    - K_other: the most a number that is not a measure moved, in ulps of S + |w|;
+    - K_measure: the most a measure moved beyond its floor C·u/(g + w), in ulps of 1 + |w|;
+    - K_amplified: for each run of golden.AMPLIFIED, the larger of the two K over its numbers.
+
+    C and the two K are over the other runs."""
+    u = golden.U
+    rows = []
+    for setting, m in settings.items():
+        for name, values in m["moved"].items():
+            want = reference[name]
+            S = want["scale"]["S"]
+            for k, g in values.items():
+                w = want["summary"][k]
+                if isinstance(w, float) and isinstance(g, float) and not (math.isnan(w) or math.isnan(g)) and not golden.is_aggregate(k):
+                    rows.append((setting, name, k, w, g, S))
+
+    def best(items: list[tuple[float, str, str, str]]) -> dict[str, Any]:
+        v, setting, name, key = max(items, default=(0.0, "", "", ""))
+        return {"ulps": v, "setting": setting, "scenario": name, "key": key}
+
+    C = best([(abs(g * g - w * w) / u, s, n, k) for s, n, k, w, g, _ in rows if n not in golden.AMPLIFIED and golden.is_measure(k) and abs(w) < FLOOR_BELOW])
+    c = C["ulps"]
+
+    def K(s: str, n: str, k: str, w: float, g: float, S: float) -> tuple[float, str, str, str]:
+        if golden.is_measure(k):
+            return max(0.0, abs(g - w) - c * u / max(abs(g) + abs(w), 1e-300)) / (u * (1.0 + abs(w))), s, n, k
+        return abs(g - w) / (u * (S + abs(w))), s, n, k
+
+    return {
+        "C": C,
+        "K_other": best([K(*r) for r in rows if r[1] not in golden.AMPLIFIED and not golden.is_measure(r[2])]),
+        "K_measure": best([K(*r) for r in rows if r[1] not in golden.AMPLIFIED and golden.is_measure(r[2])]),
+        "K_amplified": {n: best([K(*r) for r in rows if r[1] == n]) for n in sorted(golden.AMPLIFIED)},
+    }
+
+
+def constants(d: dict[str, Any]) -> dict[str, Any]:
+    """The bound's constants SAFETY times the measured ``derived`` gives, each rounded up to a power of two."""
+    f = golden.SAFETY
+    return {
+        "K_ULPS": _pow2(f * max(d["K_other"]["ulps"], d["K_measure"]["ulps"])),
+        "C_TRACE": _pow2(f * d["C"]["ulps"]),
+        "AMPLIFIED": {n: _pow2(f * v["ulps"]) for n, v in d["K_amplified"].items()},
+    }
+
+
 def write(settings: dict[str, Any], machine: str) -> None:
     reference = golden.reference()
     doc = {
@@ -170,17 +231,95 @@ def write(settings: dict[str, Any], machine: str) -> None:
             "The golden sim runs (tests/data/golden_sim.json) under each kernel and SIMD setting of this machine: the numbers that "
             "moved from the reference (moved), and the numbers of each run with a gain times 1 + 1e-6 that differ from the reference "
             "(gain_changes).  margins: each scenario's largest |Δ|/bound (the bound promises <= 1/SAFETY) and each gain change's "
-            "largest |Δ|/bound and count of numbers beyond their bound.  Written by `python -m tests.measure_golden_spread`; "
-            "tests/golden.py derives its bound from it."
+            "largest |Δ|/bound and count of numbers beyond their bound.  derived: what the bound's constants are SAFETY times.  "
+            "Written by `python -m tests.measure_golden_spread`; tests/golden.py derives its bound from it."
         ),
         "machine": machine,
         "reference_fingerprint": reference["fingerprint"],
         "gain_change": GAIN_CHANGE,
         "bound": {"SAFETY": golden.SAFETY, "K_ULPS": golden.K_ULPS, "C_TRACE": golden.C_TRACE, "AMPLIFIED": golden.AMPLIFIED},
         "settings": settings,
+        "derived": derived(settings, reference["scenarios"]),
         "margins": margins(settings, reference["scenarios"]),
     }
     SPREAD.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+
+
+GROWTH = golden.ROOT / "tests" / "data" / "golden_growth.json"
+LENGTHS = (1.0, 2.0, 4.0, 8.0)  # s of world time
+LENGTH_RUNS = ("thesis-3.2-fixed8", "thesis-3.3-moving5", "thesis-4.5-hybrid-pose5", "thesis-5.6-hybrid7", "thesis-5.6-velocity-free7-noisy")
+LENGTH_SETTINGS = ("default", "openblas=Prescott", "libm-FMA")
+TURN = 1e-12  # rad: one initial estimate turned by this much
+TURNS = {  # run -> the initial estimate turned (its angle as the scenario gives it)
+    "thesis-4.5-continuous5": ("agents[0].estimate.R.angle", "-pi/2"),
+    "thesis-4.5-continuous5-noisy": ("agents[0].estimate.R.angle", "-pi/2"),
+    "thesis-4.5-hybrid5": ("agents[0].estimate.R.angle", "-pi/2"),
+    "thesis-5.6-velocity-free7": ("agents[2].estimate.Q.angle", "pi/2"),
+}
+
+
+def child_lengths(out: Path) -> None:
+    """The LENGTH_RUNS for each of LENGTHS, under this process's setting: their numbers."""
+    runs = {}
+    with tempfile.TemporaryDirectory() as d:
+        for length in LENGTHS:
+            golden.DURATION = length
+            for name in LENGTH_RUNS:
+                where = Path(d) / f"{name} {length}"
+                where.mkdir()
+                runs[f"{name} {length:g}"] = golden.run(name, where)
+    out.write_text(json.dumps(runs))
+
+
+def growth() -> None:
+    """How far the constants measured at DURATION hold at other lengths (the default against two
+    settings, each number's |Δ| over its bound as it stands), and how much a run grows what it is
+    given (one initial estimate turned by TURN: the largest move of a number at the end)."""
+    raw = {}
+    with tempfile.TemporaryDirectory() as d:
+        for setting in LENGTH_SETTINGS:
+            out = Path(d) / f"{setting}.json"
+            argv = [sys.executable, "-m", "tests.measure_golden_spread", "--child-lengths", str(out)]
+            subprocess.run(argv, env={**os.environ, **SETTINGS[setting]}, cwd=golden.ROOT, check=True, timeout=3600)
+            raw[setting] = json.loads(out.read_text())
+        turned = {}
+        for name, (field, angle) in TURNS.items():
+            (Path(d) / name).mkdir()
+            (Path(d) / f"{name} turned").mkdir()
+            base = golden.run(name, Path(d) / name)["summary"]
+            moved_ = golden.run(name, Path(d) / f"{name} turned", (f'{field}="{angle}+{TURN!r}"',))["summary"]
+            floats = [(abs(moved_[k] - w), k, w) for k, w in base.items() if isinstance(w, float) and isinstance(moved_.get(k), float) and not math.isnan(w)]
+            d_, key, w = max(floats)
+            turned[name] = {"turned": field, "by_rad": TURN, "largest_move": d_, "of": key, "value": w, "gain": d_ / TURN}
+    lengths: dict[str, Any] = {}
+    for setting in LENGTH_SETTINGS[1:]:
+        for run, got in raw[setting].items():
+            name = run.split()[0]
+            want = raw["default"][run]
+            tol = golden.bounds(name, got, want, golden.k_ulps(name, golden.N_MEASURED))
+            r, k = max(((abs(got["summary"][k] - want["summary"][k]) / tol[k], k) for k in tol), default=(0.0, ""))
+            S = want["scale"]["S"]
+            other = [abs(got["summary"][k] - want["summary"][k]) / (golden.U * (S + abs(want["summary"][k]))) for k in tol if not golden.is_measure(k)]
+            lengths.setdefault(setting, {})[run] = {
+                "N": want["scale"]["N"],
+                "worst_over_bound": r,
+                "worst": k,
+                "value": want["summary"].get(k),
+                "moved_by": abs(got["summary"][k] - want["summary"][k]) if k else 0.0,
+                "K_other": max(other, default=0.0),
+            }
+    doc = {
+        "about": (
+            "Written by `python -m tests.measure_golden_spread --growth`.  lengths: the golden runs LENGTH_RUNS at 1, 2, 4 and 8 s of "
+            "world time under two settings against the default, each run's largest |Δ|/bound with the bound's constants as they "
+            "stand (measured at 2 s) and its K of the numbers that are not measures (ulps of S + |w|).  turned: one initial "
+            "estimate turned by 1e-12 rad, the largest move of a number at 2 s and its ratio to the turn."
+        ),
+        "machine": _cpu(),
+        "lengths": lengths,
+        "turned": turned,
+    }
+    GROWTH.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
 
 
 def _cpu() -> str:
@@ -193,6 +332,13 @@ def _cpu() -> str:
 def main(argv: list[str]) -> int:
     if argv[:1] == ["--child"]:
         child(Path(argv[1]))
+        return 0
+    if argv[:1] == ["--child-lengths"]:
+        child_lengths(Path(argv[1]))
+        return 0
+    if argv[:1] == ["--growth"]:
+        growth()
+        print(f"wrote {GROWTH.relative_to(golden.ROOT)}")
         return 0
     if argv[:1] == ["--margins"]:  # the bound's constants changed: the margins anew from the numbers kept
         doc = json.loads(SPREAD.read_text())

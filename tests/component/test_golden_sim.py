@@ -80,6 +80,29 @@ def test_the_bound_covers_the_measured_spread():
     assert set(doc["settings"]["default"]["moved"]) == set(golden.SCENARIOS)  # every scenario measured
 
 
+def test_the_constants_are_the_derived_ones():
+    """K_ULPS, C_TRACE and AMPLIFIED are SAFETY times what was measured, rounded up to a power of
+    two (tests/measure_golden_spread.py ``derived``), and a run is in AMPLIFIED only if it needs it."""
+    doc = _measured()
+    d = spread.derived(doc["settings"], golden.reference()["scenarios"])
+    assert d == doc["derived"]
+    assert spread.constants(d) == {"K_ULPS": golden.K_ULPS, "C_TRACE": golden.C_TRACE, "AMPLIFIED": golden.AMPLIFIED}, d
+    assert all(k > golden.K_ULPS for k in golden.AMPLIFIED.values()), golden.AMPLIFIED
+
+
+def test_the_bound_is_for_the_length_it_was_measured_at():
+    """tests/data/golden_growth.json: at another length the same constants do not hold (so
+    ``bounds`` refuses one), and the AMPLIFIED runs grow a turned initial estimate where the
+    hybrid observer damps it."""
+    doc = json.loads(spread.GROWTH.read_text())
+    at = {(s, run): m for s, x in doc["lengths"].items() for run, m in x.items()}
+    assert all(m["worst_over_bound"] <= 1 / golden.SAFETY for (s, run), m in at.items() if m["N"] == golden.N_MEASURED), at
+    assert max(m["worst_over_bound"] for m in at.values() if m["N"] != golden.N_MEASURED) > 1
+    turned = doc["turned"]
+    assert turned["thesis-4.5-continuous5"]["gain"] > 100 > 1 > turned["thesis-4.5-hybrid5"]["gain"], turned
+    assert turned["thesis-5.6-velocity-free7"]["gain"] > 1, turned
+
+
 def test_every_measured_gain_change_fails_under_every_setting():
     """Under each of the 13 measured settings, each gain change of the four schemes fails the
     comparison, by SAFETY bounds or more."""
@@ -115,9 +138,11 @@ def test_the_tolerance_is_the_derived_one():
     # an aggregate: at least the largest bound of its terms
     assert golden.tolerance("mean_attitude_error_final", 0.5, 0.5, 5.0, K, 1e-7) == 1e-7
     assert golden.tolerance("synchronization.final", 0.5, 0.5, 5.0, K, 0.0) == pytest.approx(K * u * 1.5 + C * u / 1.0)
-    # K for a run of other length scales with its steps; an amplified run has its own
-    assert golden.k_ulps("thesis-3.2-fixed8", 2 * golden.N_MEASURED) == 2 * K
+    # an amplified run has its own K; a run of another length has none (measured: not a multiple of N)
+    assert golden.k_ulps("thesis-3.2-fixed8", golden.N_MEASURED) == K
     assert golden.k_ulps("thesis-4.5-continuous5", golden.N_MEASURED) == golden.AMPLIFIED["thesis-4.5-continuous5"]
+    with pytest.raises(ValueError, match="golden-spread"):
+        golden.k_ulps("thesis-3.2-fixed8", 2 * golden.N_MEASURED)
     # the §3.3 follower measured between the SkylakeX and Haswell kernels (1.7e-7, 0.25 %) is within it
     g, w = 1.6893630909549037e-07, 1.6936651483911734e-07
     assert abs(g - w) <= golden.tolerance("agents.3.attitude_error_final", w, g, 5.0, K)
