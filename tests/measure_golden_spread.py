@@ -24,8 +24,8 @@ interpreter of its own (the ``--child``):
   exp, atan2, ... have FMA builds chosen at load time; this turns them off (measured: other bits);
 - zswarm's compiled loops: off (``ZSWARM_KERNELS=0``, numpy's code) and the default clone
   alone (``-DZSWARM_DEFAULT_ONLY``, what a CPU without AVX2 runs; ``ZSWARM_KERNELS_FILE``);
-- combinations: tests/layers.sh's OTHER exactly, and the oldest machine this can fake (Prescott,
-  numpy at its baseline, glibc without FMA, the default clone).
+- combinations: tests/layers.sh's OTHER exactly, OTHER with glibc without FMA, and the oldest
+  machine this can fake (Prescott, numpy at its baseline, glibc without FMA, the default clone).
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ SETTINGS: dict[str, dict[str, str]] = {
     "kernels-off": {"ZSWARM_KERNELS": "0"},
     "kernels-default-build": {"ZSWARM_KERNELS_FILE": DEFAULT_BUILD},
     "layers-OTHER": {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": _AVX512},
+    "layers-OTHER+libm-FMA": {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": _AVX512, "GLIBC_TUNABLES": _NO_FMA_LIBM},
     "oldest": {"OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": _BASELINE, "GLIBC_TUNABLES": _NO_FMA_LIBM, "ZSWARM_KERNELS_FILE": DEFAULT_BUILD},
 }
 

@@ -52,7 +52,7 @@ def test_a_gain_changed_by_a_millionth_fails_on_any_machine(name, field, tmp_pat
     1 + 1e-6 moves a number of the run by SAFETY times its bound or more.  Then it fails on any
     machine whose spread is within the bound (a difference of at least (SAFETY − 1) bounds
     cannot hide in one bound), and on this one, where the comparison may be bit for bit.
-    Measured under 13 settings (tests/data/golden_spread.json): the weakest, §3.3's k_R of
+    Measured under 14 settings (tests/data/golden_spread.json): the weakest, §3.3's k_R of
     agent 5, moves agent 5's position error by 2.2e3 bounds; the others by 1.8e4 to 8e6."""
     value = spread.GAINS[name][field]
     got = golden.run(name, tmp_path, (spread.changed(field, value),))
@@ -104,7 +104,7 @@ def test_the_bound_is_for_the_length_it_was_measured_at():
 
 
 def test_every_measured_gain_change_fails_under_every_setting():
-    """Under each of the 13 measured settings, each gain change of the four schemes fails the
+    """Under each of the 14 measured settings, each gain change of the four schemes fails the
     comparison, by SAFETY bounds or more."""
     doc = _measured()
     weak = []
