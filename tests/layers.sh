@@ -11,8 +11,8 @@
 # 1b. (In the background part of step 2.)  The tests whose verdict depends on the rounding of the machine (the golden sim runs, the
 #    compiled loops against numpy, sin and cos, SO(3)) once more as on another machine: OpenBLAS
 #    forced to its Prescott kernel (no FMA: it rounds 3x3 products otherwise than the
-#    SkylakeX/Haswell/Zen kernels) and numpy's AVX-512 paths off (other arctan2 and exp).  Both
-#    are run-time switches, nothing to install; a verdict that holds on one machine only is
+#    SkylakeX/Haswell/Zen kernels), numpy's AVX-512 paths off (other arctan2 and exp) and glibc's
+#    libm without FMA.  All are run-time switches, nothing to install; a verdict that holds on one machine only is
 #    caught here.  The batched engine's agreement with sim runs so too.
 #
 # Each part lists its slowest tests (where the suite's time goes, on CI's machine too).  The exit
@@ -26,7 +26,10 @@ PY=${1:-.venv/bin/python}
 "$PY" -m pytest -q -m "not integration and not background" -n 2 --dist loadfile --durations=15 || exit $?
 
 # What numpy 1.x and 2.x call their AVX-512 dispatch targets; a name a numpy does not know is ignored.
-OTHER="OPENBLAS_CORETYPE=Prescott NPY_DISABLE_CPU_FEATURES=AVX512F,AVX512CD,AVX512_SKX,AVX512_CLX,AVX512_CNL,AVX512_ICL,AVX512_SPR,X86_V4"
+# glibc's libm without its FMA builds of exp, sin, cos, atan2 (GLIBC_TUNABLES): other bits on the
+# same CPU.  tests/data/golden_spread.json measured this combination (make golden-spread), and
+# test_golden_sim checks that the suite's settings are among those measured.
+OTHER="OPENBLAS_CORETYPE=Prescott GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA NPY_DISABLE_CPU_FEATURES=AVX512F,AVX512CD,AVX512_SKX,AVX512_CLX,AVX512_CNL,AVX512_ICL,AVX512_SPR,X86_V4"
 
 idle=(nice -n 19)
 command -v chrt >/dev/null 2>&1 && idle=(chrt --idle 0)
