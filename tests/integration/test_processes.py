@@ -269,7 +269,6 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     was never seen to go.  `zswarm run` now hands its children a secret: run control is
     signed and tokens are tagged, so none of it takes.  A copy of a tagged token (issue 50)
     hides nothing either: the neighbour sees the silence, the launcher its child's exit."""
-    import contextlib
     import os
     import re
 
@@ -284,7 +283,7 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     info = json.loads((out / "processes.json").read_text())
     run, ep = info["run_id"], info["router"]["endpoint"]
-    with contextlib.ExitStack() as stack, zenoh.open(zenoh_config("client", connect=[ep])) as peer:
+    with zenoh.open(zenoh_config("client", connect=[ep])) as peer:
         # Tokens for every agent, the recorder and the world, as a peer would declare them.
         fakes = [peer.liveliness().declare_token(f"zswarm/{run}/alive/{r}/{i}") for r, i in [("recorder", 0), ("world", 0), *(("agent", k) for k in range(1, 9))]]
         world_started(out)
@@ -295,25 +294,14 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
         wait_for(lambda: sum(1 for k in list(seen) if re.search(r"/alive/agent/\d+/[0-9a-f]{24}$", k)) >= 8, 30, "the agents' tagged tokens seen")
         fakes += [peer.liveliness().declare_token(k) for k in sorted(seen)]
         watch.undeclare()
-        # What Zenoh tells another client of the router of agent 3's tagged token from here on:
-        # the test's own view of whether the copy hid the kill, as agent 4 is told it (the
-        # copying session itself is told the real token's going: a session's own token is not
-        # a remote one).
-        tagged3 = next(k for k in seen if "/alive/agent/3/" in k)
-        told: list[tuple[str, float]] = []
-        watcher = stack.enter_context(zenoh.open(zenoh_config("client", connect=[ep])))
-        observer = watcher.liveliness().declare_subscriber(tagged3, lambda sample: told.append((str(sample.kind), time.monotonic())))
         time.sleep(2.0)
         peer.put(keys.ctl(run, "start"), wire.encode("start", 0, 0, 0.0, epoch=time.time(), time_scale=1e-3, duration=14.0, seed=1, run=run))
         peer.put(keys.ctl(run, "stop"), wire.encode("stop", 0, 0, 2.0, reason="forged"))
         time.sleep(1.0)
         # Agent 3 SIGKILLed while a token of its name stands: agent 4 (its out-neighbour) must see it go.
         a3 = next(c["pid"] for c in kids if c["name"] == "agent-3")
-        t_kill = time.monotonic()
         os.kill(a3, signal.SIGKILL)
         code = p.wait(120)
-        t_end = time.monotonic()
-        observer.undeclare()
         for f in fakes:
             f.undeclare()
     log = (tmp_path / "launcher.log").read_text()
@@ -323,17 +311,17 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
         if i != "3":  # every other agent ran to the end: the forged stop at ~2 s did not take
             assert a["alive_at_end"] and a["last_estimate_t"] > 13.5, (i, a)  # an estimate in the run's last 0.5 s (of 14): it ran to the end
     assert not s["agents"]["3"]["alive_at_end"] and s["agents"]["3"]["fate"] == "killed by signal 9"
-    # Agent 4 saw it go.  The copy hid the kill from Zenoh's liveliness (no DELETE of the tagged
-    # token was told between the kill and the run's end: 3 runs of 3 on 2026-12-07), so agent 4
-    # found it by its silence while the token stood (AgentNode.check_silent, after SILENT_S);
-    # where Zenoh does tell the real token's going apart from its copy, the liveliness path is
-    # the one that must fire.  Which one fired is in the assertion's message.
+    # Agent 4 saw it go, and only by its silence: the copy hid the kill from its liveliness
+    # watch.  Agent 4 declared that watch (bus.watch_alive: the tagged key, with history) before
+    # agent 3's token and its copy existed; the router told it of the key once and, the copy
+    # standing, never of its going (11 runs of 11, 2026-12-07, one of them a CI run).  Only the
+    # silence check (AgentNode.check_silent, after SILENT_S) can then find the kill: with it
+    # switched off by hand this fails.  (A watcher declared after the copy is told the real
+    # token's going: the router replays both tokens to it.  Such a watcher is no stand-in for
+    # agent 4, so the test reads agent 4's own log.)
     a4 = (out / "logs" / "agent-4.log").read_text()
-    gone = [t for kind, t in told if "DELETE" in kind and t_kill <= t <= t_end]
-    path = "liveliness" if gone else "silence"
-    want = "in-neighbour 3 lost (liveliness)" if gone else "in-neighbour 3 lost: silent for"
-    assert want in a4, (f"the {path} path should have fired (Zenoh told {told})", a4[-2000:])
-    assert not gone, f"the copied token did not hide the kill (Zenoh told its going at {gone[0] - t_kill:.2f} s): the silence check was not exercised"
+    assert "in-neighbour 3 lost: silent for" in a4, ("the silence check should have found the kill", a4[-2000:])
+    assert "in-neighbour 3 lost (liveliness)" not in a4, ("the copied token did not hide the kill from agent 4's liveliness watch", a4[-2000:])
     assert "zswarm run: agent-3 killed by signal 9 at t = " in log
     assert s["malformed_in_recording"] >= 2  # the forged start and stop: recorded, counted as not the run's
 
