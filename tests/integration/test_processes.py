@@ -328,7 +328,8 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
 
 def test_a_run_whose_world_died_is_not_completed(procs, tmp_path):
     """The world SIGKILLed at ~3 s of 8: the launcher exited 0 and the table showed every agent
-    alive (summary.json alone said completed: false).  Now exit 1 and the reasons, printed."""
+    alive (summary.json alone said completed: false).  Now exit 1 and the reasons, printed, and
+    no late sensor data (the agents' idle ticks after the death are the death's)."""
     import os
 
     out = tmp_path / "out"
@@ -343,6 +344,14 @@ def test_a_run_whose_world_died_is_not_completed(procs, tmp_path):
     assert not s["completed"] and s["exit_codes"]["world"] == -9
     assert "the world exited with -9" in s["problems"] and any("stop is not in the recording" in x for x in s["problems"]), s["problems"]
     assert "NOT COMPLETED: " in log and "the world exited with -9" in log, log[-2000:]
+    # Nor is the world's death put down to late sensor data (issue 61: the launcher printed
+    # "LATE SENSOR DATA: ... the world's packets came late", 23.4 %).  The event it came from did
+    # happen: the agents ticked on without packets, over the 2 % share (results.OVERLOAD_PCT)
+    # past which a run whose world lives is told late data ...
+    idle = {i: a["idle_ticks"] / max(1, a["steps"] + a["idle_ticks"] + a["missed_deadlines"]) for i, a in s["agents"].items()}
+    assert max(idle.values()) > s["overload"]["threshold_pct"] / 100, idle
+    # ... and it is not told as late packets.
+    assert s["overload"]["late"] == [] and "LATE SENSOR DATA" not in log, (s["overload"], log[-3000:])
 
 
 def _truth_holes(recording, longer_than: float) -> list[tuple[float, float]]:
