@@ -427,7 +427,7 @@ def quickstart_cells(rows: list[dict]) -> dict[str, str]:
 
     mv, nz = "thesis-3.3-moving5", "thesis-3.3-moving5-noisy"
     fine = "thesis-3.3-moving5 " + " ".join(FINE)
-    c, cn, h, hn, hp = (f"thesis-4.5-{x}5" for x in ("continuous", "continuous-noisy", "hybrid", "hybrid-noisy", "hybrid-pose"))
+    c, cn, h, hn, hp = (f"thesis-4.5-{x}" for x in ("continuous5", "continuous5-noisy", "hybrid5", "hybrid5-noisy", "hybrid-pose5"))
     ratio = f(hn, "rel_att_final_mean") / f(cn, "rel_att_final_mean")
     return {
         mv: "Thesis §3.3.4: a pentagon rotating about x at π/6 rad/s, observer (3.23) + (3.25), k_p = 1, k_i^R = 10/5/3 (Figs. 3.14–3.15). "
@@ -439,7 +439,7 @@ def quickstart_cells(rows: list[dict]) -> dict[str, str]:
         f"final mean attitude error {f(nz, 'att_final'):.2g} and position error {f(nz, 'pos_final'):.2g} on `sim`.",
         c: "Thesis §4.5: a square pyramid rotating about z, relative-attitude observer (4.3) + (4.8) started **on** the undesired equilibrium "
         "(every `\\|R̄_k\\|_I = 1`). It is an unstable equilibrium (Theorem 4.1): round-off and asynchronous steps push it off "
-        f"(every edge below 0.9 by {f(c, 'leaves_start_s'):.2f} s and below 1e-2 by {f(c, 'settle_1e-2_max'):.2f} s on `sim`), after which "
+        f"(the first edge below 0.9 at {f(c, 'leaves_start_s'):.2f} s, every edge below 1e-2 from {f(c, 'settle_1e-2_max'):.2f} s on `sim`), after which "
         f"`\\|R̄_k\\|_I` ends at {_e(f(c, 'rel_att_final_max'))} at most — convergence by luck, not by design (Fig. 4.4, continuous).",
         cn: f"The same with `R_ij exp([n_R]×)` and `ω + n_ω`, variances 0.01 (Fig. 4.6): `\\|R̄_k\\|_I` {f(cn, 'rel_att_final_mean'):.2g} at the end "
         "(mean over edges).",

@@ -41,6 +41,7 @@ CHAPTER5 = STUDIES / "chapter5.md"
 COMMUNICATION = STUDIES / "communication.md"
 ENGINES = STUDIES / "engines.md"
 DEVELOPMENT = DOCS / "development.md"
+QUICKSTART = DOCS / "quickstart.md"
 THRESHOLDS = (0.01, 0.1)  # zswarm sweep's defaults
 
 
@@ -295,3 +296,33 @@ def test_a_run_against_sim_row_runs_again(tmp_path):
     sim(row["scenario"], out)
     got = {k: str(rows_io.cell(v)) for k, v in st.engines_row(out, row["scenario"], 0.0).items() if k != "cpu_s"}
     assert got == {k: row[k] for k in got}, row["scenario"]
+
+
+# --------------------------------------------------------------------------- quickstart.md's scenario table
+
+
+def test_the_quickstart_table_is_its_file():
+    """quickstart.md's "what it shows" of the §3.3 and §4.5 scenarios, cell by cell, is
+    docs/data/quickstart-sim.csv (docs/examples/sim_tables.py quickstart: each scenario once on
+    ``sim``, and §3.3 once more with agents and sensors at 1 kHz)."""
+    st = _example("sim_tables")
+    rows = read_csv(DATA / "quickstart-sim.csv")
+    assert {r["scenario"] for r in rows} == {*st.QUICKSTART, "thesis-3.3-moving5 " + " ".join(st.FINE)}
+    want = st.quickstart_cells(rows)
+    got = {r[0].strip("`").removeprefix("topologies/").removesuffix(".toml"): r[2] for r in md_table(QUICKSTART, "| scenario | command | what it shows |")}
+    assert {k: got.get(k) for k in want} == want
+    text = " ".join(QUICKSTART.read_text().split())
+    assert "python docs/examples/sim_tables.py quickstart" in text and "(data/quickstart-sim.csv)" in text
+    cpu = sum(float(r["value"]) for r in rows if r["measure"] == "cpu_s")
+    assert f"{cpu:.0f} s of CPU for the eight runs" in text
+
+
+def test_a_quickstart_scenario_runs_again(tmp_path):
+    """One of the seven scenarios, picked with a fixed seed (4-17 s of CPU), run again with the
+    script's command line: its measures as the file writes them."""
+    st = _example("sim_tables")
+    name = random.Random(61).choice(st.QUICKSTART)
+    want = {r["measure"]: r["value"] for r in read_csv(DATA / "quickstart-sim.csv") if r["scenario"] == name and r["measure"] != "cpu_s"}
+    out = tmp_path / name
+    sim(name, out)
+    assert {k: str(rows_io.cell(v)) for k, v in st.quickstart_measures(out, name).items()} == want, name
