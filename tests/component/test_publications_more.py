@@ -96,6 +96,17 @@ def sim(topology: str, out: Path, *sets: str, duration: float | None = None) -> 
 # --------------------------------------------------------------------------- measured on one machine
 
 
+# chapter5.md's CPU per draw, sim against the batched engine (make bench-batched and its cases)
+BENCH_BATCHED = [
+    (CHAPTER5, "| scheme | `sim`, s per draw | batched, 10 / 100 / 1000 draws together | ratio |", 0, "bench-batched-2026-12-04.json",
+     "`make bench-batched`", "bench/bench_batched.py --duration 3 --draws 10,100,1000"),
+    (CHAPTER5, "| scheme | `sim`, s per draw | batched, 100 / 1000 draws together | ratio | the same without links |", 0, "bench-batched-links-2026-12-05.json",
+     "`--draws 100,1000 --schemes thesis-5.6-hybrid7,thesis-5.6-velocity-free7 --sweep-schemes ''`", "bench/bench_batched.py --draws 100,1000"),
+    (CHAPTER5, "| scheme | `sim`, s per draw | batched, 100 / 1000 draws together | ratio |", 1, "bench-batched-sensors-2026-12-05.json",
+     "`--duration 3 --draws 100,1000 --schemes thesis-5.6-hybrid7,thesis-5.6-velocity-free7 --sweep-schemes '' --links ''`", "--links ''"),
+    (CHAPTER5, "| scheme | `sim` | batched, 100 / 1000 draws together | ratio |", 0, "bench-batched-observers-2026-12-04.json",
+     "`--duration 30 --draws 100,1000 --schemes thesis-4.5-continuous5,thesis-4.5-hybrid5`", "bench/bench_batched.py --duration 30"),
+]
 # (page, the table's header line as it starts, which of the tables so headed, its file, the
 # command as its caption shows it, the program the file's command names)
 MEASURED = [
@@ -106,6 +117,7 @@ MEASURED = [
     (DEVELOPMENT, "| | d017381 | aef1f82 | fbd00f6 |", 0, "agent-tick.json", "`bench/bench_capacity.py --n 8 --duration 15`", "bench/bench_capacity.py --n 8 --duration 15"),
     (DEVELOPMENT, "| what | first measurement |", 0, "bench-runtime.json", "`python bench/bench_runtime.py --duration 20`", "bench/bench_runtime.py --duration 20"),
     (DEVELOPMENT, "| flood on est/3 |", 0, "recorder-floods.json", "`pytest -s tests/integration/test_fuzz_zenoh.py`", "tests/integration/test_fuzz_zenoh.py"),
+    *BENCH_BATCHED,
 ]
 
 
@@ -127,6 +139,29 @@ def test_a_measured_table_is_its_file(page, header, nth, name, on_page, program)
     assert dates and all(d in words for d in dates), (name, dates, cap)
     assert on_page in cap and program in f["command"], (name, on_page, f["command"])
     assert f["machine"] and f["made_again"].startswith("no: ")
+
+
+def _printed(cell: str) -> tuple[float, float]:
+    """The interval a printed number stands for: ± half a unit of its last digit ("0.0020" is
+    [0.00195, 0.00205])."""
+    x = cell.strip().removesuffix(" s").removesuffix("x")
+    digits = len(x.split(".")[1]) if "." in x else 0
+    h = 0.5 * 10.0**-digits
+    return float(x) - h, float(x) + h
+
+
+@pytest.mark.parametrize("name", [b[3] for b in BENCH_BATCHED])
+def test_the_batched_benchmarks_ratios_follow_from_their_times(name):
+    """A ratio column of chapter5.md's CPU tables is `sim`'s time over the batched engine's, each
+    as measured, not as printed: the printed ratio must lie in what the printed times allow (each
+    time ± half a unit of its last digit; the ratio ± 0.5)."""
+    f = json.loads((DATA / name).read_text())
+    for row in f["rows"]:
+        sim_lo, sim_hi = _printed(row[1])
+        for b, r in zip(row[2].split(" / "), row[3].split(" / "), strict=True):
+            b_lo, b_hi = _printed(b)
+            r_lo, r_hi = _printed(r)
+            assert sim_lo / b_hi <= r_hi and sim_hi / b_lo >= r_lo, (name, row[0], b, r)
 
 
 # --------------------------------------------------------------------------- decarli.md
