@@ -5,12 +5,16 @@ Each subcommand runs its ``zswarm sim`` commands (one results folder each under 
 what the page's table shows in a CSV of docs/data/ (``--csv``) and prints the table;
 tests/component/test_publications_more.py holds each page's table to the file through the same
 functions (:func:`decarli_measured`, :func:`decarli_noise`, :func:`chapter5_scenarios`,
-:func:`spot_check`, :func:`run_against_sim`)::
+:func:`spot_check`, :func:`run_against_sim`, :func:`quickstart_cells`)::
 
     .venv/bin/python docs/examples/sim_tables.py decarli --csv docs/data/decarli-sim.csv
     .venv/bin/python docs/examples/sim_tables.py chapter5 --csv docs/data/scenarios-5.6.csv
     .venv/bin/python docs/examples/sim_tables.py engines --csv docs/data/run-against-sim-sim.csv
     .venv/bin/python docs/examples/sim_tables.py quickstart --csv docs/data/quickstart-sim.csv
+
+communication.md's spot check needs no script: its ``sim`` side is the sweep.csv of ``zswarm sweep
+topologies/thesis-3.2-fixed8.toml --engine sim --vary links.delay_ms=0,50,150 --set
+links.drop=0.2`` (docs/data/spot-check-3.2-sim.csv), and :func:`spot_check` prints the table.
 
 Where a table sets ``zswarm run`` beside ``sim``, the ``run`` side is a measurement of one machine
 on one day (real processes, wall-clock ticks): it is kept as it was measured in a JSON file of

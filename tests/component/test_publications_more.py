@@ -4,16 +4,20 @@
 Two kinds of table:
 
 * **made by ``zswarm sim``** (decarli.md's measured and noise tables, chapter5.md's scenario
-  table, communication.md's spot check, engines.md's run against sim): the ``sim`` side is a file
-  of docs/data/ that a named command writes (docs/examples/sim_tables.py, or ``zswarm sweep
-  --engine sim``), the page's table is printed from it by the same functions the test calls, and
-  a row, picked with a fixed seed, is run again on ``sim`` (the same code path: every number as
-  the file writes it, six significant digits);
+  table, communication.md's spot check, engines.md's run against sim, quickstart.md's scenario
+  table): the ``sim`` side is a file of docs/data/ that a named command writes
+  (docs/examples/sim_tables.py, or ``zswarm sweep --engine sim``), the page's table is printed
+  from it by the same functions the test calls, and a row, picked with a fixed seed, is run again
+  on ``sim`` (the same code path: every number as the file writes it, six significant digits);
+  decarli.md's rows are not run again (35 s of CPU a row, see its test);
 * **measured on one machine on one day** (the ``run`` sides, development.md's benchmarks, the
-  suite's times, engines.md's load table): wall-clock times, CPU shares, missed ticks of real
-  processes.  They cannot be made again to the same digits, so each is kept as published in a
-  JSON file of docs/data/ that names its command, machine and date; the test holds the page's
-  table to it, cell by cell, and the table's caption to the command, the date and the file.
+  suite's times, engines.md's load table, chapter5.md's CPU per draw): wall-clock times, CPU
+  shares, missed ticks of real processes.  They cannot be made again to the same digits, so each
+  is kept as published in a JSON file of docs/data/ that names its command, machine and date; the
+  test holds the page's table to it, cell by cell, and the table's caption to the command, the
+  date and the file (and a ratio column to the times it is the ratio of).
+
+The re-runs are CPU-bound ``zswarm sim`` processes that keep no real time: ~40 s of CPU in all.
 """
 
 from __future__ import annotations
@@ -173,8 +177,9 @@ def test_the_decarli_tables_are_their_files():
     the figures the text draws from them too.
 
     No row is run again here: a row is one 40 s run of eight agents at 200 Hz on ``sim`` (the
-    batched engine has no De Carli family), 30-40 s of CPU; the three take the CPU the file's
-    ``cpu_s`` says."""
+    batched engine has no De Carli family), 34-35 s of CPU (the file's ``cpu_s``; 105 s the three),
+    over twice what a re-run here may cost; a shorter run would not give the row's numbers (its
+    means are over 20-40 s, its settle times over the whole run)."""
     st = _example("sim_tables")
     rows = read_csv(DATA / "decarli-sim.csv")
     run = json.loads((DATA / "decarli-run.json").read_text())
@@ -248,7 +253,8 @@ def test_the_hybrid_law_row_is_the_batched_engines_too():
 
 def test_a_chapter5_law_runs_again_on_sim(tmp_path):
     """One of the three laws, picked with a fixed seed, run again with the script's command line
-    (150 s on ``sim``, 25-30 s of CPU): its row as the file writes it, every column but the CPU."""
+    (150 s on ``sim``: 21-39 s of CPU, the file's cpu_s; the continuous law, picked, 21 s): its row
+    as the file writes it, every column but the CPU."""
     st = _example("sim_tables")
     law = random.Random(61).choice(st.SYNC_LAWS)
     want = next(r for r in read_csv(DATA / "scenarios-5.6.csv") if r["law"] == law)
