@@ -56,9 +56,11 @@ def fixed8_text() -> str:
 # background layer then ended with the integration layer (26.3 of 26.5 min beside stress-ng,
 # against 23.6 of 25.3 without it) and make test took 31.0 min instead of 30.6, so it stays in
 # the component layer.
-# test_publications.py joined on 2026-12-07: its re-runs of published rows and draws are ~140 s
-# of one core of sim and batched runs, no real time.
-BACKGROUND = frozenset({"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py", "test_publications.py"})
+# test_publications.py and test_publications_more.py joined on 2026-12-07: their re-runs of
+# published rows and draws are ~140 s and ~40 s of one core of sim and batched runs, no real time.
+BACKGROUND = frozenset(
+    {"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py", "test_publications.py", "test_publications_more.py"}
+)
 
 
 def pytest_collection_modifyitems(config, items):

@@ -33,12 +33,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests import reproduce
 from tests.conftest import ROOT
 from zswarm.scenario import load, parse_override, with_rotations
 from zswarm.studies import basin
 from zswarm.studies.sweep import Job, run_job
 from zswarm.studies.sweep_batched import run_batch
-from zswarm.util import rows as rows_io
 
 DOCS = ROOT / "docs"
 CHAPTER5 = DOCS / "studies" / "chapter5.md"
@@ -98,8 +98,9 @@ def _pick(rows: list[dict[str, str]], k: int, seed: int) -> list[dict[str, str]]
 
 def _same_cells(got: dict, row: dict[str, str], what: str) -> None:
     """A re-run's result columns as sweep.csv writes them (rows.cell: six significant digits)
-    against the file's row: equal, but the wall time."""
-    diff = {k: (rows_io.cell(v), row[k]) for k, v in got.items() if k != "wall_s" and str(rows_io.cell(v)) != row[k]}
+    against the file's row, the wall time aside: equal on the machine that wrote the file, the
+    same printed figure elsewhere (tests/reproduce.py)."""
+    diff = reproduce.differ(got, row)
     assert not diff, f"{what} {row['run_id']}: (re-run, file) differ in {diff}"
 
 
@@ -310,7 +311,7 @@ def test_basin_under_delay_draws_run_again():
     res = plugins.engine("batched").run(scs, 150.0, scs[0].seed, b.grid_s, seeds=seeds)
     got = [basin._row(draw, None, *res.series(n), 0.01, int(res.jumps[n]), int(res.agent_jumps[n]), 0.0, b.verdict) for n, draw in enumerate(draws)]
     row0 = _file_row("hybrid", draws[0])
-    assert {k: str(rows_io.cell(v)) for k, v in got[0].items() if k != "wall_s"} == {k: row0[k] for k in got[0] if k != "wall_s"}
+    assert not reproduce.differ(got[0], row0), reproduce.differ(got[0], row0)
     for (d, p), g in zip(plan[1:], got[1:], strict=True):
         c = cells["hybrid", d, p]
         k, n = int(c["synchronized"]), int(c["drawn"])
@@ -466,8 +467,8 @@ def test_uniform_basin_draws_of_the_observers_run_again():
     draws = sorted(random.Random(61).sample(range(1, 10001), 2))
     want = {r["draw"]: r for r in basin.read_rows(FIGURES / "basins" / law / "basin.csv")}
     for got in basin.run_chunk(str(ROOT / "topologies" / f"{law}.toml"), 1, draws, 30.0, 0.01):
-        cells = {k: str(rows_io.cell(v)) for k, v in got.items() if k not in ("wall_s", "final_max")}
-        assert cells == {k: want[str(got["draw"])][k] for k in cells}, got["draw"]
+        diff = reproduce.differ(got, want[str(got["draw"])], skip=("wall_s", "final_max"))
+        assert not diff, (got["draw"], diff)
 
 
 # --------------------------------------------------------------------------- decarli.md's communication sweeps
