@@ -281,6 +281,27 @@ def test_the_lossless_undelayed_cells_are_the_uniform_basins_first_thousand():
         assert [s["jumps"]["median"], s["jumps"]["max"]] == [float(row["jumps_median"]), float(row["jumps_max"])]
 
 
+DELAY_BASINS = FIGURES / "basins" / "delay"
+
+
+def test_each_kept_basin_under_delay_cell_is_its_folders_draws():
+    """The cells of docs/data/basin-delay-5.6.csv whose basin folder is kept (under
+    docs/figures/basins/delay/, one ``zswarm basin`` each, made again on 2026-12-07: 9 of the 21
+    delayed or lossy cells, every one giving the page's figures) are that folder's 1000 draws
+    summarized again here (basin.summarize of its basin.csv), to every digit."""
+    kept = [r for r in read_csv(DATA / "basin-delay-5.6.csv") if r["rows"].startswith(str(DELAY_BASINS.relative_to(ROOT)))]
+    assert len(kept) == 9
+    for row in kept:
+        d = DELAY_BASINS / f"thesis-5.6-{row['law']}7-d{row['delay_ms']}-p{row['loss']}"
+        assert row["rows"] == str((d / "basin.csv").relative_to(ROOT)), row
+        s = basin.summarize(basin.read_rows(d / "basin.csv"), 0.01, 150.0, verdict="synchronized")
+        assert (s["drawn"], s["synchronized"]) == (int(row["drawn"]), int(row["synchronized"])), row
+        assert [100 * x for x in s["fraction_95ci"]] == [float(row["ci95_lo_pct"]), float(row["ci95_hi_pct"])], row
+        st, j = s.get("settle_s") or {}, s["jumps"]
+        assert [st.get(q, "") for q in ("p10", "median", "p90")] == [float(row[f"settle_{q}_s"]) if row[f"settle_{q}_s"] else "" for q in ("p10", "median", "p90")], row
+        assert [j["median"], j["max"]] == [float(row["jumps_median"]), float(row["jumps_max"])], row
+
+
 def _file_row(law: str, draw: int) -> dict[str, str]:
     return next(r for r in basin.read_rows(_basin_dir(law) / "basin.csv") if int(r["draw"]) == draw)
 
@@ -290,9 +311,10 @@ def test_basin_under_delay_draws_run_again():
     batched engine in one batch, as ``zswarm basin --engine batched`` steps a chunk (run_chunk),
     each draw with its own cell's command delay and loss and its own seeds (the draw's number for
     the start, ``seed + draw`` for the losses).  The draw of the cell without delay or loss gives
-    its row of docs/figures/basins/thesis-5.6-hybrid7/basin.csv to every digit (the same code
-    path; a batch's other draws change nothing of a draw).  Where the table's cell is unanimous
-    (1000 of 1000 at 2 ms, and at 1 ms with 10 % loss), the draw's verdict is the cell's; at 5 ms
+    its row of docs/figures/basins/thesis-5.6-hybrid7/basin.csv, and the draw at 2 ms its row of
+    that cell's kept folder (tests/reproduce.py: to every digit on the machine that wrote them, a
+    batch's other draws changing nothing of a draw).  Where a cell's folder is not kept and the
+    table's cell is unanimous (1000 of 1000 at 1 ms with 10 % loss), the draw's verdict is the cell's; at 5 ms
     with 10 % loss 3 of 1000 synchronized, so a picked draw must not (the pick is fixed: were it
     one of the 3, this test would say so at once, on every machine)."""
     cells = {(r["law"], r["delay_ms"], r["loss"]): r for r in read_csv(DATA / "basin-delay-5.6.csv")}
@@ -312,8 +334,13 @@ def test_basin_under_delay_draws_run_again():
     got = [basin._row(draw, None, *res.series(n), 0.01, int(res.jumps[n]), int(res.agent_jumps[n]), 0.0, b.verdict) for n, draw in enumerate(draws)]
     row0 = _file_row("hybrid", draws[0])
     assert not reproduce.differ(got[0], row0), reproduce.differ(got[0], row0)
-    for (d, p), g in zip(plan[1:], got[1:], strict=True):
+    for (d, p), draw, g in zip(plan[1:], draws[1:], got[1:], strict=True):
         c = cells["hybrid", d, p]
+        folder = DELAY_BASINS / f"thesis-5.6-hybrid7-d{d}-p{p}"
+        if c["rows"] == str((folder / "basin.csv").relative_to(ROOT)):  # a kept cell: its draw's row
+            want = next(r for r in basin.read_rows(folder / "basin.csv") if int(r["draw"]) == draw)
+            assert not reproduce.differ(g, want), (d, p, draw, reproduce.differ(g, want))
+            continue
         k, n = int(c["synchronized"]), int(c["drawn"])
         want = True if k == n else False if k <= 3 else None
         assert want is not None, c
