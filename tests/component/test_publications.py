@@ -100,7 +100,15 @@ def _same_cells(got: dict, row: dict[str, str], what: str) -> None:
     """A re-run's result columns as sweep.csv writes them (rows.cell: six significant digits)
     against the file's row, the wall time aside: equal on the machine that wrote the file, the
     same printed figure elsewhere (tests/reproduce.py)."""
-    diff = reproduce.differ(got, row)
+    skip = ["wall_s"]
+    if not reproduce.same_machine() and "conv_attitude_s" in row and not row["conv_attitude_s"]:
+        # A run that never settles does not contract: the §5.6 hybrid loop at 100-200 ms of
+        # command delay chatters, and round-off differences grow without bound over its 150 s
+        # (under layers.sh's other-machine settings p013-r3 of the coarse grid gave 210 jumps and
+        # a final error 0.879 against the file's 220 and 0.845).  Off the machine that wrote the
+        # file only its verdict (never settled) and its seeded link counts are reproducible.
+        skip += ["final_attitude_error", "final_position_error", "jumps", "stale_terms", "conv_attitude_01_s"]
+    diff = reproduce.differ(got, row, skip=skip)
     assert not diff, f"{what} {row['run_id']}: (re-run, file) differ in {diff}"
 
 
