@@ -1,4 +1,5 @@
 import os
+import resource
 import signal
 import subprocess
 import time
@@ -61,6 +62,29 @@ def fixed8_text() -> str:
 BACKGROUND = frozenset(
     {"test_convergence_study.py", "test_sim_sync.py", "test_sim_thesis.py", "test_sim.py", "test_sim_formation.py", "test_batched.py", "test_publications.py", "test_publications_more.py"}
 )
+
+
+# ZSWARM_TEST_CPU=FILE: one line per test appended to FILE, "nodeid wall_s cpu_s": its setup, call
+# and teardown's wall time and CPU (this process's and every reaped child's: a run's launcher
+# reaps its agents, the procs fixture reaps the launcher).  What decides which tests may share the
+# machine (a real-time run that waits on the clock uses a small part of the core it keeps).
+CPU_LOG = os.environ.get("ZSWARM_TEST_CPU")
+
+
+def _cpu_s() -> float:
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    if not CPU_LOG:
+        yield
+        return
+    t0, c0 = time.monotonic(), _cpu_s()
+    yield
+    with open(CPU_LOG, "a") as f:
+        f.write(f"{item.nodeid} {time.monotonic() - t0:.2f} {_cpu_s() - c0:.2f}\n")
 
 
 def pytest_collection_modifyitems(config, items):
