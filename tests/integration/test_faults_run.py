@@ -9,7 +9,7 @@ import math
 import pytest
 
 from tests.conftest import TOPO
-from tests.integration.conftest import SIM_RUN_TOL, assert_run_exit_ok, fail_if_overloaded, not_alive, wait_for, zswarm
+from tests.integration.conftest import SIM_RUN_TOL, assert_run_exit_ok, fail_if_overloaded, judged_if_kept_up, not_alive, wait_for, zswarm
 from zswarm.transport.bus import LEASE_MS
 
 pytestmark = pytest.mark.integration
@@ -72,7 +72,8 @@ def test_a_killed_agent_is_flagged_rejoins_and_the_team_reconverges(procs, tmp_p
     # is 4.6·ln(3)/ln(10) = 2.2 s.  And the new process first has to start and join: agent 6
     # marked it back d6["back_after_end_s"] after the restart (imports, session, warm-up).
     bound = d6["back_after_end_s"] + SIM_RECONVERGENCE_S * (1 + math.log(SIM_RUN_TOL) / math.log(SIM_PEAK_OVER_LEVEL))
-    assert r["reconvergence_s"] is not None and r["reconvergence_s"] < bound, (r, bound)
+    with judged_if_kept_up(s, "the team's reconvergence"):  # late sensor data slow it (seen at a load average of 10)
+        assert r["reconvergence_s"] is not None and r["reconvergence_s"] < bound, (r, bound)
     # The axes alone make a 15.6 kB PNG; with the curves and the shading 73-76 kB.
     assert (out / "plots" / "attitude_error.png").stat().st_size > 30_000
 
