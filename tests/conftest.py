@@ -87,6 +87,17 @@ def pytest_runtest_protocol(item, nextitem):
         f.write(f"{item.nodeid} {time.monotonic() - t0:.2f} {_cpu_s() - c0:.2f}\n")
 
 
+# ZSWARM_WORKER_SESSIONS=1 (tests/layers.sh's CPU-bound parts): each pytest-xdist worker starts a
+# session of its own.  The kernel's autogroup scheduling (kernel.sched_autogroup_enabled, on in
+# Debian's kernels) shares the CPU between sessions first: two workers in pytest's one session
+# beside another session's busy process get one core between them, in two sessions two thirds
+# of the two cores, as each process of a `zswarm run` (started in its own session) already does.
+# Ctrl-C reaches pytest, which stops its workers (by PID) as it always does.
+def pytest_configure(config):
+    if hasattr(config, "workerinput") and os.environ.get("ZSWARM_WORKER_SESSIONS") == "1" and os.getsid(0) != os.getpid():
+        os.setsid()
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in BACKGROUND and item.path.parent.name == "component":

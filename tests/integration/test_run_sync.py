@@ -23,12 +23,18 @@ import pytest
 
 from tests.conftest import TOPO
 from tests.integration.conftest import assert_run_exit_ok, fail_if_overloaded, not_alive, require_kept_up, stop_tail, wait_for, zswarm
-from zswarm.scenario import load
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import ZenohBus, zenoh_config
 
 pytestmark = pytest.mark.integration
 NAME = "thesis-5.6-hybrid7"
+# The run's horizon: the first 75 of the scenario's 150 s.  What is checked over Zenoh is the
+# transient, where asynchrony and command latency act: the jumps (all by 9.8 s in sim) and the
+# settle below 0.1 (58.5 s in READING-NOTES; a run may be 25 % later than sim, 73 s, so 75 s
+# decides it).  The settle below 0.01 (102 s) is the same decay continued at the equations'
+# rate (k_ω = 0.1: 0.053 /s from 0.1 to 0.01), which sim holds against READING-NOTES at 100 Hz
+# and 1 kHz (test_sim_sync); over Zenoh it cost 75 s of the integration layer's wall time.
+DURATION = 75.0
 
 
 def _bad_commands(run: str) -> list[tuple[str, bytes]]:
@@ -45,10 +51,9 @@ def _bad_commands(run: str) -> list[tuple[str, bytes]]:
 
 
 def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_reference, tmp_path):
-    sc = load(TOPO / f"{NAME}.toml")
     out = tmp_path / "run"
-    ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", lean=True)  # computed while the run runs
-    # At time scale 1 (150 world s in 150 s of wall time): seven agents at 100 Hz and the
+    ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", DURATION, lean=True)  # computed while the run runs
+    # At time scale 1 (DURATION world s in as many s of wall time): seven agents at 100 Hz and the
     # rigid-body world at 1 kHz use 0.8-1.0 of this machine's two cores (2026-12-03, summary
     # "cpu": agents 6-8 % of a core each, world 16 %, router 10 %, recorder 8 %).  Beside
     # `stress-ng --cpu 1` the agents missed ≤ 0.04 % of their ticks and the world skipped
@@ -57,7 +62,7 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     # issue 28 the same needed 1.7-1.9 cores, and at time scale 0.5 with a core busy the
     # agents stepped at 55-60 Hz; an overloaded run fails the test (its settle times and
     # jumps would not be the equations').
-    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--time-scale", "1", "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--duration", f"{DURATION:g}", "--time-scale", "1", "--quiet"), log=tmp_path / "launcher.log")
     meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
     run_id, ep = meta["run_id"], meta["router"]["endpoint"]
     procs.adopt(out)
@@ -70,7 +75,7 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
         for key, payload in _bad_commands(run_id):
             pubs.setdefault(key, bus.publisher(key)).put(payload)
         time.sleep(0.5)
-    code = p.wait(sc.duration * 2 + 120)  # 150 s of wall time, ×2 for a loaded machine, + start-up
+    code = p.wait(DURATION * 2 + 120)  # DURATION s of wall time, ×2 for a loaded machine, + start-up
     procs.adopt(out)
     s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")
     assert s["completed"]
@@ -109,16 +114,16 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     # edges one swing more than sim's (8 + 6), where chattering, the failure it exists for,
     # shows as hundreds (the noisy §4.5 observer: 1000-1400 jumps per edge in 30 s).
     assert 6 <= s["jumps_total"] <= ss["jumps_total"] + len(s["edges"]), (s["jumps_total"], ss["jumps_total"])
-    for key, notes in (("settles_below_0.1_at", 58.5), ("settles_below_0.01_at", 102.0)):
-        got, ref = sy[key], sy_sim[key]
-        assert got is not None and ref is not None, (sy, sy_sim)
-        assert abs(got - ref) <= 0.25 * ref, (key, got, ref)  # run vs sim (the issue's criterion)
-        assert abs(got - notes) <= 0.25 * notes, (key, got, notes)  # run vs READING-NOTES
-    assert all(e["relative_attitude_error_final"] < 0.01 for e in s["edges"].values())
+    key, notes = "settles_below_0.1_at", 58.5
+    got, ref = sy[key], sy_sim[key]
+    assert got is not None and ref is not None, (sy, sy_sim)
+    assert abs(got - ref) <= 0.25 * ref, (key, got, ref)  # run vs sim (the issue's criterion)
+    assert abs(got - notes) <= 0.25 * notes, (key, got, notes)  # run vs READING-NOTES
+    assert sy["settles_below_0.01_at"] is None and sy_sim["settles_below_0.01_at"] is None, (sy, sy_sim)  # not by 75 s: the horizon is the transient's
     # The machine's capacity, last (an overloaded run reruns; the checks above were made on it).
     require_kept_up(s, "the command rates and ages")
     for link, v in cmd.items():
-        _assert_command_rate(link, v, sc.duration, 0.95)
+        _assert_command_rate(link, v, DURATION, 0.95)
     assert all(v["expired"] == 0 for v in s["commands"]["per_agent"].values()), s["commands"]  # none outlived its max_age at the world
 
 
