@@ -90,6 +90,14 @@ clean:
 golden: $(STAMP)
 	$(PY) -m tests.write_golden
 
+## make fine-references: the step-size tests' fine runs made anew (the convergence study's 5x-rate runs, the §5.6
+## hybrid loop at 1 kHz) and their numbers kept in tests/data/convergence_fine.json and tests/data/sync_fine.json,
+## which the tests compare the default-rate runs with (~5 min of CPU); commit the files with the reason they changed
+.PHONY: fine-references
+fine-references: $(STAMP)
+	$(PY) -m tests.component.test_convergence_study --write
+	$(PY) -m tests.component.test_sim_sync --write
+
 ## make golden-spread: measure how far the golden runs move under every kernel and SIMD setting this machine
 ## can force (OpenBLAS, numpy dispatch, libm, compiled loops) and how far a 1e-6 gain change moves them; writes
 ## tests/data/golden_spread.json, which tests/golden.py's bound is derived from, and tests/data/golden_growth.json

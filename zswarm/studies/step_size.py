@@ -70,23 +70,37 @@ def escape_time(s: Series, level: float = 0.9) -> float:
     return float(s.t[below[0]]) if len(below) else float("nan")
 
 
-def compare(default: Series, fine: Series, from_escape: bool = False) -> list[dict[str, Any]]:
-    """Rows ``{what, default, fine}``: times to each threshold the fine run reaches at least
-    1 s before its end (from the escape when ``from_escape``), then the final errors."""
-    rows: list[dict[str, Any]] = []
-    t0d, t0f = (escape_time(default), escape_time(fine)) if from_escape else (0.0, 0.0)
+def reference(fine: Series, from_escape: bool = False) -> dict[str, Any]:
+    """What :func:`compare` reads of the fine run: ``{times, final_att, final_pos}``, ``times`` the
+    rows ``{key, thr, t}`` of each threshold ``thr`` of the series ``key`` ("att", "pos") that it
+    reaches after its start and at least 1 s before its end, at ``t`` (from the escape when
+    ``from_escape``).  Plain numbers: a reference kept in a file (JSON) compares as the run."""
+    t0 = escape_time(fine) if from_escape else 0.0
     end = float(fine.t[-1])
+    times: list[dict[str, Any]] = []
     for key, thrs in (("att", ATT_THRESHOLDS), ("pos", POS_THRESHOLDS)):
-        fs, ds = getattr(fine, key), getattr(default, key)
+        fs = getattr(fine, key)
         if not np.isfinite(fs).any():
             continue
         for thr in thrs:
             tf = report.convergence_time(fine.t, fs, thr)
             if tf is None or tf > end - 1.0 or tf == 0.0:
                 continue
-            td = report.convergence_time(default.t, ds, thr)
-            rows.append({"what": f"{key} < {thr:g} (s)", "default": None if td is None else td - t0d, "fine": tf - t0f})
-    rows.append({"what": "final attitude", "default": default.final_att, "fine": fine.final_att})
-    if fine.final_pos is not None and default.final_pos is not None:
-        rows.append({"what": "final position", "default": default.final_pos, "fine": fine.final_pos})
+            times.append({"key": key, "thr": thr, "t": tf - t0})
+    return {"times": times, "final_att": fine.final_att, "final_pos": fine.final_pos}
+
+
+def compare(default: Series, fine: Series | dict[str, Any], from_escape: bool = False) -> list[dict[str, Any]]:
+    """Rows ``{what, default, fine}``: times to each threshold the fine run reaches at least
+    1 s before its end (from the escape when ``from_escape``), then the final errors.  ``fine``
+    is the run or its :func:`reference`."""
+    ref = reference(fine, from_escape) if isinstance(fine, Series) else fine
+    t0d = escape_time(default) if from_escape else 0.0
+    rows: list[dict[str, Any]] = []
+    for r in ref["times"]:
+        td = report.convergence_time(default.t, getattr(default, r["key"]), r["thr"])
+        rows.append({"what": f"{r['key']} < {r['thr']:g} (s)", "default": None if td is None else td - t0d, "fine": r["t"]})
+    rows.append({"what": "final attitude", "default": default.final_att, "fine": ref["final_att"]})
+    if ref["final_pos"] is not None and default.final_pos is not None:
+        rows.append({"what": "final position", "default": default.final_pos, "fine": ref["final_pos"]})
     return rows
