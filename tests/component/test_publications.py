@@ -296,11 +296,12 @@ DELAY_BASINS = FIGURES / "basins" / "delay"
 
 def test_each_kept_basin_under_delay_cell_is_its_folders_draws():
     """The cells of docs/data/basin-delay-5.6.csv whose basin folder is kept (under
-    docs/figures/basins/delay/, one ``zswarm basin`` each, made again on 2026-12-07: 9 of the 21
-    delayed or lossy cells, every one giving the page's figures) are that folder's 1000 draws
-    summarized again here (basin.summarize of its basin.csv), to every digit."""
+    docs/figures/basins/delay/, one ``zswarm basin`` each, made again on 2026-12-07: 14 of the 21
+    delayed or lossy cells, the continuous and the hybrid law's, every one giving the page's
+    figures) are that folder's 1000 draws summarized again here (basin.summarize of its
+    basin.csv), to every digit."""
     kept = [r for r in read_csv(DATA / "basin-delay-5.6.csv") if r["rows"].startswith(str(DELAY_BASINS.relative_to(ROOT)))]
-    assert len(kept) == 9
+    assert sorted((r["law"], r["delay_ms"], r["loss"]) for r in kept) == sorted((law, d, p) for law in ("continuous", "hybrid") for d in "0125" for p in ("0", "0.1") if (d, p) != ("0", "0"))
     for row in kept:
         d = DELAY_BASINS / f"thesis-5.6-{row['law']}7-d{row['delay_ms']}-p{row['loss']}"
         assert row["rows"] == str((d / "basin.csv").relative_to(ROOT)), row
@@ -330,7 +331,7 @@ def test_basin_under_delay_draws_run_again():
 
     The continuous law's kept cells: a draw costs 16-18 s of CPU there against 25 s of the hybrid
     law's, and the two draws 23 s against 45 s for the four hybrid draws (two of them only held to
-    their cell's verdict, their rows not kept) this test ran before (measured 2026-12-08).  The
+    their cell's verdict, their rows not kept) this test ran before (measured 2026-12-07).  The
     hybrid law under command delay and loss is run again by test_command_delay_sweep_rows_run_again;
     the cells whose rows are not kept are held to the table by the tests above only."""
     cells = {(r["law"], r["delay_ms"], r["loss"]): r for r in read_csv(DATA / "basin-delay-5.6.csv")}
