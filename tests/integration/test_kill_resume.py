@@ -25,13 +25,17 @@ import pytest
 
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import _children, pid_alive, wait_for, zswarm
+from tests.keepup import MachineDidNotKeepUp
 from zswarm.engines.launch import free_port
 from zswarm.recording import mcap_io
 from zswarm.transport import keys
 from zswarm.transport.bus import ZenohBus, zenoh_config
 from zswarm.util import rows
 
-pytestmark = pytest.mark.integration
+# The sweep's and the basin's nemesis keep no real time (CPU-bound `sim` runs, killed at moments
+# of the wall clock, which only says how far each got): `make test` runs them in its background
+# part (tests/layers.sh), beside the integration layer, not in it (317 s of its 31 min beside
+# stress-ng, 2026-12-07).  The recorder's keeps a live world's real time: an integration test.
 
 T32, T56 = TOPO / "thesis-3.2-fixed8.toml", TOPO / "thesis-5.6-hybrid7.toml"
 N_KILLS = 20
@@ -131,6 +135,7 @@ def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed
     assert len(want) > 1
     log = tmp_path / "nemesis.log"
     finished_early = 0
+    saved, advanced = 0, 0  # rows whole in the file; kills after which it held more than before
     for k, delay in enumerate(moments(seed, 0.3, 4.0)):
         rc = _kill_at([*cmd, "--out", str(out)], delay, log)
         finished_early += rc is not None
@@ -141,9 +146,13 @@ def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed
             (out / csv_name).write_bytes(data[: len(data) - random.Random(seed + k).randint(1, 40)])
         t = rows.read(out / csv_name)
         assert t.header is None or t.torn in ([], [len(t.rows) + 2]), f"kill {k} at {delay} s: torn lines {t.torn} beyond the last"
+        now = 0
         for rid, r in _by(t, key).items():  # what is in the file is whole and right at every moment
             if r.get("status") == "ok":
                 assert r == want[rid], f"kill {k} at {delay} s: {rid}"
+                now += 1
+        advanced += now > saved
+        saved = now
     p = subprocess.run([*cmd, "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     final = rows.read(out / csv_name)
@@ -152,16 +161,24 @@ def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed
     # The moments must have hit the commands at work, not only after they had finished: most
     # of them (a command that ends before its kill tests nothing of a kill).
     assert finished_early < N_KILLS // 2, f"{finished_early} of {N_KILLS} commands ended before their kill"
+    # And a quarter of them after the command had saved rows (a kill during the start-up tests the
+    # start-up only).  A command that the machine starved (this test runs at idle priority beside
+    # the integration layer) cannot be killed at work: then the check could not be made.
+    if advanced < N_KILLS // 4:
+        raise MachineDidNotKeepUp(f"only {advanced} of {N_KILLS} kills came after their command had saved a row: this machine did not give it the CPU to be killed at work")
 
 
+@pytest.mark.background
 def test_a_sweep_killed_at_20_moments_resumes_to_the_uninterrupted_rows(tmp_path):
     _nemesis(SWEEP, tmp_path / "sweep", tmp_path / "ref", "sweep.csv", "run_id", 5001, tmp_path)
 
 
+@pytest.mark.background
 def test_a_basin_killed_at_20_moments_resumes_to_the_uninterrupted_rows(tmp_path):
     _nemesis(BASIN, tmp_path / "basin", tmp_path / "ref", "basin.csv", "draw", 5002, tmp_path)
 
 
+@pytest.mark.integration
 def test_a_recorder_killed_at_20_moments_leaves_readable_recordings(procs, tmp_path):
     """A live world (§3.2; this test holds the agents' tokens); `zswarm record` joins it and
     is killed at moments(5003, 0.5, 4.0).  Each recording it leaves is read up to the kill."""
