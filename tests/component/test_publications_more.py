@@ -374,3 +374,13 @@ def test_a_quickstart_scenario_runs_again(tmp_path):
     sim(name, out)
     diff = reproduce.differ(st.quickstart_measures(out, name), want)
     assert not diff, (name, diff)
+
+
+def test_the_suite_time_cpu_figures_are_its_file():
+    """development.md's CPU figures of the d20e23d run are docs/data/suite-time.json's, and they add up."""
+    c = json.loads((ROOT / "docs" / "data" / "suite-time.json").read_text())["cpu_s_d20e23d"]
+    assert c["first_layer"] + c["integration"] + c["background"] + c["other_machine_reruns"] == c["total"]
+    text = " ".join((ROOT / "docs" / "development.md").read_text().split())
+    want = f"{c['total']:,} s of CPU (the first layer {c['first_layer']}, the integration layer {c['integration']:,}, the background part {c['background']}, the other-machine reruns {c['other_machine_reruns']};"
+    assert want in text, want
+    assert f"{c['total'] / (c['wall_s'] - 35):.1f} cores on average" in text  # less about 35 s of pip install
