@@ -18,9 +18,11 @@ larger; counts, jump numbers and verdicts exactly.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
 
 from tests.conftest import ROOT
 from tests.golden import C_TRACE, U, fingerprint
@@ -80,3 +82,13 @@ def differ(got: Mapping[str, object], want: Mapping[str, str], skip: Iterable[st
 if __name__ == "__main__":
     MACHINE.write_text(json.dumps({"written_by": "python -m tests.reproduce", "fingerprint": fingerprint()}, indent=1) + "\n")
     print(MACHINE)
+
+
+def write_main(description: str, default: Path, write: Callable[[Path], None]) -> None:
+    """The ``--write [FILE]`` command of a test module that keeps a reference file (``make
+    fine-references``): ``write(FILE)``, ``default`` without FILE, and the path printed."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--write", type=Path, nargs="?", const=default, required=True, metavar="FILE", help=f"the file to write (without FILE: {default.relative_to(ROOT)})")
+    out = ap.parse_args().write
+    write(out)
+    print(out)

@@ -44,7 +44,6 @@ run is judged against the kept fine numbers as before.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import hashlib
 import json
@@ -59,7 +58,7 @@ import pytest
 
 from tests.conftest import ROOT, TOPO
 from tests.golden import fingerprint
-from tests.reproduce import near
+from tests.reproduce import near, write_main
 from zswarm.scenario import Scenario, load
 from zswarm.studies import step_size as study
 
@@ -275,10 +274,4 @@ def test_decarli_is_first_order_in_the_step(results, kept):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description="Make the study's fine runs and keep their numbers (tests/data/convergence_fine.json).")
-    ap.add_argument(
-        "--write", type=Path, nargs="?", const=FINE, required=True, metavar="FILE", help=f"the file to write (without FILE: {FINE.relative_to(ROOT)})"
-    )
-    out = ap.parse_args().write
-    write(out)
-    print(out)
+    write_main("Make the study's fine runs and keep their numbers (tests/data/convergence_fine.json).", FINE, write)

@@ -7,7 +7,6 @@ centralised hybrid loop at 0.5 ms) gives 61.7 s / 99.9 s where READING-NOTES
 prints 58.5 s / 102 s, so the notes' figures carry a few % of their own step.
 """
 
-import argparse
 import hashlib
 import json
 import math
@@ -19,7 +18,7 @@ import pytest
 
 from tests.conftest import ROOT, TOPO
 from tests.golden import fingerprint
-from tests.reproduce import near
+from tests.reproduce import near, write_main
 from zswarm.engines.sim import simulate
 from zswarm.results import make_report
 from zswarm.scenario import ScenarioError, load, loads
@@ -385,10 +384,4 @@ def test_every_hybrid_variable_in_its_jump_set_at_the_start_jumps_at_t_0(tmp_pat
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description="Make the §5.6 hybrid loop's 1 kHz run and keep its numbers (tests/data/sync_fine.json).")
-    ap.add_argument(
-        "--write", type=Path, nargs="?", const=FINE_FILE, required=True, metavar="FILE", help=f"the file to write (without FILE: {FINE_FILE.relative_to(ROOT)})"
-    )
-    out = ap.parse_args().write
-    write(out)
-    print(out)
+    write_main("Make the §5.6 hybrid loop's 1 kHz run and keep its numbers (tests/data/sync_fine.json).", FINE_FILE, write)
