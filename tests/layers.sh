@@ -2,11 +2,16 @@
 # make test: the test layers in the order and on the cores that fit a 2-core machine.
 #
 # 1. Unit and component tests on two workers (by file).
-# 2. The integration tests alone (their processes keep real time), and beside them, at idle
-#    priority, the component tests marked "background" (tests/conftest.py: long `sim` runs that
-#    keep no time and have no wall-clock limit).  `chrt --idle 0` gives them only CPU that no
-#    other process asks for, and a waking process of a run preempts them at once, so the
-#    integration runs keep the machine they had.  Their output follows the integration layer's.
+# 2. The integration tests that keep real time one at a time, and beside them:
+#    - the integration tests marked "no_real_time" (the kill -9 nemesis, the Dask clusters:
+#      CPU-bound commands with no pace to keep), one at a time at normal priority in a session
+#      of their own: they need a normal process's CPU (a starved nemesis cannot be killed at
+#      work), and a run's processes, each in its own session, each use a small part of a core;
+#    - at idle priority, the component tests marked "background" (tests/conftest.py: long `sim`
+#      runs that keep no time and have no wall-clock limit).  `chrt --idle 0` gives them only CPU
+#      that no other process asks for, and a waking process of a run preempts them at once, so
+#      the integration runs keep the machine they had.
+#    The output of both follows the real-time tests'.
 #
 # 1b. (In the background part of step 2.)  The tests whose verdict depends on the rounding of the machine (the golden sim runs, the
 #    compiled loops against numpy, sin and cos, SO(3)) once more as on another machine: OpenBLAS
@@ -22,6 +27,13 @@
 # and its workers) and waited for.
 set -u
 PY=${1:-.venv/bin/python}
+
+# Every process of the suite (a run starts a dozen, a sweep one per run) imports zswarm; where
+# PYTHONDONTWRITEBYTECODE is set (it is on this project's CI machines) none writes its bytecode,
+# and each compiled the sources again: 0.5-1.2 s of CPU more per command (measured 2026-12-07:
+# a 2 s run 8.1 s -> 6.9 s, a 4-run sim sweep 6.4 s -> 5.8 s).  compileall writes it whatever
+# that variable says, and only where a source is newer than its bytecode.
+"$PY" -m compileall -q zswarm agent world tests >/dev/null || exit $?
 
 # Each worker in a session of its own (tests/conftest.py, ZSWARM_WORKER_SESSIONS): beside another
 # session's busy process the two get two thirds of the two cores, not one core between them.
@@ -49,30 +61,41 @@ setsid "${idle[@]}" bash -c '
 ' >"$log" 2>&1 &
 bg=$!
 
-show_background() {
-    echo "--- the background tests (${idle[*]}, beside the integration layer): exit $1"
-    cat "$log"
-    rm -f "$log"
-}
-stop_background() {
-    kill -TERM -- "-$bg" 2>/dev/null
-    wait "$bg"
-    show_background "$?"
-}
-trap 'stop_background; exit 130' INT
-trap 'stop_background; exit 143' TERM
-
+# The integration tests that keep no real time, in a session of their own (setsid: pytest is its
+# group's leader, so the group is stopped as a whole, as the background part's).
+nlog=$(mktemp)
 # A real-time run that did not keep up cannot make the checks it exists for: they raise
 # tests.keepup.MachineDidNotKeepUp, and a test that failed with that exception and nothing else
 # runs again, twice at most (tests/keepup.py: the decision is on the exception's type, never on
 # a message's text).  Any other failure fails at once; a test still overloaded on its third try
 # fails, naming the check.  -rR lists each rerun with its reason.
 RERUN=(-rR)
-echo "$PY -m pytest -q -m integration --durations=15 ${RERUN[*]}   (beside it: pytest -m background at ${idle[*]}, its output below)"
-"$PY" -m pytest -q -m integration --durations=15 "${RERUN[@]}"
+setsid "$PY" -m pytest -q -m "integration and no_real_time" --durations=10 "${RERUN[@]}" >"$nlog" 2>&1 &
+nrt=$!
+
+show_part() {  # $1: what, $2: its exit status, $3: its log
+    echo "--- $1: exit $2"
+    cat "$3"
+    rm -f "$3"
+}
+stop_parts() {
+    kill -TERM -- "-$nrt" "-$bg" 2>/dev/null
+    wait "$nrt"
+    show_part "the integration tests that keep no real time (beside the others)" "$?" "$nlog"
+    wait "$bg"
+    show_part "the background tests (${idle[*]}, beside the integration layer)" "$?" "$log"
+}
+trap 'stop_parts; exit 130' INT
+trap 'stop_parts; exit 143' TERM
+
+echo "$PY -m pytest -q -m 'integration and not no_real_time' --durations=15 ${RERUN[*]}   (beside it: pytest -m 'integration and no_real_time', and pytest -m background at ${idle[*]}, their output below)"
+"$PY" -m pytest -q -m "integration and not no_real_time" --durations=15 "${RERUN[@]}"
 it=$?
+wait "$nrt"
+nt=$?
 wait "$bg"
 bt=$?
 trap - INT TERM
-show_background "$bt"
-exit $((it != 0 || bt != 0))
+show_part "the integration tests that keep no real time (beside the others)" "$nt" "$nlog"
+show_part "the background tests (${idle[*]}, beside the integration layer)" "$bt" "$log"
+exit $((it != 0 || nt != 0 || bt != 0))

@@ -18,7 +18,9 @@ import pytest
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import wait_for
 
-pytestmark = pytest.mark.integration
+# Dask schedulers and workers running sweeps and basins: CPU-bound, no real time, so make test
+# runs them beside the real-time integration tests (marker no_real_time, tests/layers.sh).
+pytestmark = [pytest.mark.integration, pytest.mark.no_real_time]
 
 DASK = str(Path(sys.executable).parent / "dask")
 # The waits below are deadlines for a hang, not measures: a scheduler or worker starts in

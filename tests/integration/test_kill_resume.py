@@ -35,8 +35,10 @@ from zswarm.util import rows
 # Integration tests, all three: the nemesis needs the CPU of a normal process to be killed at
 # work.  Run at idle priority beside the integration layer (make test's background part,
 # 2026-12-07, beside stress-ng --cpu 1) only 0-4 of the 20 kills came after the command had
-# saved a row, and a killed sweep's process outlived the test.
-pytestmark = pytest.mark.integration
+# saved a row, and a killed sweep's process outlived the test.  None keeps real time (the
+# recorder's world has no check of its pace), so make test runs them beside the real-time
+# integration tests, at normal priority (marker no_real_time, tests/layers.sh).
+pytestmark = [pytest.mark.integration, pytest.mark.no_real_time]
 
 T32, T56 = TOPO / "thesis-3.2-fixed8.toml", TOPO / "thesis-5.6-hybrid7.toml"
 N_KILLS = 20
