@@ -50,8 +50,8 @@ def fixed8_text() -> str:
 # `sim` runs (the convergence study's fine steps, the Chapter 3-5 scenarios over their whole
 # horizons; 700 s of one core of the component layer's 1080, measured quietly on 2026-12-04)
 # that keep no time and have no wall-clock limit, so a starved one is late, never wrong.  At
-# SCHED_IDLE the scheduler gives them only CPU that no other process asks for, and a waking
-# process of a run preempts them at once: the runs keep the machine they had.
+# SCHED_IDLE a waking process of a run preempts them at once, and the part gets a session's share
+# of the CPU (autogroup scheduling, tests/layers.sh), of which each process of a run needs little.
 # test_batched.py joined them on 2026-12-04 (57 s quietly: the batched engine against sim, draw by
 # draw, no subprocess and no timeout).  test_sweep_engines.py (34 s) was tried here too: the
 # background layer then ended with the integration layer (26.3 of 26.5 min beside stress-ng,

@@ -204,6 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run's sim or run process is killed and recorded as failed (not the batched engine's runs)")
     sw.add_argument("--keep-recordings", action="store_true", help="keep each run's recording.mcap (deleted by default; summaries and CSVs stay)")
+    sw.add_argument("--no-plots", action="store_true", help="write no figures (sweep.csv only; figures an earlier run left in --out are removed, as they would not show this sweep.csv)")
 
     b = sub.add_parser(
         "basin",
@@ -247,6 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--chunk", type=procutil.positive_int, default=None, help="draws stepped together per task of the batched engine (default: the draws shared out among the jobs, at most 1000)")
     b.add_argument("--cluster", default=None, metavar="ADDRESS", help="run the draws on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:port) instead of local processes")
+    b.add_argument("--no-plots", action="store_true", help="write no basin.png (basin.csv and basin.json only; a basin.png an earlier run left in --out is removed)")
 
     bc = sub.add_parser(
         "basin-compare",

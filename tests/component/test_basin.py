@@ -104,9 +104,10 @@ def test_basin_end_to_end_resume_and_bad_input(tmp_path):
     s = json.loads((out / "basin.json").read_text())
     assert s["drawn"] == 2 and s["scenario"] == "thesis-4.5-hybrid5" and s["synchronized"] == 2 and (out / "basin.png").exists()
     assert "2 of 2 uniform draws synchronized" in p.stdout
-    # The same command resumes: nothing left to run.
-    p2 = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    # The same command resumes: nothing left to run; --no-plots removes the earlier figure.
+    p2 = subprocess.run([*cmd, "--no-plots"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert p2.returncode == 0 and "draw " not in p2.stderr.replace("draws", "")
+    assert not (out / "basin.png").exists() and "basin.png" not in p2.stdout
     assert len(list(csv.DictReader(open(out / "basin.csv")))) == 3
     # Another horizon in the same folder is refused; a non-tree scheme is not covered.
     p3 = subprocess.run([*cmd[:5], "--duration", "10", "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=60)

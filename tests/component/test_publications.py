@@ -371,6 +371,7 @@ def test_the_sensor_side_basin_is_its_file():
     s = json.loads(SENSOR_BASIN.read_text())
     text = " ".join(CHAPTER5.read_text().replace("\\\n", " ").split())
     assert " ".join(s["command"].split()) in text
+    assert f"[`{s['rows']}`]" in text  # the page names the folder of its draws
     lo, hi = s["fraction_95ci_pct"]
     st, j = s["settle_s"], s["jumps"]
     quoted = (
@@ -381,21 +382,40 @@ def test_the_sensor_side_basin_is_its_file():
     assert f"{s['cpu_s']:,} s of CPU for the {s['drawn'] + 1} draws" in text
 
 
+def test_the_sensor_side_basin_file_is_its_folders_draws():
+    """docs/data/basin-sensors-5.6.json is its folder's draws (docs/figures/basins/sensors/, the
+    page's command run once) summarized again here (basin.summarize of its basin.csv), as the
+    page prints them: the interval to 0.1 %, the settle quantiles to 0.1 s; the counts and the
+    jumps exactly.  The folder's basin_def.json is the command's."""
+    s = json.loads(SENSOR_BASIN.read_text())
+    folder = ROOT / Path(s["rows"]).parent
+    d = json.loads((folder / "basin_def.json").read_text())
+    argv = s["command"].split()
+    assert d["topology"] == argv[2] and d["set"] == [a for a in argv if a.startswith("links.")] and d["duration_s"] == 150.0, d
+    got = basin.summarize(basin.read_rows(folder / "basin.csv"), 0.01, 150.0, verdict="synchronized")
+    assert got["drawn"] + 1 == int(argv[argv.index("--draws") + 1])  # draw 0 is the scenario's own start, not counted
+    assert (got["drawn"], got["synchronized"]) == (s["drawn"], s["synchronized"])
+    assert [round(100 * x, 1) for x in got["fraction_95ci"]] == s["fraction_95ci_pct"]
+    assert {q: round(got["settle_s"][q], 1) for q in ("p10", "median", "p90")} == s["settle_s"]
+    assert {q: got["jumps"][q] for q in ("median", "max")} == s["jumps"]
+
+
 def test_a_sensor_side_basin_draw_runs_again_on_sim():
     """A draw of the sensor-side basin (150 s, lossy and jittered sensor links), picked with a
     fixed seed, on ``sim`` (one draw costs less there than on the batched engine, 27 s of CPU
     against 61 s: the batched engine's gain is in stepping many draws together; the two give the
-    same row, tests/component/test_sweep_engines.py): every one of the 999 synchronized, so this
-    draw must, settling before the horizon with no more jumps than the basin's most."""
+    same row, tests/component/test_sweep_engines.py): its row of the folder's basin.csv, to the
+    printed figure (another code path than the batched engine's that wrote it: tests/reproduce.py)."""
     s = json.loads(SENSOR_BASIN.read_text())
-    assert s["synchronized"] == s["drawn"]
     path = ROOT / "topologies" / "thesis-5.6-hybrid7.toml"
     sets = [a for a in s["command"].split() if a.startswith("links.")]
     sc = load(path, [parse_override(x, "--set") for x in sets])
     assert sc.random_links  # each draw its own losses: the draw's run seed is seed + draw
     draw = random.Random(61).randrange(1, s["drawn"] + 1)
     got = basin.run_draw((sc.text, str(path)), 1, draw, 150.0, 0.01)
-    assert got["synchronized"] is True and got["settle_s"] < 150.0 and got["jumps"] <= s["jumps"]["max"], got
+    want = next(r for r in basin.read_rows(ROOT / s["rows"]) if int(r["draw"]) == draw)
+    diff = reproduce.differ(got, want, same_path=False)
+    assert not diff, (draw, diff)
 
 
 # --------------------------------------------------------------------------- communication.md's smaller §3.2 sweeps

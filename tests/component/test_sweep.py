@@ -66,10 +66,11 @@ def test_sweep_writes_rows_plots_and_resumes(tmp_path):
         assert (out / name).stat().st_size > 10_000
     assert not list(out.glob("runs/*/recording.mcap"))  # deleted unless --keep-recordings
 
-    again = sweep(*args)  # everything is done: nothing runs again
+    again = sweep(*args, "--no-plots")  # everything is done: nothing runs again
     assert again.returncode == 0, again.stderr
-    assert "(0 run now" in again.stdout
+    assert "(0 run now" in again.stdout and "plots: none" in again.stdout
     assert len(rows(out)) == 8
+    assert not list(out.glob("*.png"))  # --no-plots: the earlier figures removed, none written
 
     other = sweep("--vary", "links.drop=0,0.2", "--duration", "1.5", "--out", str(out))
     assert other.returncode == 2 and "holds a different sweep (differs in: repeats, vary)" in other.stderr

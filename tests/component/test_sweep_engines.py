@@ -29,7 +29,7 @@ def test_batched_rows_are_sims(tmp_path, topology, vary):
     args = ["--vary", vary, "--repeats", "2", "--duration", "3", "--thresholds", "0.7,0.1", "--jobs", "2"]
     got = {}
     for engine in ("batched", "sim"):
-        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
+        p = _sweep_of(topology, *args, "--no-plots", "--engine", engine, "--out", str(tmp_path / engine))  # rows only: no figures
         assert p.returncode == 0, p.stderr
         got[engine] = {r["run_id"]: r for r in rows(tmp_path / engine)}
     assert sorted(got["batched"]) == sorted(got["sim"]) and len(got["sim"]) == 4
@@ -49,7 +49,7 @@ def _same_rows(tmp_path, topology, args, batches=None):
     time (``batches``: the batched run's stderr says it ran in that many); sim's rows."""
     got = {}
     for engine in ("batched", "sim"):
-        p = _sweep_of(topology, *args, "--engine", engine, "--out", str(tmp_path / engine))
+        p = _sweep_of(topology, *args, "--no-plots", "--engine", engine, "--out", str(tmp_path / engine))  # rows only: no figures
         assert p.returncode == 0, p.stderr
         got[engine] = {r["run_id"]: {k: v for k, v in r.items() if k != "wall_s"} for r in rows(tmp_path / engine)}
         if engine == "batched" and batches is not None:

@@ -386,9 +386,11 @@ def _matches_sim(s: dict, ss: dict, keys: tuple[str, ...]) -> None:
 # the machine idle (a §5.6 run at time scale 1 uses 0.8-1.0 of the two cores, the §3 runs
 # less), and its reference sim is CPU-bound work of 7-37 s (measured quietly, 2026-12-04:
 # §5.6 hybrid 150 s 37 s, §4.5 hybrid pose 60 s 25 s, §3.2 40 s 9 s, §3.3 30 s 7.5 s).
-# The reference process runs at SCHED_IDLE: the scheduler gives it only CPU that no other
-# process asks for, and a waking process of the run preempts it at once, so the run keeps
-# the machine it had (the run's own overload figures stay the judge of that).  When the run
+# The reference process runs at SCHED_IDLE: a waking process of the run preempts it at once.
+# It is in a session of its own, as each of the run's processes is, and the kernel shares the
+# CPU between sessions first (autogroup scheduling, tests/layers.sh), so over time it gets a
+# session's share, which each of the run's processes needs only a small part of (the run's own
+# overload figures stay the judge of that).  When the run
 # is over, the reference is raised back to the normal policy and the test waits for it.
 SIM_REFERENCE_TIMEOUT_S = 900.0  # 37 s quietly for the longest; ×20 for a loaded machine
 

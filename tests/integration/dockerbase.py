@@ -5,8 +5,8 @@ root imported with ``docker import``: 42-49 s of downloads and unpacking on this
 (2026-12-04), a third of the compose test's time.  It needs no Docker engine, so the
 integration layer starts it when the session begins (``conftest.base_rootfs``) and runs the
 compose tests last: the root is then built beside the other tests' real-time runs, at
-SCHED_IDLE (``chrt --idle 0``: it gets only CPU that nothing else asks for, so the runs keep
-the machine they had), and the image fixture only imports it.
+SCHED_IDLE (``chrt --idle 0``: a waking process of a run preempts it at once; between
+sessions the CPU is shared first, tests/layers.sh), and the image fixture only imports it.
 """
 
 from __future__ import annotations

@@ -18,9 +18,7 @@ import pytest
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import wait_for
 
-# Dask schedulers and workers running sweeps and basins: CPU-bound, no real time, so make test
-# runs them beside the real-time integration tests (marker no_real_time, tests/layers.sh).
-pytestmark = [pytest.mark.integration, pytest.mark.no_real_time]
+pytestmark = pytest.mark.integration
 
 DASK = str(Path(sys.executable).parent / "dask")
 # The waits below are deadlines for a hang, not measures: a scheduler or worker starts in
@@ -72,7 +70,7 @@ def _rows(out: Path) -> list[dict[str, str]]:
 
 
 def _basin(out: Path, *extra: str) -> list[dict[str, str]]:
-    _zswarm("basin", str(TOPO / "thesis-5.6-hybrid7.toml"), "--draws", "5", "--duration", "3", "--jobs", "2", "--out", str(out), *extra)
+    _zswarm("basin", str(TOPO / "thesis-5.6-hybrid7.toml"), "--draws", "5", "--duration", "3", "--jobs", "2", "--out", str(out), "--no-plots", *extra)
     return _rows(out)
 
 
@@ -120,7 +118,7 @@ SWEEP_KEYS = ("run_id", "point", "repeat", "seed", "links.delay_ms", "final_atti
 
 
 def _sweep(out: Path, *extra: str) -> list[dict[str, str]]:
-    _zswarm("sweep", str(TOPO / "thesis-3.2-fixed8.toml"), "--vary", "links.delay_ms=0,20", "--repeats", "2", "--duration", "3", "--out", str(out), *extra)
+    _zswarm("sweep", str(TOPO / "thesis-3.2-fixed8.toml"), "--vary", "links.delay_ms=0,20", "--repeats", "2", "--duration", "3", "--out", str(out), "--no-plots", *extra)
     with open(out / "sweep.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert rows and set(SWEEP_KEYS) <= set(rows[0]), list(rows[0])

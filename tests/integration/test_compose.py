@@ -28,10 +28,12 @@ import time
 import pytest
 
 from tests.conftest import ROOT, TOPO
+from tests.integration.conftest import _machine_problems_only, judged_if_kept_up, not_kept_up
 from tests.integration.dockerbase import BASE_IMAGE, Rootfs
 from tests.integration.dockerbase import apt_install as _apt_install
 from tests.integration.dockerbase import image_exists as _image_exists
 from tests.integration.dockerbase import run as _run
+from tests.keepup import MachineDidNotKeepUp
 from zswarm.engines import compose
 from zswarm.scenario import load
 
@@ -194,17 +196,20 @@ def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
     second router for the routed topology): the run ends by itself, summary.json
     shows the thesis' convergence, and the networks let nothing out.
 
-    At time scale 0.5 (80 s of wall time).  Before issue 28 the twelve containers needed
-    about 1.7 of this machine's two cores at time scale 1, and with another process
-    keeping a core busy agent 3 fell to 25 Hz and its estimate was lost (attitude error
-    0.99 at 18 s).  Since, at 1 beside `stress-ng --cpu 1` (2026-12-03) the agents kept up
-    (≤ 0.08 % missed ticks) but the world skipped 2.5 % of its samples, over the 2 %
-    the report calls overloaded: the engine's share of the cost, so this stays at 0.5."""
+    At time scale 1 (40 s of wall time).  Before issue 28 the twelve containers needed
+    about 1.7 of this machine's two cores at 1, and with another process keeping a core
+    busy agent 3 fell to 25 Hz and its estimate was lost (attitude error 0.99 at 18 s).
+    At 1 beside `stress-ng --cpu 1` (2026-12-03) the agents kept up (≤ 0.08 % missed
+    ticks) but the world skipped 2.5 % of its samples, while it skipped every sample it
+    woke a period late; it now takes them late, up to 0.1 s (0.05 % skipped in
+    test_run.py's runs), so this no longer runs at 0.5 (80 s).  The convergence is
+    judged as the other runs' are: a run whose data came late reruns when it fails
+    (judged_if_kept_up)."""
     results = tmp_path / "results"
     results.mkdir()
     f = tmp_path / "compose.yml"
     r = _run(
-        [sys.executable, "-m", "zswarm", "compose", str(TOPO / "thesis-3.2-fixed8.toml"), "-o", str(f), "--no-build", "--image", image, "--results", str(results), "--network", "routed", "--time-scale", "0.5"],
+        [sys.executable, "-m", "zswarm", "compose", str(TOPO / "thesis-3.2-fixed8.toml"), "-o", str(f), "--no-build", "--image", image, "--results", str(results), "--network", "routed", "--time-scale", "1"],
         60,
         cwd=ROOT,
     )
@@ -227,19 +232,25 @@ def test_compose_run_converges_in_a_real_engine(image, compose_cli, tmp_path):
             c["Name"]: c["State"]["ExitCode"]
             for c in json.loads(_run(["docker", "inspect", *_run([*base, "ps", "-q"], 60, cwd=tmp_path).stdout.split()], 60).stdout or "[]")
         }
-        assert len(codes) == 12 and all(v == 0 for v in codes.values()), codes
+        assert len(codes) == 12, codes
     finally:
         left = _compose_down(base, project, tmp_path)
     assert not left, left
-    print(f"\ncompose run: {elapsed:.1f} s wall for 40 s of world time at time scale 0.5", file=sys.stderr)
+    print(f"\ncompose run: {elapsed:.1f} s wall for 40 s of world time at time scale 1", file=sys.stderr)
     s = json.loads((results / "thesis-3.2-fixed8" / "summary.json").read_text())
+    # As assert_run_exit_ok: a container that exited 1 on recording holes alone, in a run that did
+    # not keep up, is the machine's doing (a rerun); any other exit fails at once.
+    if any(codes.values()) and _machine_problems_only(s["problems"]) and (why := not_kept_up(s)):
+        raise MachineDidNotKeepUp(f"this machine did not keep up with the compose run ({'; '.join(why)}); its containers exited {codes} on what that leaves: {'; '.join(s['problems'])}")
+    assert all(v == 0 for v in codes.values()), codes
     assert s["engine"] == "run" and s["completed"] and s["duration_s"] == 40.0
-    for i, a in s["agents"].items():
-        assert a["alive_at_end"], i
-        if a["role"] == "follower":
-            # The thesis' thresholds; sim reaches 7e-5 and 1.2e-2 (a wrong frame or timing gives 0.1–1).
-            assert a["attitude_error_final"] < 1e-2, (i, a)
-            assert a["position_error_final"] < 0.1, (i, a)
+    with judged_if_kept_up(s, "the thesis' final errors in containers"):
+        for i, a in s["agents"].items():
+            assert a["alive_at_end"], i
+            if a["role"] == "follower":
+                # The thesis' thresholds; sim reaches 7e-5 and 1.2e-2 (a wrong frame or timing gives 0.1–1).
+                assert a["attitude_error_final"] < 1e-2, (i, a)
+                assert a["position_error_final"] < 0.1, (i, a)
     assert (results / "thesis-3.2-fixed8" / "recording.mcap").stat().st_size > 100_000
     from zswarm.recording.mcap_io import read
 

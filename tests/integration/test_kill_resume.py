@@ -1,7 +1,9 @@
 """``kill -9`` at seeded moments, then resume (issue 50; in the style of Jepsen's nemesis).
 
 A sweep and a basin check are each killed at 20 moments drawn from a seeded generator (listed
-below), resumed by the same command each time, and finally let finish.  Every run must then be
+below), resumed by the same command each time, and finally let finish.  Ten moments are seconds
+after the command's start (its start-up or its work, as fast as the machine is), ten are a
+fraction of a second after it saved its next row: at work by construction, on any machine.  Every run must then be
 in the results file once, whole, and equal to its row in an uninterrupted run of the same
 command (the wall-clock column aside).  ``zswarm record`` is killed at 20 moments of a live run:
 each recording it leaves reads (no exception), and ``zswarm report`` on it says what happened in
@@ -19,13 +21,13 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import _children, pid_alive, wait_for, zswarm
-from tests.keepup import MachineDidNotKeepUp
 from zswarm.engines.launch import free_port
 from zswarm.recording import mcap_io
 from zswarm.transport import keys
@@ -35,10 +37,13 @@ from zswarm.util import rows
 # Integration tests, all three: the nemesis needs the CPU of a normal process to be killed at
 # work.  Run at idle priority beside the integration layer (make test's background part,
 # 2026-12-07, beside stress-ng --cpu 1) only 0-4 of the 20 kills came after the command had
-# saved a row, and a killed sweep's process outlived the test.  None keeps real time (the
-# recorder's world has no check of its pace), so make test runs them beside the real-time
-# integration tests, at normal priority (marker no_real_time, tests/layers.sh).
-pytestmark = [pytest.mark.integration, pytest.mark.no_real_time]
+# saved a row, and a killed sweep's process outlived the test.  Nor beside the real-time
+# integration tests at normal priority (2026-12-07, with the Dask tests, beside stress-ng --cpu 1):
+# the machine is short of CPU all along, the runs beside them were slowed by 15-30 % (three ran
+# again, late sensor data; the killed agent's team reconverged in 10.9 s against a bound of 7.4),
+# and the sweep's nemesis, then killed at seconds after its start only, came after a saved row
+# at fewer than 5 of its 20 kills three times.
+pytestmark = pytest.mark.integration
 
 T32, T56 = TOPO / "thesis-3.2-fixed8.toml", TOPO / "thesis-5.6-hybrid7.toml"
 N_KILLS = 20
@@ -50,10 +55,21 @@ def moments(seed: int, lo: float, hi: float) -> list[float]:
     return [round(rng.uniform(lo, hi), 3) for _ in range(N_KILLS)]
 
 
-# Long enough that 20 kills at moments(seed, 0.3, 4.0) (a failure names the moment) mostly
-# hit the command at work: 24 runs of ~1.8 s each two at a time, 64 draws of ~0.6 s.
-SWEEP = [sys.executable, "-m", "zswarm", "sweep", str(T32), "--vary", "links.drop=0,0.1,0.2,0.3,0.4,0.5", "--repeats", "4", "--duration", "3", "--jobs", "2", "--engine", "sim"]
-BASIN = [sys.executable, "-m", "zswarm", "basin", str(T56), "--draws", "64", "--duration", "4", "--engine", "sim", "--jobs", "2"]
+def plan(seed: int, lo: float, hi: float) -> list[tuple[str, float]]:
+    """Each kill's moment: ("start", s) for ``s`` seconds after the command's start (the even
+    kills, moments(seed, lo, hi)), ("row", s) for ``s`` seconds (0-0.3) after the command's next
+    row is in the file (the odd kills).  The first kind finds the command wherever the machine's
+    speed has brought it by then (a starved one is still starting up, 2026-12-07: 0-4 of 20 kills
+    after a saved row, at idle priority); the second finds it at work on any machine."""
+    rng = random.Random(seed + 1)
+    return [("start", s) if k % 2 == 0 else ("row", round(rng.uniform(0.0, 0.3), 3)) for k, s in enumerate(moments(seed, lo, hi))]
+
+
+# Long enough that 20 kills mostly hit the command at work, and that the rows the ten kills after
+# a row leave (one or two each) and the others' do not finish it early (a failure names the
+# moment): 36 runs of ~1.2 s each two at a time, 64 draws of ~0.6 s.
+SWEEP = [sys.executable, "-m", "zswarm", "sweep", str(T32), "--vary", "links.drop=0,0.1,0.2,0.3,0.4,0.5", "--repeats", "6", "--duration", "2", "--jobs", "2", "--engine", "sim", "--no-plots"]
+BASIN = [sys.executable, "-m", "zswarm", "basin", str(T56), "--draws", "64", "--duration", "4", "--engine", "sim", "--jobs", "2", "--no-plots"]
 WALL = {"wall_s"}  # the only cells that differ between two runs of the same command
 
 
@@ -97,13 +113,19 @@ def _descendants(pid: int) -> set[int]:
     return out
 
 
-def _kill_at(cmd: list[str], delay: float, log: Path) -> int | None:
+def _kill_at(cmd: list[str], delay: float, log: Path, after: Callable[[], bool] | None = None) -> int | None:
     """Start ``cmd``, SIGKILL it (the command alone, not its group: its children must see it
-    die) ``delay`` s later, reap it; its exit code when it ended by itself first.  The
-    processes it had started must end by themselves within 60 s (else killed, and a failure)."""
+    die) ``delay`` s later (``after``: ``delay`` s after ``after()`` first holds, polled every
+    20 ms), reap it; its exit code when it ended by itself first.  The processes it had started
+    must end by themselves within 60 s (else killed, and a failure)."""
     with open(log, "ab") as f:
         p = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
     try:
+        while after is not None and not after():
+            try:
+                return p.wait(0.02)
+            except subprocess.TimeoutExpired:
+                pass
         try:
             return p.wait(delay)
         except subprocess.TimeoutExpired:
@@ -139,20 +161,26 @@ def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed
     log = tmp_path / "nemesis.log"
     finished_early = 0
     saved, advanced = 0, 0  # rows whole in the file; kills after which it held more than before
-    for k, delay in enumerate(moments(seed, 0.3, 4.0)):
-        rc = _kill_at([*cmd, "--out", str(out)], delay, log)
+
+    def ok_rows() -> int:
+        return sum(1 for r in rows.read(out / csv_name).rows if r.get("status") == "ok") if (out / csv_name).exists() else 0
+
+    for k, (kind, delay) in enumerate(plan(seed, 0.3, 4.0)):
+        before = saved
+        rc = _kill_at([*cmd, "--out", str(out)], delay, log, (lambda b=before: ok_rows() > b) if kind == "row" else None)
+        at = f"kill {k} ({delay} s after {'its start' if kind == 'start' else 'a row'})"
         finished_early += rc is not None
-        assert rc in (None, 0), f"kill {k} at {delay} s: the command failed by itself (exit {rc}); see {log}"
+        assert rc in (None, 0), f"{at}: the command failed by itself (exit {rc}); see {log}"
         _none_left(out)
         if k % 5 == 4 and (out / csv_name).exists():  # a power cut as well: the file's last bytes lost
             data = (out / csv_name).read_bytes()
             (out / csv_name).write_bytes(data[: len(data) - random.Random(seed + k).randint(1, 40)])
         t = rows.read(out / csv_name)
-        assert t.header is None or t.torn in ([], [len(t.rows) + 2]), f"kill {k} at {delay} s: torn lines {t.torn} beyond the last"
+        assert t.header is None or t.torn in ([], [len(t.rows) + 2]), f"{at}: torn lines {t.torn} beyond the last"
         now = 0
         for rid, r in _by(t, key).items():  # what is in the file is whole and right at every moment
             if r.get("status") == "ok":
-                assert r == want[rid], f"kill {k} at {delay} s: {rid}"
+                assert r == want[rid], f"{at}: {rid}"
                 now += 1
         advanced += now > saved
         saved = now
@@ -165,11 +193,10 @@ def _nemesis(cmd: list[str], out: Path, ref: Path, csv_name: str, key: str, seed
     # of them (a command that ends before its kill tests nothing of a kill).
     assert finished_early < N_KILLS // 2, f"{finished_early} of {N_KILLS} commands ended before their kill"
     # And a quarter of them after the command had saved rows (a kill during the start-up tests the
-    # start-up only).  A command that the machine starved cannot be killed at work: then the check
-    # could not be made.
+    # start-up only): the ten kills after a row do, on any machine, but where a power cut took
+    # the row again (every fifth kill) or the command ended before its kill.
     print(f"{advanced} of {N_KILLS} kills came after their command had saved a row; {finished_early} commands ended before their kill")
-    if advanced < N_KILLS // 4:
-        raise MachineDidNotKeepUp(f"only {advanced} of {N_KILLS} kills came after their command had saved a row: this machine did not give it the CPU to be killed at work")
+    assert advanced >= N_KILLS // 4, f"only {advanced} of {N_KILLS} kills came after their command had saved a row"
 
 
 def test_a_sweep_killed_at_20_moments_resumes_to_the_uninterrupted_rows(tmp_path):
@@ -182,7 +209,8 @@ def test_a_basin_killed_at_20_moments_resumes_to_the_uninterrupted_rows(tmp_path
 
 def test_a_recorder_killed_at_20_moments_leaves_readable_recordings(procs, tmp_path):
     """A live world (§3.2; this test holds the agents' tokens); `zswarm record` joins it and
-    is killed at moments(5003, 0.5, 4.0).  Each recording it leaves is read up to the kill."""
+    is killed at plan(5003, 0.5, 4.0): ten times 0.5-4 s after its start, ten times 0-0.3 s after
+    its recording first held a message.  Each recording it leaves is read up to the kill."""
     ep = f"tcp/127.0.0.1:{free_port()}"
     procs.start(zswarm("router", "--listen", ep), log=tmp_path / "router.log")
     run = "kill9"
@@ -197,11 +225,15 @@ def test_a_recorder_killed_at_20_moments_leaves_readable_recordings(procs, tmp_p
         procs.start([sys.executable, "-m", "world", "--topology", str(T32), "--duration", "600", "--wait-for-recorder", "--run-id", run, "--connect", ep], log=tmp_path / "world.log")
         wait_for(lambda: "start:" in (tmp_path / "world.log").read_text(), 60, "the world started")
         read_any = 0
-        for k, delay in enumerate(moments(5003, 0.5, 4.0)):
+        for k, (kind, delay) in enumerate(plan(5003, 0.5, 4.0)):
             out = tmp_path / f"rec-{k}"
-            rc = _kill_at(zswarm("record", str(T32), "--out", str(out), "--run-id", run, "--connect", ep, "--no-report"), delay, tmp_path / f"rec-{k}.log")
-            assert rc is None, f"recorder {k} ended by itself (exit {rc})"
             raw = out / ("recording" + mcap_io.RAW_SUFFIX)
+
+            def holds_a_message(raw: Path = raw) -> bool:  # the odd kills: after its first message is on disk
+                return raw.exists() and next(iter(mcap_io.read(raw, [])), None) is not None
+
+            rc = _kill_at(zswarm("record", str(T32), "--out", str(out), "--run-id", run, "--connect", ep, "--no-report"), delay, tmp_path / f"rec-{k}.log", holds_a_message if kind == "row" else None)
+            assert rc is None, f"recorder {k} ended by itself (exit {rc})"
             if not raw.exists():
                 continue  # killed before it opened its file
             lost: list = []
@@ -212,6 +244,7 @@ def test_a_recorder_killed_at_20_moments_leaves_readable_recordings(procs, tmp_p
                 p = subprocess.run(zswarm("report", str(out)), cwd=ROOT, capture_output=True, text=True, timeout=300)
                 assert p.returncode == 1 and "Traceback" not in p.stderr + p.stdout, (k, delay, p.stderr)
                 assert "NOT COMPLETED" in p.stdout
-        # Most kills came after the recorder's start-up (~1 s of the 0.5-4 s moments): at least half
-        # left a recording to read, else the test would check little.
+        # The ten kills after a message was on disk left one to read (and those of the others that
+        # came after the recorder's start-up, ~1 s of the 0.5-4 s moments): at least half, else the
+        # test would check little.
         assert read_any >= N_KILLS // 2, f"only {read_any} of {N_KILLS} recordings held messages"

@@ -452,10 +452,17 @@ def table(name: str, s: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write(out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None, verdict: str = "settled", measure: str = "the basin measure") -> dict[str, Any]:
+def write(
+    out: Path, name: str, rows: list[dict[str, str]], threshold: float, duration: float, near: float | None = None, verdict: str = "settled", measure: str = "the basin measure", plots: bool = True
+) -> dict[str, Any]:
+    """basin.json (the summary) and, with ``plots``, basin.png; without, a basin.png an earlier
+    run left is removed (it would not show this basin.csv)."""
     s = {"scenario": name, **summarize(rows, threshold, duration, near, verdict, measure)}
     files.write_text(out / "basin.json", json.dumps(s, indent=2) + "\n")
-    plot(out, name, rows, s)
+    if plots:
+        plot(out, name, rows, s)
+    else:
+        (out / "basin.png").unlink(missing_ok=True)
     return s
 
 
@@ -517,7 +524,7 @@ def command(args: argparse.Namespace) -> int:
     if interrupted:
         print(f"interrupted: {len(rows)} of {args.draws} draws are in {out / 'basin.csv'}; the same command resumes", file=sys.stderr)
         return procutil.interrupted_code()
-    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near, basin.verdict_in(out / "basin.csv", b.verdict), b.measure)
+    s = basin.write(out, sc.name, rows, args.threshold, duration, args.near, basin.verdict_in(out / "basin.csv", b.verdict), b.measure, plots=not args.no_plots)
     print(basin.table(sc.name, s))
-    print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}, {out / 'basin.png'}")
+    print(f"{len(rows)} draws in {out / 'basin.csv'} ({time.monotonic() - t0:.0f} s now); {out / 'basin.json'}" + ("" if args.no_plots else f", {out / 'basin.png'}"))
     return 0 if not s["failed"] else 1

@@ -133,7 +133,12 @@ def command(args: argparse.Namespace) -> int:
     if interrupted:
         print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
         return procutil.interrupted_code()
-    plots = sweep_figures.plot_sweep(out, rows, [v.field for v in varies], duration, family.of(sc).sweep.figures, scenario=sc.name)
+    if args.no_plots:
+        for old in out.glob("sweep_*.png"):  # an earlier run's figures would not show this sweep.csv
+            old.unlink()
+        plots = []
+    else:
+        plots = sweep_figures.plot_sweep(out, rows, [v.field for v in varies], duration, family.of(sc).sweep.figures, scenario=sc.name)
     n_failed = sum(1 for r in rows if r["status"] == "failed")
     print(f"{len(rows)} runs ({ok} run now in {wall:.0f} s, {n_failed} failed in all); {out / 'sweep.csv'}; plots: {', '.join(p.name for p in plots) or 'none'}")
     return 0 if n_failed == 0 else 1
