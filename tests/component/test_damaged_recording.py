@@ -124,6 +124,23 @@ def test_a_file_cut_anywhere_reads_a_prefix_and_says_where(run_dir, tmp_path):
         assert len(lost) <= 1 and all(x.offset < cut for x in lost), (cut, [x.text() for x in lost])
 
 
+def test_a_file_cut_before_its_first_record_holds_nothing_and_says_so(run_dir, tmp_path):
+    """A recorder killed before its first flush (every 0.5 s) leaves an empty file, or one cut
+    inside MCAP's 8-byte magic: ours, with nothing in it (not "not an MCAP recording", exit 2).
+    zswarm report says the run did not complete, in one line per problem (exit 1)."""
+    data = (run_dir / "recording.mcap").read_bytes()
+    for cut in range(8):
+        p = tmp_path / "cut.mcap"
+        p.write_bytes(data[:cut])
+        got, lost = _all(p)
+        assert got == [] and len(lost) == 1 and lost[0].offset == cut and "cut short" in lost[0].text(), (cut, [x.text() for x in lost])
+    d = _copy(run_dir, tmp_path, "empty")
+    (d / "recording.mcap").write_bytes(b"")
+    p = _cli("report", str(d))
+    assert p.returncode == 1 and "Traceback" not in p.stderr + p.stdout, p.stderr
+    assert "NOT COMPLETED" in p.stdout, p.stdout
+
+
 def test_a_cut_recording_reports_and_views_without_a_traceback(run_dir, tmp_path):
     d = _copy(run_dir, tmp_path, "cut")
     data = (d / "recording.mcap").read_bytes()

@@ -101,11 +101,17 @@ def _span(t0: int | None, a: int, b: int) -> str:
 
 def records(path: str | Path, lost: list[Lost]) -> Iterator[tuple[Channel, Message]]:
     """Every readable message of ``path`` with its channel, in file order; each loss appended
-    to ``lost``.  :class:`NotMcap` when the file does not begin as an MCAP file."""
+    to ``lost``.  :class:`NotMcap` when the file does not begin as an MCAP file.  A file that
+    ends before its magic does (empty, or a prefix of it: a writer killed before its first
+    flush, which the recorder makes every 0.5 s) holds nothing and says so."""
     path = Path(path)
     with open(path, "rb") as f:
         size = os.fstat(f.fileno()).st_size
-        if f.read(8) != MAGIC:
+        head = f.read(8)
+        if head != MAGIC:
+            if MAGIC.startswith(head):
+                lost.append(Lost(path, len(head), "the file ends before its first record (cut short: a writer killed before its first flush, or a full disk)", "nothing of it was written"))
+                return
             raise NotMcap(f"{path}: byte 0: not an MCAP recording (no MCAP magic)")
         summary = _summary(f, size)
         channels: dict[int, Channel] = dict(summary.channels) if summary else {}

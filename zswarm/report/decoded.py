@@ -30,6 +30,11 @@ from zswarm.recording.mcap_read import Lost
 from zswarm.transport import run_control, wire
 
 
+class NoTruth(ValueError):
+    """A recording without one ground-truth message: nothing to report on (a recorder stopped
+    before the world's first message reached it, or a file cut short before it)."""
+
+
 @dataclass
 class Recording:
     """What the report needs, decoded from a recording."""
@@ -170,7 +175,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         elif m["type"] == "stop":
             stop_seen = True
     if not truth:
-        raise ValueError(f"{path if isinstance(path, (str, Path)) else 'recording'}: the recording holds no ground truth")
+        raise NoTruth(f"{path if isinstance(path, (str, Path)) else 'recording'}: the recording holds no ground truth")
     truth.sort(key=lambda m: m["t"])
     ids = truth[0]["ids"]
     return Recording(

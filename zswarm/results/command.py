@@ -18,6 +18,7 @@ def report(args: argparse.Namespace) -> int:
     from zswarm import results
     from zswarm.recording.mcap_io import decode, ensure_recording, read
     from zswarm.recording.mcap_read import NotMcap
+    from zswarm.report.decoded import NoTruth
     from zswarm.transport import wire
 
     sc = procutil.load_or_exit(str(args.results / "scenario.toml"))
@@ -51,9 +52,15 @@ def report(args: argparse.Namespace) -> int:
     remade = {**(prev.get("remade") if isinstance(prev.get("remade"), dict) else {}), **remade}
     if remade:  # where each parameter of the run was found (summary.json lost or not one)
         kept["remade"] = remade
-    summary = results.make_report(
-        args.results, sc, engine, duration, scale, seed, exit_codes=codes, not_recorded=prev.get("recording", {}).get("not_recorded", ()), keep=kept
-    )
+    try:
+        summary = results.make_report(
+            args.results, sc, engine, duration, scale, seed, exit_codes=codes, not_recorded=prev.get("recording", {}).get("not_recorded", ()), keep=kept
+        )
+    except NoTruth as exc:  # no summary to make: the run's verdict is said, in one line
+        lost: list = []
+        list(read(rec_path, lost))
+        print(f"{sc.name}: NOT COMPLETED: {exc}" + "".join(f"; {x.text()}" for x in lost))
+        return 1
     print(results.table(summary))
     for line in summary.get("recording", {}).get("damaged", []):
         print(line, file=sys.stderr)
