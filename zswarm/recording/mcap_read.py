@@ -124,7 +124,7 @@ def records(path: str | Path, lost: list[Lost]) -> Iterator[tuple[Channel, Messa
             opcode, length = _HEAD.unpack(head) if len(head) == _HEAD.size else (0, 0)
             end = pos + _HEAD.size + length
             framed = len(head) == _HEAD.size and opcode in _KNOWN and length <= MAX_RECORD and end <= size
-            if not framed and summary is None and (len(head) < _HEAD.size or end > size) and opcode in _KNOWN:
+            if not framed and summary is None and (len(head) < _HEAD.size or (end > size and opcode in _KNOWN)):
                 lost.append(Lost(path, pos, "the file ends inside a record (cut short: a killed writer or a full disk)", "what followed was never written"))
                 return
             try:
