@@ -71,10 +71,10 @@ def plan(seed: int, lo: float, hi: float) -> list[tuple[str, float]]:
 # moment): 36 runs of ~1.2 s each two at a time, 64 draws of ~0.6 s.
 SWEEP = [sys.executable, "-m", "zswarm", "sweep", str(T32), "--vary", "links.drop=0,0.1,0.2,0.3,0.4,0.5", "--repeats", "6", "--duration", "2", "--jobs", "2", "--engine", "sim", "--no-plots"]
 BASIN = [sys.executable, "-m", "zswarm", "basin", str(T56), "--draws", "64", "--duration", "4", "--engine", "sim", "--jobs", "2", "--no-plots"]
-WALL = {"wall_s"}
+WALL = {"wall_s"}  # the only cells that differ between two runs of the same command
 # A command's next row (a sim run of 2 s, a draw of 4 s: ~1 s of CPU each) or a recorder's first
 # message comes within seconds; 120 s is a hang's deadline on a loaded machine, not a measure.
-AFTER_DEADLINE_S = 120.0  # the only cells that differ between two runs of the same command
+AFTER_DEADLINE_S = 120.0
 
 
 def _pids_using(path: Path) -> list[int]:
