@@ -213,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
         "randomises uniformly on SO(3): every R_i(0) for the Chapter 5 laws, Q_i(0) too for the velocity-free one, every "
         "R̂_i(0) for the §4 observers), runs them on the batched engine (or sim) and reports the fraction whose family "
         "measure (max_k |R̄_k|_I for those) stays below the threshold from some time on, and the settle times.  Writes "
-        "basin.csv, basin.json, basin.png; the same command with the same --out resumes.",
+        "basin.csv, basin.json, basin.png (not with --no-plots); the same command with the same --out resumes.",
     )
     b.add_argument("topology", help="scenario TOML file (of an experiment family with a basin check: a Chapter 5 law, a §4 observer)")
     b.add_argument("--draws", type=procutil.positive_int, default=101, help="draws including the scenario's own start (default 101)")
