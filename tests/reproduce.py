@@ -82,11 +82,6 @@ def differ(got: Mapping[str, object], want: Mapping[str, str], skip: Iterable[st
     return out
 
 
-if __name__ == "__main__":
-    MACHINE.write_text(json.dumps({"written_by": "python -m tests.reproduce", "fingerprint": fingerprint()}, indent=1) + "\n")
-    print(MACHINE)
-
-
 def write_main(description: str, default: Path, write: Callable[[Path], None]) -> None:
     """The ``--write [FILE]`` command of a test module that keeps a reference file (``make
     fine-references``): ``write(FILE)``, ``default`` without FILE, and the path printed."""
@@ -95,3 +90,8 @@ def write_main(description: str, default: Path, write: Callable[[Path], None]) -
     out = ap.parse_args().write
     write(out)
     print(out)
+
+
+if __name__ == "__main__":
+    MACHINE.write_text(json.dumps({"written_by": "python -m tests.reproduce", "fingerprint": fingerprint()}, indent=1) + "\n")
+    print(MACHINE)

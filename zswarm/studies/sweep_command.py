@@ -134,8 +134,7 @@ def command(args: argparse.Namespace) -> int:
         print(f"interrupted: {len(rows)} of {len(jobs)} runs are in {out / 'sweep.csv'}; the same command resumes", file=sys.stderr)
         return procutil.interrupted_code()
     if args.no_plots:
-        for old in out.glob("sweep_*.png"):  # an earlier run's figures would not show this sweep.csv
-            old.unlink()
+        sweep_figures.remove_figures(out)
         plots = []
     else:
         plots = sweep_figures.plot_sweep(out, rows, [v.field for v in varies], duration, family.of(sc).sweep.figures, scenario=sc.name)

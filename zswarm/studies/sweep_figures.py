@@ -32,6 +32,13 @@ def load_rows(path: Path) -> list[dict[str, str]]:
     return list({r.get("run_id", str(n)): r for n, r in enumerate(rows.read(path).rows)}.values())
 
 
+def remove_figures(out: Path) -> None:
+    """Remove the figures :func:`plot_sweep` writes (``sweep_*.png``) from ``out``: an earlier
+    run's would not show the folder's sweep.csv once it is written again without them."""
+    for old in out.glob("sweep_*.png"):
+        old.unlink()
+
+
 def plot_sweep(
     out: Path, rows: list[dict[str, str]], fields: Sequence[str], duration: float, metrics: Sequence[tuple[str, str, bool]] = DEFAULT_FIGURES, scenario: str = ""
 ) -> list[Path]:
