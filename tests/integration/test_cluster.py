@@ -18,7 +18,9 @@ import pytest
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import wait_for
 
-pytestmark = pytest.mark.integration
+# Real processes, no real time (marker "processes"): make test runs the file in its first layer,
+# beside the component tests (tests/layers.sh); each wait below is a hang's deadline.
+pytestmark = pytest.mark.processes
 
 DASK = str(Path(sys.executable).parent / "dask")
 # The waits below are deadlines for a hang, not measures: a scheduler or worker starts in

@@ -22,7 +22,10 @@ from zswarm.scenario import load
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import ZenohBus, zenoh_config
 
-pytestmark = pytest.mark.integration
+# Real processes, no real time (marker "processes"): every check counts messages or bytes, and
+# each wait is a hang's deadline, so make test runs the file in its first layer, beside the
+# component tests (tests/layers.sh), not in the integration layer's real-time stream.
+pytestmark = pytest.mark.processes
 N = 100_000
 T32, T56 = TOPO / "thesis-3.2-fixed8.toml", TOPO / "thesis-5.6-hybrid7.toml"
 STREAM_TYPES = {"truth": "truth", "sense": "sense", "edge": "edge", "est": "est", "cmd": "cmd", "stats": "stats", "ctl": ("start", "stop", "progress")}
