@@ -202,7 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ATT,POS",
         help="convergence thresholds on the mean attitude error |R̃|_I and position error in m (default 0.01,0.1)",
     )
-    sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run's sim or run process is killed and recorded as failed (not the batched engine's runs)")
+    sw.add_argument("--timeout", type=procutil.positive_float, default=None, help="seconds before a run (on sim or run) is stopped and recorded as failed: a run process killed, or on sim the worker processes, whose other runs start again (not the batched engine's runs, nor a cluster's)")
     sw.add_argument("--keep-recordings", action="store_true", help="keep each run's recording.mcap (deleted by default; summaries and CSVs stay)")
     sw.add_argument("--no-plots", action="store_true", help="write no figures (sweep.csv only; figures an earlier run left in --out are removed, as they would not show this sweep.csv)")
 

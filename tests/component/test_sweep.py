@@ -120,6 +120,58 @@ def _sweep_of(topology, *args, timeout=600):
     return subprocess.run([sys.executable, "-m", "zswarm", "sweep", str(TOPO / topology), *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
 
 
+def test_a_run_past_its_timeout_kills_the_workers_and_their_other_runs_start_again(tmp_path, monkeypatch):
+    """On sim a sweep's runs share worker processes (sweep.run_sweep_workers): a run past its
+    timeout cannot be stopped alone, so the workers are stopped, it is a failed row, and the
+    run another worker held starts again in the next ones.  Here the workers are threads and
+    the runs stand-ins (their timing decides the case, not the scenario): A never ends, B ends
+    at 2 s, C begins then and never ends on its first try.  A is late at its 4 s timeout, when C
+    has run 2-2.5 s: C goes back to the queue and ends on its second try."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+    from contextlib import contextmanager
+
+    from zswarm.engines import cluster
+    from zswarm.scenario import load
+    from zswarm.studies import sweep as sw
+
+    pools: list[threading.Event] = []
+    tries: dict[str, int] = {}
+
+    @contextmanager
+    def threads(n_jobs, where=None):
+        stopped = threading.Event()
+        pools.append(stopped)
+        with ThreadPoolExecutor(n_jobs) as pool:
+            yield cluster.Runner(pool, n_jobs, stopped.set, f"{n_jobs} threads")
+            stopped.set()
+
+    def stand_in(text, path, job, duration, thresholds):
+        tries[job.run_id] = tries.get(job.run_id, 0) + 1
+        stopped = pools[-1]
+        if job.run_id == "p000-r0" or (job.run_id == "p002-r0" and tries[job.run_id] == 1):
+            stopped.wait(60)  # "never ends": until its workers are stopped
+            raise RuntimeError("stopped")
+        if job.run_id == "p001-r0":
+            time.sleep(2.0)
+        return {"final_attitude_error": 0.5}, None, {"summary.json": b"{}"}
+
+    monkeypatch.setattr(cluster, "executor", threads)
+    monkeypatch.setattr(sw, "run_job", stand_in)
+    sc = load(FIXED8)
+    varies = [sw.parse_vary("links.drop=0,0.1,0.2")]
+    jobs = sw.plan(FIXED8, sc, [], varies, 1, 1)
+    out = tmp_path / "s"
+    (out / "runs").mkdir(parents=True)
+    ok, failed, interrupted = sw.run_sweep_workers(FIXED8, jobs, varies, out, 1.0, (0.01, 0.1), 2, None, lambda: False, timeout=4.0)
+    got = {r["run_id"]: r for r in rows(out)}
+    assert (ok, failed, interrupted) == (2, 1, False)
+    assert got["p000-r0"]["status"] == "failed" and got["p000-r0"]["error"] == "timed out after 4 s"
+    assert got["p001-r0"]["status"] == "ok" and got["p002-r0"]["status"] == "ok", got
+    assert tries == {"p000-r0": 1, "p001-r0": 1, "p002-r0": 2} and len(pools) == 2
+    assert (out / "runs" / "p002-r0" / "summary.json").read_bytes() == b"{}"
+
+
 def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):
     """auto: the grid point with agents on a perfect clock is batched, the one with clock jitter
     runs on sim and says why; --engine batched refuses that sweep before it starts (exit 2); a

@@ -118,8 +118,8 @@ def command(args: argparse.Namespace) -> int:
         if batches:
             ok, _failed, interrupted = sweep_batched.run_sweep_batched(args.topology, jobs, batches, varies, out, duration, thresholds, n_jobs, args.cluster, stop.is_set)
         if on_sim and not interrupted:
-            if args.cluster is not None:
-                ok2, _failed, interrupted = sweep.run_sweep_cluster(args.topology, jobs, varies, out, duration, thresholds, args.cluster, stop.is_set)
+            if args.cluster is not None or (sim_engine == "sim" and not args.keep_recordings):
+                ok2, _failed, interrupted = sweep.run_sweep_workers(args.topology, jobs, varies, out, duration, thresholds, n_jobs, args.cluster, stop.is_set, timeout)
             else:
                 ok2, _failed, interrupted = sweep.run_sweep(
                     args.topology, sc, jobs, varies, out, sim_engine, n_jobs, duration, thresholds, timeout, args.keep_recordings, stop.is_set, lock
