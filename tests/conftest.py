@@ -102,10 +102,22 @@ def pytest_configure(config):
         os.setsid()
 
 
+# The first layer's longest files, first: with --no-loadscope-reorder (tests/layers.sh)
+# pytest-xdist hands the files to its workers in collection order, two each and then one as
+# each worker ends one, so a long file collected late is a tail that one worker runs alone
+# (xdist's own order is by the number of tests in a file: the 3 tests of the kill -9 nemeses
+# last).  Wall times beside stress-ng --cpu 1 on 2026-12-07, largest first: test_sweep_engines
+# 427 s, test_kill_resume 418 s, test_basin 169 s, test_cluster 116 s, test_fuzz_zenoh 95 s
+# (the rest at most 80 s each).
+LONG_FIRST = ("test_sweep_engines.py", "test_kill_resume.py", "test_basin.py", "test_cluster.py", "test_fuzz_zenoh.py")
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in BACKGROUND and item.path.parent.name == "component":
             item.add_marker(pytest.mark.background)
+    rank = {name: n for n, name in enumerate(LONG_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the order otherwise kept
 
 
 def interrupt_when(cmd: list[str], ready: Callable[[], bool], timeout: float = 300.0) -> tuple[int, str]:

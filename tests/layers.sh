@@ -42,7 +42,8 @@ PY=${1:-.venv/bin/python}
 
 # Each worker in a session of its own (tests/conftest.py, ZSWARM_WORKER_SESSIONS): beside another
 # session's busy process the two get two thirds of the two cores, not one core between them.
-ZSWARM_WORKER_SESSIONS=1 "$PY" -m pytest -q -m "not integration and not background" -n 2 --dist loadfile --durations=15 || exit $?
+# --no-loadscope-reorder: the files in collection order, the longest first (tests/conftest.py LONG_FIRST).
+ZSWARM_WORKER_SESSIONS=1 "$PY" -m pytest -q -m "not integration and not background" -n 2 --dist loadfile --no-loadscope-reorder --durations=15 || exit $?
 
 # What numpy 1.x and 2.x call their AVX-512 dispatch targets; a name a numpy does not know is ignored.
 # glibc's libm without its FMA builds of exp, sin, cos, atan2 (GLIBC_TUNABLES): other bits on the

@@ -10,6 +10,7 @@ import time
 import pytest
 
 from tests.conftest import ROOT, TOPO, interrupt_when
+from tests.integration.conftest import _children
 
 FIXED8 = str(TOPO / "thesis-3.2-fixed8.toml")
 
@@ -126,9 +127,12 @@ def test_a_run_past_its_timeout_kills_the_workers_and_their_other_runs_start_aga
     run another worker held starts again in the next ones.  Here the workers are threads and
     the runs stand-ins (their timing decides the case, not the scenario): A never ends, B ends
     at 2 s, C begins then and never ends on its first try.  A is late at its 4 s timeout, when C
-    has run 2-2.5 s: C goes back to the queue and ends on its second try."""
+    has run 2-2.5 s: C goes back to the queue and ends on its second try.  (The real processes
+    are killed and started again in test_failed_runs_are_recorded_and_the_sweep_goes_on and
+    test_a_killed_worker_s_runs_start_again_in_a_new_pool.)"""
     import threading
     from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
     from contextlib import contextmanager
 
     from zswarm.engines import cluster
@@ -146,12 +150,12 @@ def test_a_run_past_its_timeout_kills_the_workers_and_their_other_runs_start_aga
             yield cluster.Runner(pool, n_jobs, stopped.set, f"{n_jobs} threads")
             stopped.set()
 
-    def stand_in(text, path, job, duration, thresholds):
+    def stand_in(text, path, job, duration, thresholds, scratch=None):
         tries[job.run_id] = tries.get(job.run_id, 0) + 1
         stopped = pools[-1]
         if job.run_id == "p000-r0" or (job.run_id == "p002-r0" and tries[job.run_id] == 1):
             stopped.wait(60)  # "never ends": until its workers are stopped
-            raise RuntimeError("stopped")
+            raise BrokenProcessPool("its worker was killed")  # what a process pool's future of a killed worker gives
         if job.run_id == "p001-r0":
             time.sleep(2.0)
         return {"final_attitude_error": 0.5}, None, {"summary.json": b"{}"}
@@ -170,6 +174,33 @@ def test_a_run_past_its_timeout_kills_the_workers_and_their_other_runs_start_aga
     assert got["p001-r0"]["status"] == "ok" and got["p002-r0"]["status"] == "ok", got
     assert tries == {"p000-r0": 1, "p001-r0": 1, "p002-r0": 2} and len(pools) == 2
     assert (out / "runs" / "p002-r0" / "summary.json").read_bytes() == b"{}"
+
+
+def test_a_killed_worker_s_runs_start_again_in_a_new_pool(tmp_path):
+    """SIGKILL of one of a sweep's worker processes (what the kernel's OOM killer does) while it
+    holds a run: the pool is gone, its runs in flight start again in new workers, the sweep
+    says so in a line and ends with every run ok, its scratch folder removed."""
+    out = tmp_path / "s"
+    cmd = [sys.executable, "-m", "zswarm", "sweep", FIXED8, "--vary", "links.drop=0,0.1,0.2,0.3", "--duration", "4", "--jobs", "2", "--engine", "sim", "--no-plots", "--out", str(out)]
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300  # a hang's deadline: a row comes in seconds
+        while not (out / "sweep.csv").exists() or len(rows(out)) < 1:
+            assert p.poll() is None and time.monotonic() < deadline, p.communicate()
+            time.sleep(0.05)
+        workers = [k for k in _children(p.pid) if b"spawn_main" in open(f"/proc/{k}/cmdline", "rb").read()]  # not its resource tracker
+        assert len(workers) == 2, workers
+        os.kill(workers[0], signal.SIGKILL)  # the row's worker went on to the next run: in flight
+        _, err = p.communicate(timeout=300)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert p.returncode == 0, err
+    assert "a worker process died" in err and "start again in new ones" in err, err
+    got = rows(out)
+    assert sorted(r["run_id"] for r in got) == [f"p{k:03d}-r0" for k in range(4)] and all(r["status"] == "ok" for r in got), got
+    assert not (out / ".work").exists()
 
 
 def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):

@@ -129,8 +129,9 @@ def _sweep(out: Path, *extra: str) -> list[dict[str, str]]:
 
 def test_sweep_on_a_dask_cluster_gives_the_local_rows(cluster, tmp_path):
     # sim runs as the cluster's tasks (the run without link delay would go to the batched engine:
-    # the next test)
-    local = _sweep(tmp_path / "local", "--jobs", "2", "--engine", "sim")
+    # the next test); the local side with --keep-recordings, a `zswarm sim` process per run (the
+    # other local path, sweep.run_sweep; without it the runs go to local workers, as on a cluster)
+    local = _sweep(tmp_path / "local", "--jobs", "2", "--engine", "sim", "--keep-recordings")
     remote = _sweep(tmp_path / "cluster", "--cluster", cluster[0], "--engine", "sim")
     assert remote == local
     assert len(local) == 4 and all(r["status"] == "ok" for r in local)

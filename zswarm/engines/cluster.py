@@ -74,7 +74,11 @@ def executor(jobs: int, cluster: str | None = None) -> Iterator[Runner]:
             pool.shutdown(wait=True, cancel_futures=True)
 
         with pool:
-            yield Runner(pool, jobs, kill, f"{jobs} local processes")
+            try:
+                yield Runner(pool, jobs, kill, f"{jobs} local processes")
+            except BaseException:
+                kill()  # leaving the pool waits for its runs: a hung one would be waited for ever
+                raise
         return
     try:
         import distributed

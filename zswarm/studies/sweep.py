@@ -30,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -314,11 +315,11 @@ def run_sweep(
                     if problems is not None:
                         # It ran to its end and wrote its summary, which says why it is not
                         # completed (an agent failing most of its steps): its figures are kept.
-                        row.update(summarize_run(folder, sc, duration, thresholds))
+                        row.update(summarize_run(folder, load(topology, job.overrides), duration, thresholds))
                         raise RuntimeError("not completed: " + "; ".join(problems))
                     if rc != 0:
                         raise RuntimeError(f"exit code {rc}: {_last_error(folder / 'log.txt')}")
-                    row.update(summarize_run(folder, sc, duration, thresholds))
+                    row.update(summarize_run(folder, load(topology, job.overrides), duration, thresholds))  # the run's own scenario, as run_job's
                     row["status"], row["error"] = "ok", ""
                     ok += 1
                 except Exception as exc:  # noqa: BLE001 - any failure of one run is recorded, the sweep goes on
@@ -362,15 +363,22 @@ def _job_row(job: Job, varies: Sequence[Vary]) -> dict[str, Any]:
     return row
 
 
-def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[float, float]) -> tuple[dict[str, Any], list[str] | None, dict[str, bytes]]:
-    """One run of a sweep on sim in this process (a cluster's worker): what ``zswarm sim
-    --no-recording --lean --no-plots`` computes and writes, then its sweep.csv columns.
-    Returns those, the run's problems when it did not complete (None when it did), and the
-    files it wrote (summary.json, errors.csv, the family's CSVs) for the sweep's folder."""
+def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[float, float], scratch: str | None = None) -> tuple[dict[str, Any], list[str] | None, dict[str, bytes]]:
+    """One run of a sweep on sim in this process (a worker's): what ``zswarm sim --no-recording
+    --lean --no-plots`` computes and writes, then its sweep.csv columns.  Returns those, the
+    run's problems when it did not complete (None when it did), and the files it wrote
+    (summary.json, errors.csv, the family's CSVs) for the sweep's folder.  ``scratch``: the
+    folder its temporary folder goes in (a local sweep's, which it clears of what killed
+    workers left; None: the system's).  A run whose estimated cost ``zswarm sim`` refuses
+    without ``--allow-long`` (zswarm.engines.cost) is refused here too (ValueError)."""
+    from zswarm.engines import cost
     from zswarm.engines.sim import LEAN_SKIP, simulate
 
     sc = loads(text, path, job.overrides)
-    with tempfile.TemporaryDirectory(prefix="zswarm-sweep-") as d:
+    cpu, steps, ticks = cost.estimate_cpu_s(sc, duration)
+    if cpu > cost.MAX_CPU_S:
+        raise ValueError(f"{steps:.3g} world steps and {ticks:.3g} agent ticks: over the CPU zswarm sim starts without --allow-long ({cpu:.3g} s estimated)")
+    with tempfile.TemporaryDirectory(prefix="zswarm-sweep-", dir=scratch) as d:
         folder = Path(d)
         files.write_text(folder / "scenario.toml", sc.text)
         msgs = simulate(sc, folder, duration, job.seed, lean=True, record=False)
@@ -379,6 +387,12 @@ def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[f
         problems = None if summary["completed"] else [str(p) for p in summary.get("problems", [])]
         written = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
     return row, problems, written
+
+
+# A run whose worker process died (killed by the kernel, a crash) takes the pool with it: every
+# run in flight then fails with BrokenProcessPool, whichever killed it.  They start again in a
+# new pool; a run in flight at this many breaks is a failed row.
+MAX_BREAKS = 2
 
 
 def run_sweep_workers(
@@ -395,14 +409,15 @@ def run_sweep_workers(
 ) -> tuple[int, int, bool]:
     """:func:`run_sweep` on sim in worker processes that each run one run after another
     (:func:`run_job`): ``n_jobs`` local processes, or the Dask cluster whose scheduler is at
-    ``cluster``; each run's files are written into ``out/runs/<id>/`` here.  A local run still
-    running ``timeout`` s after it began is a failed row: the workers are killed (a run in a
-    process cannot be stopped alone), the runs they held go back to the queue, and new
-    workers take them.  Returns (ok, failed, interrupted).
+    ``cluster``; each run's files are written into ``out/runs/<id>/`` here (a failed run's
+    traceback into its log.txt).  A local run still running ``timeout`` s after it began is a
+    failed row: the workers are killed (a run in a process cannot be stopped alone), and the
+    runs they held that had not ended start again in new ones, as after a worker's death
+    (MAX_BREAKS).  Returns (ok, failed, interrupted).
 
     A process per run, as :func:`run_sweep` starts, costs its interpreter and imports
     (0.4-0.5 s of CPU here, 2026-12-07): as much as a 2 s §5.6 run itself."""
-    from concurrent.futures import FIRST_COMPLETED, wait
+    from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
 
     from zswarm.engines import cluster as zswarm_cluster
 
@@ -411,27 +426,40 @@ def run_sweep_workers(
     ok = failed = 0
     interrupted = False
     queue = list(todo)
+    breaks: dict[str, int] = {}
+    scratch = None if cluster is not None else out / ".work"  # the runs' temporary folders
     if cluster is not None:
         timeout = None  # the cluster's scheduler retries and moves its tasks (zswarm.engines.cluster)
 
-    def record(job: Job, t0: float, error: str | None, done: tuple[dict[str, Any], list[str] | None, dict[str, bytes]] | None) -> None:
+    def clear_scratch() -> None:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)  # what killed workers left
+
+    def record(job: Job, t0: float, outcome: tuple[dict[str, Any], list[str] | None, dict[str, bytes]] | BaseException | str) -> None:
         nonlocal ok, failed
         row = _job_row(job, varies)
-        try:
-            if done is None:
-                raise RuntimeError(error)
-            results, problems, written = done
-            folder = out / "runs" / job.run_id
-            folder.mkdir(parents=True, exist_ok=True)
+        folder = out / "runs" / job.run_id
+        if folder.exists():
+            shutil.rmtree(folder)  # what an earlier try left
+        if isinstance(outcome, tuple):
+            res, problems, written = outcome
+            folder.mkdir(parents=True)
             for name, data in written.items():
                 files.write_bytes(folder / name, data)
-            row.update(results)
-            if problems is not None:
-                raise RuntimeError("not completed: " + "; ".join(problems))
+            row.update(res)
+            error = None if problems is None else "not completed: " + "; ".join(problems)
+        else:
+            error = outcome if isinstance(outcome, str) else f"{type(outcome).__name__}: {outcome}"
+            if isinstance(outcome, BaseException):  # its traceback (a worker's comes as the cause's text)
+                cause = outcome.__cause__
+                tb = str(getattr(cause, "tb", "")) or "".join(traceback.format_exception(outcome))
+                folder.mkdir(parents=True)
+                files.write_text(folder / "log.txt", tb)
+        if error is None:
             row["status"], row["error"] = "ok", ""
             ok += 1
-        except Exception as exc:  # noqa: BLE001 - any failure of one run is recorded, the sweep goes on
-            row["status"], row["error"] = "failed", (str(exc) if done is None else f"{type(exc).__name__}: {exc}")[:400]
+        else:
+            row["status"], row["error"] = "failed", error[:400]
             failed += 1
             prog.failed += 1
         row["wall_s"] = round(time.monotonic() - t0, 2)
@@ -439,40 +467,70 @@ def run_sweep_workers(
         prog.done += 1
         prog.update(job, row["status"])
 
+    def ended(fut: Future[Any]) -> bool:
+        """It ended by itself: its result, or the run's own exception (not its pool's end)."""
+        return fut.done() and not fut.cancelled() and not isinstance(fut.exception(), BrokenExecutor)
+
     try:
         while queue and not interrupted:
+            clear_scratch()
+            if scratch is not None:
+                scratch.mkdir(parents=True)
+            sdir = None if scratch is None else str(scratch)
             with zswarm_cluster.executor(n_jobs, cluster) as runner:
                 # One waiting per thread on a cluster (no idle worker between runs); locally one
                 # per process, so that a run's clock starts when it does (its timeout).
-                cap = runner.slots if timeout is not None else 2 * runner.slots
-                pending: dict[Any, tuple[Job, float]] = {}
+                cap = runner.slots if cluster is None else 2 * runner.slots
+                pending: dict[Future[Any], tuple[Job, float]] = {}
+                broken = False
                 while queue or pending:
                     if stop():
                         interrupted = True
                         runner.abort()
                         break
-                    while queue and len(pending) < cap:
-                        job = queue.pop(0)
-                        pending[runner.pool.submit(run_job, text, topology, job, duration, thresholds)] = (job, time.monotonic())
-                    finished, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        job, t0 = pending.pop(fut)
-                        try:
-                            done, error = fut.result(), None
-                        except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
-                            done, error = None, f"{type(exc).__name__}: {exc}"
-                        record(job, t0, error, done)
-                    late = [fut for fut, (_job, t0) in pending.items() if timeout is not None and time.monotonic() - t0 > timeout]
-                    if late:
-                        runner.abort()  # kills the workers: the other runs they held start again
-                        for fut in late:
-                            job, t0 = pending.pop(fut)
-                            record(job, t0, f"timed out after {timeout:g} s", None)
-                        queue[:0] = [job for job, _t0 in pending.values()]
-                        break
+                    try:
+                        while queue and len(pending) < cap:
+                            job = queue[0]
+                            pending[runner.pool.submit(run_job, text, topology, job, duration, thresholds, sdir)] = (job, time.monotonic())
+                            queue.pop(0)
+                    except BrokenExecutor:
+                        broken = True
+                    if not broken:
+                        done, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
+                        for fut in done:
+                            if ended(fut):
+                                job, t0 = pending.pop(fut)
+                                exc = fut.exception()
+                                record(job, t0, exc if exc is not None else fut.result())
+                            else:
+                                broken = True  # a worker died: the pool is gone
+                    now = time.monotonic()
+                    late = {fut for fut, (_job, t0) in pending.items() if timeout is not None and not fut.done() and now - t0 > timeout}
+                    if not (late or broken):
+                        continue
+                    runner.abort()  # kills the workers: what they held and had not ended starts again
+                    if broken:
+                        prog.line(f"a worker process died (killed, or a crash): the {sum(not ended(fut) for fut in pending)} runs it and the others held start again in new ones")
+                    again: list[Job] = []
+                    for fut, (job, t0) in pending.items():
+                        if fut in late:
+                            record(job, t0, f"timed out after {timeout:g} s")
+                        elif ended(fut):
+                            exc = fut.exception()
+                            record(job, t0, exc if exc is not None else fut.result())
+                        elif broken and (n := breaks.get(job.run_id, 0) + 1) >= MAX_BREAKS:
+                            record(job, t0, f"its worker process died (in flight at {n} deaths of the pool's workers; a crash or the kernel's OOM killer?)")
+                        else:
+                            if broken:
+                                breaks[job.run_id] = breaks.get(job.run_id, 0) + 1
+                            again.append(job)
+                    queue[:0] = again
+                    pending.clear()
+                    break
     finally:
         f.close()
         prog.close()
+        clear_scratch()
     return ok, failed, interrupted
 
 
