@@ -203,6 +203,16 @@ def test_a_killed_worker_s_runs_start_again_in_a_new_pool(tmp_path):
     assert not (out / ".work").exists()
 
 
+def test_a_run_beyond_reason_is_a_failed_row_naming_its_cost(tmp_path):
+    """A run zswarm sim would refuse without --allow-long (10^11 world steps) is not started by a
+    sweep's worker either: a failed row naming the steps and the estimate."""
+    out = tmp_path / "s"
+    p = sweep("--vary", "links.drop=0", "--set", "world.step=1e-6", "--duration", "100000", "--engine", "sim", "--out", str(out))
+    assert p.returncode == 1, p.stderr
+    (r,) = rows(out)
+    assert r["status"] == "failed" and "1e+11 world steps" in r["error"] and "without --allow-long" in r["error"], r
+
+
 def test_auto_runs_on_sim_what_the_batched_engine_cannot(tmp_path):
     """auto: the grid point with agents on a perfect clock is batched, the one with clock jitter
     runs on sim and says why; --engine batched refuses that sweep before it starts (exit 2); a
