@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo docs test test-fast fuzz bench bench-sim bench-capacity bench-batched bench-links soak sim clean golden golden-spread
+.PHONY: demo docs test test-fast fuzz bench bench-sim bench-capacity bench-batched bench-links bench-sweeps soak sim clean golden golden-spread
 
 DEMO   := $(VENV)/.installed-demo
 DOCS   := $(VENV)/.installed-docs
@@ -73,6 +73,11 @@ bench-batched: $(STAMP)
 ## on sim, timed as a user runs it and the rows compared (bench/bench_links_sweep.py; about 9 minutes, most of it sim)
 bench-links: $(STAMP)
 	$(PY) bench/bench_links_sweep.py
+
+## make bench-sweeps: running.md's three sweeps (20 runs of 10 s each) on the batched engine and on sim, timed as a user runs
+## them, the rows compared; writes docs/data/sweep-examples.json (bench/bench_sweep_examples.py; about 2 minutes)
+bench-sweeps: $(STAMP)
+	$(PY) bench/bench_sweep_examples.py
 
 ## make soak: one hour of zswarm run with every process's RSS sampled each minute (bench/soak.py)
 soak: $(STAMP)

@@ -384,3 +384,17 @@ def test_the_suite_time_cpu_figures_are_its_file():
     want = f"{c['total']:,} s of CPU (the first layer {c['first_layer']}, the integration layer {c['integration']:,}, the background part {c['background']}, the other-machine reruns {c['other_machine_reruns']};"
     assert want in text, want
     assert f"{c['total'] / (c['wall_s'] - 35):.1f} cores on average" in text  # less about 35 s of pip install
+
+
+def test_the_sweep_examples_times_are_their_file():
+    """running.md's three sweeps timed on both engines are docs/data/sweep-examples.json's
+    (bench/bench_sweep_examples.py writes it): each example's four numbers and its rows, which
+    the engines gave the same."""
+    d = json.loads((DATA / "sweep-examples.json").read_text())
+    text = " ".join((DOCS / "running.md").read_text().split())
+    assert f"measured {d['measured']} at {d['commit']}, `python bench/bench_sweep_examples.py`" in text
+    for r in d["rows"]:
+        assert r["same_rows"], r["what"]
+        want = f"{r['batched_wall_s']:.1f} s of wall time and {r['batched_cpu_s']:.1f} s of CPU batched, {r['sim_wall_s']:.1f} s and {r['sim_cpu_s']:.1f} s on `sim`, the same {r['runs']} rows"
+        assert want in text, (r["what"], want)
+        assert " ".join(r["args"]) in text.replace("`", ""), r["args"]
