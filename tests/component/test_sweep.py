@@ -77,23 +77,30 @@ def test_sweep_writes_rows_plots_and_resumes(tmp_path):
     assert other.returncode == 2 and "holds a different sweep (differs in: repeats, vary)" in other.stderr
 
 
+def _at_first_row(cmd, out, act):
+    """Start the sweep ``cmd`` (a session of its own), call ``act(process)`` once its first row
+    is in ``out``'s sweep.csv, and let it end; the process and its stderr.  Killed (its group)
+    if anything fails on the way."""
+    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300  # a hang's deadline: a row comes in seconds
+        while not (out / "sweep.csv").exists() or len(rows(out)) < 1:
+            assert p.poll() is None and time.monotonic() < deadline, p.communicate()
+            time.sleep(0.05)
+        act(p)
+        _, err = p.communicate(timeout=300)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    return p, err
+
+
 def test_interrupted_sweep_resumes_where_it_stopped(tmp_path):
     out = tmp_path / "s"
     # On sim, a run at a time: the batched engine would step the five together, done before the signal.
     args = [sys.executable, "-m", "zswarm", "sweep", FIXED8, "--vary", "links.drop=0,0.1,0.2,0.3,0.4", "--duration", "2", "--jobs", "1", "--engine", "sim", "--out", str(out)]
-    proc = subprocess.Popen(args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            if (out / "sweep.csv").exists() and len(rows(out)) >= 1:
-                break
-            time.sleep(0.1)
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+    proc, err = _at_first_row(args, out, lambda p: p.send_signal(signal.SIGINT))
     assert proc.returncode == 130, err
     assert "the same command resumes" in err
     first = rows(out)
@@ -182,20 +189,13 @@ def test_a_killed_worker_s_runs_start_again_in_a_new_pool(tmp_path):
     says so in a line and ends with every run ok, its scratch folder removed."""
     out = tmp_path / "s"
     cmd = [sys.executable, "-m", "zswarm", "sweep", FIXED8, "--vary", "links.drop=0,0.1,0.2,0.3", "--duration", "4", "--jobs", "2", "--engine", "sim", "--no-plots", "--out", str(out)]
-    p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        deadline = time.monotonic() + 300  # a hang's deadline: a row comes in seconds
-        while not (out / "sweep.csv").exists() or len(rows(out)) < 1:
-            assert p.poll() is None and time.monotonic() < deadline, p.communicate()
-            time.sleep(0.05)
+
+    def kill_a_worker(p):
         workers = [k for k in _children(p.pid) if b"spawn_main" in open(f"/proc/{k}/cmdline", "rb").read()]  # not its resource tracker
         assert len(workers) == 2, workers
         os.kill(workers[0], signal.SIGKILL)  # the row's worker went on to the next run: in flight
-        _, err = p.communicate(timeout=300)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
+
+    p, err = _at_first_row(cmd, out, kill_a_worker)
     assert p.returncode == 0, err
     assert "a worker process died" in err and "start again in new ones" in err, err
     got = rows(out)
