@@ -71,11 +71,13 @@ def plan(seed: int, lo: float, hi: float) -> list[tuple[str, float]]:
 
 # Long enough that 20 kills mostly hit the command at work, and that the rows the ten kills after
 # a row leave (one or two each) and the others' do not finish it early (a failure names the
-# moment): 36 runs of ~1.2 s each two at a time, 64 draws of ~0.6 s.
+# moment): 36 runs of ~0.5 s of CPU each two at a time, 64 draws of ~0.4 s (2 s of world time:
+# what a draw's length changes is only the CPU the test costs; 4 s draws cost 0.74 s each,
+# measured 2026-12-07, and kept the first layer's longest test at 213 s beside stress-ng).
 SWEEP = [sys.executable, "-m", "zswarm", "sweep", str(T32), "--vary", "links.drop=0,0.1,0.2,0.3,0.4,0.5", "--repeats", "6", "--duration", "2", "--jobs", "2", "--engine", "sim", "--no-plots"]
-BASIN = [sys.executable, "-m", "zswarm", "basin", str(T56), "--draws", "64", "--duration", "4", "--engine", "sim", "--jobs", "2", "--no-plots"]
+BASIN = [sys.executable, "-m", "zswarm", "basin", str(T56), "--draws", "64", "--duration", "2", "--engine", "sim", "--jobs", "2", "--no-plots"]
 WALL = {"wall_s"}  # the only cells that differ between two runs of the same command
-# A command's next row (a sim run of 2 s, a draw of 4 s: ~1 s of CPU each) or a recorder's first
+# A command's next row (a sim run or a draw of 2 s: ~0.5 s of CPU each) or a recorder's first
 # message comes within seconds; 120 s is a hang's deadline on a loaded machine, not a measure.
 AFTER_DEADLINE_S = 120.0
 
