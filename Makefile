@@ -39,7 +39,8 @@ docs: $(DOCS)
 	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
 	@echo "docs/_build/html/index.html"
 
-## make test: unit and component tests on two workers (by file); then the integration tests alone, with
+## make test: unit and component tests on two workers (by file, the longest first), with the tests of real processes
+## that need no real time (marker "processes"); then the integration tests alone, with
 ## the CPU-bound component tests that keep no real time (marker "background") beside them at idle
 ## priority; each part lists its slowest tests (tests/layers.sh says how and why)
 test: $(STAMP)
@@ -47,7 +48,7 @@ test: $(STAMP)
 
 ## make test-fast: everything but the integration tests
 test-fast: $(STAMP)
-	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile
+	$(PY) -m pytest -q -m "not integration" -n 2 --dist loadfile --no-loadscope-reorder
 
 ## make fuzz: the property tests (Hypothesis) with a random seed and 10x their examples; the seed is
 ## printed first, and FUZZ_SEED=N make fuzz runs that draw again (make test runs the pinned examples)

@@ -50,8 +50,9 @@ def rows(out: Path) -> dict[str, dict[str, str]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "data" / "sweep-examples.json")
+    ap.add_argument("--machine", default="this project's 2-core machine, quiet", help="what the file says of the machine and its load")
     a = ap.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=False).stdout.strip()
+    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, capture_output=True, text=True, check=False).stdout.strip()  # -dirty: uncommitted changes
     found = []
     with tempfile.TemporaryDirectory() as d:
         for what, stem, args in EXAMPLES:
@@ -69,7 +70,7 @@ def main() -> None:
         "command": "python bench/bench_sweep_examples.py",
         "measured": datetime.date.today().isoformat(),
         "commit": commit,
-        "machine": "this project's 2-core machine, quiet",
+        "machine": a.machine,
         "made_again": "no: wall-clock and CPU seconds of this machine",
         "page": "docs/running.md",
         "rows": found,

@@ -170,7 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
         "sweep",
         help="run a scenario over a grid of field values (repeated with different seeds) and plot the results",
         description="Runs every combination of the --vary values, --repeats times each (seed, seed+1, ...), "
-        "each as its own zswarm sim/run process; writes sweep.csv (a row per run) and plots.  Interrupted and "
+        "on the batched engine, on sim in --jobs worker processes (each run its own zswarm sim process with "
+        "--keep-recordings), or each its own zswarm run process; writes sweep.csv (a row per run) and plots.  Interrupted and "
         "started again with the same arguments and --out, it resumes where it stopped.",
     )
     sw.add_argument("topology", help="scenario TOML file")

@@ -395,13 +395,15 @@ def test_the_suite_time_cpu_figures_are_their_file():
 
 def test_the_sweep_examples_times_are_their_file():
     """running.md's three sweeps timed on both engines are docs/data/sweep-examples.json's
-    (bench/bench_sweep_examples.py writes it): each example's four numbers and its rows, which
-    the engines gave the same."""
+    (bench/bench_sweep_examples.py writes it): each example's four numbers after its own
+    arguments (before the next example's), and its rows, which the engines gave the same."""
     d = json.loads((DATA / "sweep-examples.json").read_text())
-    text = " ".join((DOCS / "running.md").read_text().split())
-    assert f"measured {d['measured']} at {d['commit']}, `python bench/bench_sweep_examples.py`" in text
-    for r in d["rows"]:
+    text = " ".join((DOCS / "running.md").read_text().split()).replace("`", "")
+    assert f"measured {d['measured']}, python bench/bench_sweep_examples.py" in text
+    args = [" ".join(r["args"]) for r in d["rows"]]
+    for r, a in zip(d["rows"], args, strict=True):
         assert r["same_rows"], r["what"]
-        want = f"{r['batched_wall_s']:.1f} s of wall time and {r['batched_cpu_s']:.1f} s of CPU batched, {r['sim_wall_s']:.1f} s and {r['sim_cpu_s']:.1f} s on `sim`, the same {r['runs']} rows"
-        assert want in text, (r["what"], want)
-        assert " ".join(r["args"]) in text.replace("`", ""), r["args"]
+        want = f"{r['batched_wall_s']:.1f} s of wall time and {r['batched_cpu_s']:.1f} s of CPU batched, {r['sim_wall_s']:.1f} s and {r['sim_cpu_s']:.1f} s on sim, the same {r['runs']} rows"
+        at = text.index(a)
+        pos = text.find(want, at)
+        assert pos >= 0 and not any(b in text[at + len(a) : pos] for b in args), (r["what"], want)

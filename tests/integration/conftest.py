@@ -139,7 +139,8 @@ def base_rootfs(request, tmp_path_factory, no_process_left):
 
 @pytest.fixture(scope="session", autouse=True)
 def no_process_left():
-    """After the integration layer, no process this test session started is left (the
+    """After the session (the integration layer, or a first-layer worker that ran a file of
+    this folder), no process this test session started is left (the
     per-test ``procs`` fixture checks each launcher's children by PID as well)."""
     yield
     left = [p for p in _children(os.getpid()) if pid_alive(p)]

@@ -1,6 +1,7 @@
 """zswarm basin and zswarm sweep on a real Dask distributed cluster (issue 31): a scheduler and
 two worker processes on 127.0.0.1 (free ports, no dashboard), the commands with
-``--cluster tcp://127.0.0.1:PORT``, and the same rows as the local process pool.  Every
+``--cluster tcp://127.0.0.1:PORT``, and the same rows as the same commands run locally (a
+basin in its local process pool, a sweep with a ``zswarm sim`` process per run).  Every
 process is started in its own session and reaped by PID (the procs fixture)."""
 
 from __future__ import annotations

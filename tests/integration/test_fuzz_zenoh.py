@@ -22,8 +22,10 @@ from zswarm.scenario import load
 from zswarm.transport import keys, wire
 from zswarm.transport.bus import ZenohBus, zenoh_config
 
-# Real processes, no real time (marker "processes"): every check counts messages or bytes, and
-# each wait is a hang's deadline, so make test runs the file in its first layer, beside the
+# Real processes, no real time (marker "processes"): every check counts messages or bytes, the
+# waits for a count are a hang's deadlines, and the memory test's two 2 s pauses (the recorder
+# warmed up; a flood taken and written) come before it reads the recorder's RSS against a bound
+# on what it may hold, not a rate; so make test runs the file in its first layer, beside the
 # component tests (tests/layers.sh), not in the integration layer's real-time stream.
 pytestmark = pytest.mark.processes
 N = 100_000

@@ -42,8 +42,8 @@ from zswarm.util import rows
 # progress, never on the clock: the odd kills come after a saved row (or message), the even ones
 # at seconds after the start find it wherever the machine's speed has brought it, and a wait
 # that does not end is a hang's deadline.  The nemesis needs the CPU of a normal process: at
-# idle priority (make test's background part, 2026-12-07) only 0-4 of the 20 kills that came at
-# seconds after the start found the command past its start-up; beside the real-time integration
+# idle priority (make test's background part, 2026-12-07, when all 20 kills came at seconds after
+# the start) only 0-4 of the 20 came after the command had saved a row; beside the real-time integration
 # tests at normal priority (2026-12-07, with the Dask tests, beside stress-ng --cpu 1) the runs
 # beside it were slowed by 15-30 % (three ran again, late sensor data; the killed agent's team
 # reconverged in 10.9 s against a bound of 7.4).
@@ -99,8 +99,9 @@ def _pids_using(path: Path) -> list[int]:
 
 
 def _none_left(path: Path, timeout: float = 60.0) -> None:
-    """Every process a killed command started has gone (they die with it); else kill them
-    (by PID) and fail."""
+    """No process whose command line names ``path`` (a sweep's per-run ``zswarm sim``, which
+    names its run folder) outlives its killed command; else they are killed (by PID) and it
+    fails.  Pool workers name no path: _kill_at checks the command's descendants by PID."""
     deadline = time.monotonic() + timeout
     while (left := _pids_using(path)) and time.monotonic() < deadline:
         time.sleep(0.2)
