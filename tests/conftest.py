@@ -106,9 +106,9 @@ def pytest_configure(config):
 # pytest-xdist hands the files to its workers in collection order, the next one to a worker as
 # it nears the end of those it holds, so a long file collected late is a tail that one worker
 # runs alone (xdist's own order is by the number of tests in a file, largest first: the 3 tests
-# of the kill -9 nemeses came among the last).  Wall times beside stress-ng --cpu 1 on 2026-12-07, largest first: test_sweep_engines
-# 427 s, test_kill_resume 418 s, test_basin 169 s, test_cluster 116 s, test_fuzz_zenoh 95 s
-# (the rest at most 80 s each).
+# of the kill -9 nemeses came among the last).  Wall times beside stress-ng --cpu 1 on
+# 2026-12-07, largest first: test_sweep_engines 427 s, test_kill_resume 418 s, test_basin 169 s,
+# test_cluster 116 s, test_fuzz_zenoh 95 s (the rest at most 80 s each).
 LONG_FIRST = ("test_sweep_engines.py", "test_kill_resume.py", "test_basin.py", "test_cluster.py", "test_fuzz_zenoh.py")
 
 

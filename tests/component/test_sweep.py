@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -174,6 +175,8 @@ def test_a_run_past_its_timeout_kills_the_workers_and_their_other_runs_start_aga
     jobs = sw.plan(FIXED8, sc, [], varies, 1, 1)
     out = tmp_path / "s"
     (out / "runs").mkdir(parents=True)
+    # 4 s: C begins when B ends at 2 s and the loop looks every 0.5 s, so at A's timeout C has run
+    # 2-2.5 s; only a loop stalled 1.5 s would find C late too (a stall, not the machine's speed).
     ok, failed, interrupted = sw.run_sweep_workers(FIXED8, jobs, varies, out, 1.0, (0.01, 0.1), 2, None, lambda: False, timeout=4.0)
     got = {r["run_id"]: r for r in rows(out)}
     assert (ok, failed, interrupted) == (2, 1, False)
@@ -191,7 +194,7 @@ def test_a_killed_worker_s_runs_start_again_in_a_new_pool(tmp_path):
     cmd = [sys.executable, "-m", "zswarm", "sweep", FIXED8, "--vary", "links.drop=0,0.1,0.2,0.3", "--duration", "4", "--jobs", "2", "--engine", "sim", "--no-plots", "--out", str(out)]
 
     def kill_a_worker(p):
-        workers = [k for k in _children(p.pid) if b"spawn_main" in open(f"/proc/{k}/cmdline", "rb").read()]  # not its resource tracker
+        workers = [k for k in _children(p.pid) if b"spawn_main" in Path(f"/proc/{k}/cmdline").read_bytes()]  # not its resource tracker
         assert len(workers) == 2, workers
         os.kill(workers[0], signal.SIGKILL)  # the row's worker went on to the next run: in flight
 

@@ -42,14 +42,22 @@ def _hours(s: float) -> str:
     return f"{s / 3600:.3g} h" if s < 1e6 * 3600 else f"{s / (365.25 * 86400):.3g} years"
 
 
-def refuse_if_too_long(sc: Scenario, path: str, duration: float | None, allow: bool) -> None:
-    """Exit 2 with one line naming the estimated cost when a run of ``sc`` (the file ``path``) for ``duration`` (from
-    ``--duration``; None: the scenario's) would take more than MAX_CPU_S of CPU, unless ``allow``
-    (``--allow-long``)."""
+def too_long(sc: Scenario, duration: float | None) -> str | None:
+    """Why a run of ``sc`` for ``duration`` (from ``--duration``; None: the scenario's) is beyond
+    reason (more than MAX_CPU_S of CPU), in one line naming its cost; None when it is not."""
     where = f"scenario.duration = {sc.duration:g} s" if duration is None else f"--duration {duration:g}"
     cpu, steps, ticks = estimate_cpu_s(sc, sc.duration if duration is None else duration)
-    if cpu > MAX_CPU_S and not allow:
-        procutil.fail_usage(
-            f"{path}: {where} at world.step = {sc.step:g} s is {steps:.3g} world steps for {len(sc.agents)} agents and {ticks:.3g} agent ticks: "
-            f"at least {_hours(cpu)} of CPU, over the {_hours(MAX_CPU_S)} zswarm starts without --allow-long (pass it to run this anyway)"
-        )
+    if cpu <= MAX_CPU_S:
+        return None
+    return (
+        f"{where} at world.step = {sc.step:g} s is {steps:.3g} world steps for {len(sc.agents)} agents and {ticks:.3g} agent ticks: "
+        f"at least {_hours(cpu)} of CPU, over the {_hours(MAX_CPU_S)} zswarm starts without --allow-long"
+    )
+
+
+def refuse_if_too_long(sc: Scenario, path: str, duration: float | None, allow: bool) -> None:
+    """Exit 2 with :func:`too_long`'s line (the file ``path`` named) when a run of ``sc`` for
+    ``duration`` is beyond reason, unless ``allow`` (``--allow-long``)."""
+    why = None if allow else too_long(sc, duration)
+    if why is not None:
+        procutil.fail_usage(f"{path}: {why} (pass it to run this anyway)")

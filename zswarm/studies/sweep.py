@@ -375,9 +375,9 @@ def run_job(text: str, path: str, job: Job, duration: float, thresholds: tuple[f
     from zswarm.engines.sim import LEAN_SKIP, simulate
 
     sc = loads(text, path, job.overrides)
-    cpu, steps, ticks = cost.estimate_cpu_s(sc, duration)
-    if cpu > cost.MAX_CPU_S:
-        raise ValueError(f"{steps:.3g} world steps and {ticks:.3g} agent ticks: over the CPU zswarm sim starts without --allow-long ({cpu:.3g} s estimated)")
+    why = cost.too_long(sc, duration)
+    if why is not None:
+        raise ValueError(why)
     with tempfile.TemporaryDirectory(prefix="zswarm-sweep-", dir=scratch) as d:
         folder = Path(d)
         files.write_text(folder / "scenario.toml", sc.text)
@@ -431,9 +431,14 @@ def run_sweep_workers(
     if cluster is not None:
         timeout = None  # the cluster's scheduler retries and moves its tasks (zswarm.engines.cluster)
 
-    def clear_scratch() -> None:
-        if scratch is not None:
-            shutil.rmtree(scratch, ignore_errors=True)  # what killed workers left
+    def clear_scratch(again: bool) -> str | None:
+        """``scratch`` emptied of what killed workers left (made again when ``again``)."""
+        if scratch is None:
+            return None
+        shutil.rmtree(scratch, ignore_errors=True)
+        if again:
+            scratch.mkdir(parents=True)
+        return str(scratch)
 
     def record(job: Job, t0: float, outcome: tuple[dict[str, Any], list[str] | None, dict[str, bytes]] | BaseException | str) -> None:
         nonlocal ok, failed
@@ -471,12 +476,14 @@ def run_sweep_workers(
         """It ended by itself: its result, or the run's own exception (not its pool's end)."""
         return fut.done() and not fut.cancelled() and not isinstance(fut.exception(), BrokenExecutor)
 
+    def outcome(fut: Future[Any]) -> tuple[dict[str, Any], list[str] | None, dict[str, bytes]] | BaseException:
+        """What an ended run gave: :func:`run_job`'s result, or its exception."""
+        exc = fut.exception()
+        return exc if exc is not None else fut.result()
+
     try:
         while queue and not interrupted:
-            clear_scratch()
-            if scratch is not None:
-                scratch.mkdir(parents=True)
-            sdir = None if scratch is None else str(scratch)
+            sdir = clear_scratch(again=True)
             with zswarm_cluster.executor(n_jobs, cluster) as runner:
                 # One waiting per thread on a cluster (no idle worker between runs); locally one
                 # per process, so that a run's clock starts when it does (its timeout).
@@ -496,12 +503,15 @@ def run_sweep_workers(
                     except BrokenExecutor:
                         broken = True
                     if not broken:
-                        done, _ = wait(list(pending), timeout=0.5, return_when=FIRST_COMPLETED)
+                        # Up to the first run's timeout at most: a run not ended by then is late
+                        # at once (a finer poll than 0.5 s for a short --timeout, as the
+                        # per-process path's 0.05 s), and one ended by then is never taken for late.
+                        wait_s = 0.5 if timeout is None or not pending else min(0.5, max(0.0, min(t0 for _job, t0 in pending.values()) + timeout - time.monotonic()))
+                        done, _ = wait(list(pending), timeout=wait_s, return_when=FIRST_COMPLETED)
                         for fut in done:
                             if ended(fut):
                                 job, t0 = pending.pop(fut)
-                                exc = fut.exception()
-                                record(job, t0, exc if exc is not None else fut.result())
+                                record(job, t0, outcome(fut))
                             else:
                                 broken = True  # a worker died: the pool is gone
                     now = time.monotonic()
@@ -516,8 +526,7 @@ def run_sweep_workers(
                         if fut in late:
                             record(job, t0, f"timed out after {timeout:g} s")
                         elif ended(fut):
-                            exc = fut.exception()
-                            record(job, t0, exc if exc is not None else fut.result())
+                            record(job, t0, outcome(fut))
                         elif broken and (n := breaks.get(job.run_id, 0) + 1) >= MAX_BREAKS:
                             record(job, t0, f"its worker process died (in flight at {n} deaths of the pool's workers; a crash or the kernel's OOM killer?)")
                         else:
@@ -530,7 +539,7 @@ def run_sweep_workers(
     finally:
         f.close()
         prog.close()
-        clear_scratch()
+        clear_scratch(again=False)
     return ok, failed, interrupted
 
 
