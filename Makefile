@@ -9,24 +9,28 @@ STAMP  := $(VENV)/.installed
 DEMO   := $(VENV)/.installed-demo
 DOCS   := $(VENV)/.installed-docs
 
-# Everything the tests use (the viewer, Dask, Sphinx, the test tools); it serves the demo and the docs too.
-$(STAMP): pyproject.toml
+# The installs go through uv (PyPI's `uv`, put into the venv by its pip): it resolves and unpacks in
+# parallel.  Measured 2026-12-07 on a fresh clone, 2 cores: `.[test]` in 29.5 s with pip (its cache
+# warm) and 17.5 s with uv, uv's own install and a cold cache included.  The venv keeps its pip
+# (the compose test's `pip wheel` uses it).
+UV     := $(PY) -m uv pip install --quiet --python $(PY)
+$(VENV)/.uv:
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet uv
+	touch $@
+
+# Everything the tests use (the viewer, Dask, Sphinx, the test tools); it serves the demo and the docs too.
+$(STAMP): pyproject.toml $(VENV)/.uv
+	$(UV) -e '.[test]'
 	touch $(STAMP) $(DEMO) $(DOCS)
 
 # What the demo needs and nothing else (343 MB, measured 2026-12-06: no viewer, Dask or test tools).
-$(DEMO): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e .
+$(DEMO): pyproject.toml $(VENV)/.uv
+	$(UV) -e .
 	touch $(DEMO)
 
-$(DOCS): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[docs]'
+$(DOCS): pyproject.toml $(VENV)/.uv
+	$(UV) -e '.[docs]'
 	touch $(DOCS) $(DEMO)
 
 ## make demo: the §3.2 scenario over real processes (router, world, 8 agents, recorder), then the summary
@@ -39,7 +43,7 @@ docs: $(DOCS)
 	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
 	@echo "docs/_build/html/index.html"
 
-## make test: unit and component tests on two workers (by file, the longest first), with the tests of real processes
+## make test: unit and component tests on four workers (by file, the longest first), with the tests of real processes
 ## that need no real time (marker "processes"); then the integration tests alone, with
 ## the CPU-bound component tests that keep no real time (marker "background") beside them at idle
 ## priority; each part lists its slowest tests (tests/layers.sh says how and why)

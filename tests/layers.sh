@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # make test: the test layers in the order and on the cores that fit a 2-core machine.
 #
-# 1. Unit and component tests on two workers (by file), and the tests of real processes that need
+# 1. Unit and component tests on four workers (by file), and the tests of real processes that need
 #    no real time kept (marker "processes": the kill -9 nemeses, the Dask cluster, the Zenoh fuzz):
 #    CPU-bound, each of their waits a hang's deadline, so they share the machine with the component
 #    tests rather than lengthen the real-time stream of step 2 (629 s of its 1885 on 2026-12-07,
@@ -42,8 +42,12 @@ PY=${1:-.venv/bin/python}
 
 # Each worker in a session of its own (tests/conftest.py, ZSWARM_WORKER_SESSIONS): beside another
 # session's busy process the two get two thirds of the two cores, not one core between them.
+# Four workers on the two cores: a worker often waits (for a sweep's or a nemesis' processes, a
+# pause of the fuzz), and then another has the core.  Measured 2026-12-07 beside stress-ng --cpu 1
+# (this layer alone, 916 tests): 699 s with 2 workers (1.1 cores used), 628 s with 3 (1.33),
+# 583 s with 4 (1.42).  Its tests keep no real time: each wait of theirs is a hang's deadline.
 # --no-loadscope-reorder: the files in collection order, the longest first (tests/conftest.py LONG_FIRST).
-ZSWARM_WORKER_SESSIONS=1 "$PY" -m pytest -q -m "not integration and not background" -n 2 --dist loadfile --no-loadscope-reorder --durations=15 || exit $?
+ZSWARM_WORKER_SESSIONS=1 "$PY" -m pytest -q -m "not integration and not background" -n 4 --dist loadfile --no-loadscope-reorder --durations=15 || exit $?
 
 # What numpy 1.x and 2.x call their AVX-512 dispatch targets; a name a numpy does not know is ignored.
 # glibc's libm without its FMA builds of exp, sin, cos, atan2 (GLIBC_TUNABLES): other bits on the

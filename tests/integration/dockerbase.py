@@ -36,6 +36,24 @@ def last_line(r: subprocess.CompletedProcess[str]) -> str:
     return lines[-1] if lines else f"exit {r.returncode}"
 
 
+APT_PACKAGES = ("docker.io", "docker-compose")
+
+
+def compose_command() -> str:
+    """The docker-compose command, Debian's docker.io and docker-compose installed first if
+    ``docker-compose`` or ``dockerd`` is missing (the test is skipped, saying why, if they
+    cannot be: a skip fails ``make test``, tests/conftest.py)."""
+    import pytest
+
+    if not shutil.which("docker-compose") or not shutil.which("dockerd"):
+        why = apt_install(*APT_PACKAGES)
+        if why:
+            pytest.skip(f"no docker-compose and could not install it ({why})")
+    found = shutil.which("docker-compose")
+    assert found, "docker-compose installed but not on PATH"
+    return found
+
+
 def apt_install(*pkgs: str, prefix: tuple[str, ...] = ()) -> str | None:
     """Install Debian packages; None, or why it could not.  Another apt-get of this session
     (the base root's, the engine's) may hold dpkg's lock: wait for it rather than fail."""

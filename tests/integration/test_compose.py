@@ -10,7 +10,8 @@ What it needs it installs and starts itself, and removes what it made:
 * the zswarm image, built on that base from a wheelhouse made on the host
   (``pip wheel``), installed offline in the image.
 
-Where no engine can be had it says why in one line and the test is skipped.
+Where no engine can be had it says why in one line and the test is skipped.  The compose
+files alone (``docker-compose config``) are checked in test_compose_config.py.
 Every container, network and image it created is removed, whatever happens.
 """
 
@@ -29,27 +30,18 @@ import pytest
 
 from tests.conftest import ROOT, TOPO
 from tests.integration.conftest import _machine_problems_only, judged_if_kept_up, not_kept_up
-from tests.integration.dockerbase import BASE_IMAGE, Rootfs
-from tests.integration.dockerbase import apt_install as _apt_install
+from tests.integration.dockerbase import BASE_IMAGE, Rootfs, compose_command
 from tests.integration.dockerbase import image_exists as _image_exists
 from tests.integration.dockerbase import run as _run
 from tests.keepup import MachineDidNotKeepUp
-from zswarm.engines import compose
-from zswarm.scenario import load
 
 pytestmark = pytest.mark.integration
-
-APT_PACKAGES = ("docker.io", "docker-compose")
 
 
 @pytest.fixture(scope="module")
 def compose_cli():
     """The docker-compose command (installed if missing)."""
-    if not shutil.which("docker-compose") or not shutil.which("dockerd"):
-        why = _apt_install(*APT_PACKAGES)
-        if why:
-            pytest.skip(f"no docker-compose and could not install it ({why})")
-    return shutil.which("docker-compose")
+    return compose_command()
 
 
 @pytest.fixture(scope="module")
@@ -125,32 +117,6 @@ def image(engine, base_rootfs, tmp_path_factory):
     finally:
         for name in made:
             _run(["docker", "image", "rm", "-f", name], 120)
-
-
-def test_shipped_compose_file_is_the_generators():
-    """docker-compose.yml is `zswarm compose topologies/thesis-3.2-fixed8.toml -o docker-compose.yml`."""
-    sc = load(TOPO / "thesis-3.2-fixed8.toml")
-    want = compose.write(
-        sc, TOPO / "thesis-3.2-fixed8.toml", ROOT / "docker-compose.yml", "zswarm:latest", ROOT, None, "compose", "${ZSWARM_RESULTS:-./runs}", "flat", None, 1.0, None, None,
-        argv=["topologies/thesis-3.2-fixed8.toml", "-o", "docker-compose.yml"],
-    )  # fmt: skip
-    assert (ROOT / "docker-compose.yml").read_text() == want
-
-
-@pytest.mark.parametrize("network", ["flat", "routed"])
-def test_compose_file_of_every_shipped_scenario_passes_config(compose_cli, tmp_path, network):
-    """`docker-compose config` accepts the file of every scenario in topologies/."""
-    names = sorted(p.stem for p in TOPO.glob("*.toml"))
-    assert len(names) >= 10
-    for name in names:
-        out = tmp_path / f"{name}.yml"
-        r = _run([sys.executable, "-m", "zswarm", "compose", str(TOPO / f"{name}.toml"), "-o", str(out), "--network", network, "--live", "127.0.0.1:8765"], 60, cwd=ROOT)
-        assert r.returncode == 0, r.stderr
-        r = _run([compose_cli, "-f", str(out), "config", "-q"], 60, cwd=tmp_path)
-        assert r.returncode == 0, f"{name}: {r.stderr}"
-        sc = load(TOPO / f"{name}.toml")
-        text = out.read_text()
-        assert all(f"  agent{i}:" in text for i in sc.ids), name
 
 
 ACTIVE_ENDPOINTS = "has active endpoints"
