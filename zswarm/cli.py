@@ -141,6 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common_run_args(r)
     r.add_argument("--time-scale", type=procutil.positive_float, default=1.0, help="world seconds per wall second (default 1)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
+    r.add_argument("--no-plots", action="store_true", help="skip the PNG plots (as zswarm sim --no-plots; zswarm report RESULTS draws them later)")
     _live_arg(r, "serve the recording's channels on a Foxglove WebSocket server while the run goes on (open it in Foxglove or Lichtblick)")
     _rerun_arg(r, "stream the run to a Rerun viewer while it goes on (the recorder does it, off the agents' loops)")
     r.add_argument(
@@ -491,7 +492,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     procutil.warn_notes(sc)
     procutil.check_faults_in_run(sc, sc.duration if args.duration is None else args.duration, args.duration is not None)
     secure = None if args.secure is None else Path(args.secure) if args.secure else True
-    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure, rerun=args.rerun)
+    return launch.run(args.topology, sc, args.out, args.duration, args.time_scale, args.seed, quiet=args.quiet, live=args.live, secure=secure, rerun=args.rerun, plots=not args.no_plots)
 
 
 def cmd_router(args: argparse.Namespace) -> int:

@@ -196,3 +196,68 @@ def test_transcoding_a_cut_raw_file_keeps_what_it_holds(tmp_path, fixed8):
         transcode(path, tmp_path / "recording.mcap", sc)
     assert path.read_bytes() == whole[:200] and not (tmp_path / "recording.mcap").exists()
     assert not list(tmp_path.glob("*.part"))
+
+
+def _same(a, b) -> bool:
+    """Two decoded values alike: arrays by their bits, containers item by item."""
+    import numpy as np
+
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return type(a) is type(b) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+def test_the_report_read_in_the_transcodes_pass_is_the_one_read_back(tmp_path, fixed8):
+    """``zswarm run``'s report takes the run from the transcode as it writes it
+    (mcap_io.transcoded), not from reading recording.mcap back: the recording it decodes is the
+    one read back, field by field and bit for bit (the messages, the liveliness events, the
+    junk described one by one and counted in bulk, a message of another agent's key, the
+    envelopes a fault summary uses), the summary the same, and the file written the same bytes."""
+    import dataclasses
+    import shutil
+
+    from zswarm.recording.mcap_io import transcoded
+
+    sc, msgs = fixed8
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+    raw = RawOut(tmp_path / "a" / "recording.raw.mcap", {"engine": "test"})
+    for k, (stream, payload, t) in enumerate(msgs):
+        raw.message(stream, payload, t)
+        if k % 400 == 0:
+            raw.alive({"key": f"zswarm/r/alive/agent/{k % 8 + 1}", "alive": k % 800 == 0, "t_wall": float(k)}, t)
+        if k % 97 == 0:
+            raw.message("est/3", b"\x93garbage", t)  # 10 described, the rest counted
+        if k == 1000:
+            raw.message("est/4", msgs[next(j for j, m in enumerate(msgs) if m[0] == "est/5")][1], t)  # agent 5's estimate on agent 4's key
+    raw.close()
+    shutil.copy(tmp_path / "a" / "recording.raw.mcap", tmp_path / "b" / "recording.raw.mcap")
+
+    junk = len(range(0, len(msgs), 97)) + 1  # and the estimate on another agent's key
+    assert junk > 12  # more than are described one by one (DESCRIBE_PER_KEY)
+    assert transcode(tmp_path / "a" / "recording.raw.mcap", tmp_path / "a" / "recording.mcap", sc) == junk
+    back = load_recording(tmp_path / "a" / "recording.mcap", envelopes=True)
+    entries = transcoded(tmp_path / "b" / "recording.raw.mcap", tmp_path / "b" / "recording.mcap", sc)
+    one_pass = load_recording(entries, envelopes=True)
+    assert not (tmp_path / "b" / "recording.raw.mcap").exists()  # the last entry taken: in place
+    for f in dataclasses.fields(back):
+        assert _same(getattr(back, f.name), getattr(one_pass, f.name)), f.name
+    assert back.malformed == junk and len(back.alive_events) == sum(s == "events/alive" for s, _, _ in msgs) + len(range(0, len(msgs), 400))
+    assert all(back.envelopes[s] for s in ("truth", "est/3", "sense/5", "stats/agent/5")) and back.stats  # JSON leaves out inc = 0: each was empty
+    assert (tmp_path / "a" / "recording.mcap").read_bytes() == (tmp_path / "b" / "recording.mcap").read_bytes()
+    # make_report on a folder the recorder left its raw file in reads it in the transcode's pass;
+    # made again (the raw file gone, recording.mcap read back) it is the same summary.
+    assert _same(make_report(tmp_path / "b", sc, "run", 2.0, 1.0, sc.seed, plots=False), make_report(tmp_path / "a", sc, "run", 2.0, 1.0, sc.seed, plots=False))
+    c = tmp_path / "c"
+    c.mkdir()
+    raw = RawOut(c / "recording.raw.mcap", {"engine": "test"})
+    for stream, payload, t in msgs:
+        raw.message(stream, payload, t)
+    raw.close()
+    one_pass = make_report(c, sc, "run", 2.0, 1.0, sc.seed, plots=False)
+    assert not (c / "recording.raw.mcap").exists() and (c / "recording.mcap").exists()
+    assert _same(one_pass, make_report(c, sc, "run", 2.0, 1.0, sc.seed, plots=False))

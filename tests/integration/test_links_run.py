@@ -37,7 +37,7 @@ FIXED8 = TOPO / "thesis-3.2-fixed8.toml"
 def run(procs, tmp_path, sets, duration, scale=1.0):
     out = tmp_path / "run"
     args = [a for s in sets for a in ("--set", s)]
-    p = procs.start(zswarm("run", str(FIXED8), *args, "--duration", str(duration), "--time-scale", str(scale), "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", str(FIXED8), *args, "--duration", str(duration), "--time-scale", str(scale), "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     code = p.wait(duration / scale * 3 + 90)
     procs.adopt(out)
     s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")

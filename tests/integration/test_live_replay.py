@@ -35,7 +35,7 @@ def test_live_view_then_replay_reproduces_the_report(procs, tmp_path):
     out = tmp_path / "out"
     port = free_port()
     p = procs.start(
-        zswarm("run", str(TOPO / f"{name}.toml"), "--duration", "8", "--out", str(out), "--quiet", "--live", f"127.0.0.1:{port}"), log=tmp_path / "launcher.log"
+        zswarm("run", str(TOPO / f"{name}.toml"), "--duration", "8", "--out", str(out), "--quiet", "--no-plots", "--live", f"127.0.0.1:{port}"), log=tmp_path / "launcher.log"
     )
     # Connect while it runs: the recorder's server comes up with the recorder.
     c = Client(f"ws://127.0.0.1:{port}", timeout=60)

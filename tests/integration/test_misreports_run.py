@@ -30,7 +30,7 @@ def test_a_killed_sender_counts_sent_as_a_lower_bound_and_a_killed_agent_has_its
     under ``agent-4`` and the summary had none."""
     out = tmp_path / "out"
     p = procs.start(
-        zswarm("run", T33, "--duration", "7", "--out", str(out), "--fault", "kill,agent=3,at=2,restart_at=3", "--fault", "kill,agent=4,at=2.5"),
+        zswarm("run", T33, "--duration", "7", "--out", str(out), "--no-plots", "--fault", "kill,agent=3,at=2,restart_at=3", "--fault", "kill,agent=4,at=2.5"),
         log=tmp_path / "launcher.log",
     )
     wait_for(lambda: procs.adopt(out), 60, "processes.json")

@@ -165,7 +165,7 @@ def test_a_sigkilled_recorder_leaves_a_report_of_what_was_on_disk(procs, tmp_pat
     from zswarm.recording.mcap_io import read
 
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     rec_pid = next(c["pid"] for c in kids if c["role"] == "recorder")
     world_started(out)
@@ -233,7 +233,7 @@ def test_a_full_disk_or_a_read_only_folder_is_one_line_and_nothing_half_written(
 
     full, ro = small_disk
     out = full / "out"
-    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     code = p.wait(120)
     text = (tmp_path / "launcher.log").read_text()
@@ -279,7 +279,7 @@ def test_a_peer_cannot_stop_restart_or_stand_in_for_the_runs_processes(procs, tm
     out = tmp_path / "out"
     # 14 s: agent 3 is killed at ~4-6 s, and its silence is seen 2-3 s later (check_silent), with
     # room to spare on a loaded machine (at 8 s the run ended first once on CI).
-    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "14", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "14", "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     info = json.loads((out / "processes.json").read_text())
     run, ep = info["run_id"], info["router"]["endpoint"]
@@ -333,7 +333,7 @@ def test_a_run_whose_world_died_is_not_completed(procs, tmp_path):
     import os
 
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out)), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "8", "--out", str(out), "--no-plots"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     world_started(out)
     time.sleep(3.0)
@@ -384,7 +384,7 @@ def test_a_recorder_stopped_mid_run_leaves_a_hole_that_is_a_problem(procs, tmp_p
 
     stopped_s = 4 * LEASE_MS / 1e3
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", TOPOLOGY, "--duration", "12", "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     rec = next(c["pid"] for c in kids if c["role"] == "recorder")
     world_started(out)

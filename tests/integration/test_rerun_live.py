@@ -23,7 +23,7 @@ def test_run_streams_live_to_a_rerun_viewer(procs, tmp_path):
     out = tmp_path / "run"
     with browser.rerun_receiver(tmp_path / "live.rrd") as url:
         p = procs.start(
-            zswarm("run", str(TOPO / "thesis-5.6-hybrid7.toml"), "--duration", "5", "--out", str(out), "--quiet", "--rerun", url), log=tmp_path / "launcher.log"
+            zswarm("run", str(TOPO / "thesis-5.6-hybrid7.toml"), "--duration", "5", "--out", str(out), "--quiet", "--no-plots", "--rerun", url), log=tmp_path / "launcher.log"
         )
         code = p.wait(5 * 3 + 90)
         procs.adopt(out)

@@ -98,7 +98,7 @@ def test_run_converges_and_agrees_with_sim(procs, sim_reference, tmp_path, name)
 
 def test_killed_agent_others_continue(procs, tmp_path):
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", str(TOPO / "thesis-3.2-fixed8.toml"), "--duration", "8", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", str(TOPO / "thesis-3.2-fixed8.toml"), "--duration", "8", "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     kids = wait_for(lambda: procs.adopt(out), 60, "processes.json")
     wait_for(lambda: (out / "logs" / "agent-8.log").exists() and "started" in (out / "logs" / "agent-8.log").read_text(), 60, "agent 8 started")
     time.sleep(3.0)  # let it run a few seconds of world time before the kill
@@ -106,6 +106,7 @@ def test_killed_agent_others_continue(procs, tmp_path):
     t_kill = time.time()
     os.kill(pid8, signal.SIGKILL)
     s = assert_run_exit_ok(p.wait(120), out, tmp_path / "launcher.log")
+    assert (out / "errors.csv").exists() and not (out / "plots").exists()  # --no-plots: the report but its PNGs
     assert not s["agents"]["8"]["alive_at_end"]
     for i in range(1, 8):
         assert s["agents"][str(i)]["alive_at_end"], i

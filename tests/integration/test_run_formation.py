@@ -40,7 +40,7 @@ def test_decarli_over_zenoh_matches_sim(procs, sim_reference, tmp_path):
     out = tmp_path / "run"
     ref = sim_reference(TOPO / f"{NAME}.toml", tmp_path / "sim", DURATION, lean=True)  # computed while the run runs
     p = procs.start(
-        zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--duration", str(DURATION), "--time-scale", str(SCALE), "--quiet"),
+        zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--duration", str(DURATION), "--time-scale", str(SCALE), "--quiet", "--no-plots"),
         log=tmp_path / "launcher.log",
     )
     code = p.wait(DURATION / SCALE * 2 + 120)

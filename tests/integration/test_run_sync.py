@@ -62,7 +62,7 @@ def test_hybrid_law_over_zenoh_matches_sim_and_drops_bad_commands(procs, sim_ref
     # issue 28 the same needed 1.7-1.9 cores, and at time scale 0.5 with a core busy the
     # agents stepped at 55-60 Hz; an overloaded run fails the test (its settle times and
     # jumps would not be the equations').
-    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--duration", f"{DURATION:g}", "--time-scale", "1", "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", str(TOPO / f"{NAME}.toml"), "--out", str(out), "--duration", f"{DURATION:g}", "--time-scale", "1", "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     meta = wait_for(lambda: (out / "processes.json").exists() and json.loads((out / "processes.json").read_text()), 60, "processes.json")
     run_id, ep = meta["run_id"], meta["router"]["endpoint"]
     procs.adopt(out)
@@ -152,7 +152,7 @@ def test_velocity_free_law_over_zenoh_starts_like_the_thesis(procs, tmp_path):
     law's."""
     name = "thesis-5.6-velocity-free7"
     out = tmp_path / "run"
-    args = ("--out", str(out), "--duration", "15", "--time-scale", "1", "--quiet")
+    args = ("--out", str(out), "--duration", "15", "--time-scale", "1", "--quiet", "--no-plots")
     p = procs.start(zswarm("run", str(TOPO / f"{name}.toml"), *args), log=tmp_path / "launcher.log")
     code = p.wait(15 * 3 + 120)  # 15 world s at time scale 1: 15 s of wall time, ×3 for a loaded machine, + start-up
     procs.adopt(out)

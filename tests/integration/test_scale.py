@@ -50,7 +50,7 @@ def test_sixteen_agents_no_false_failure_and_a_counted_recording(procs, tmp_path
     topo = tmp_path / "gen16.toml"
     topo.write_text(text)
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", str(topo), "--out", str(out), "--time-scale", "0.5", "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", str(topo), "--out", str(out), "--time-scale", "0.5", "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     code = p.wait(DURATION * 2 * 4 + 120)  # time scale 0.5: twice DURATION of wall time, ×4 as before, + start-up
     procs.adopt(out)
     s = assert_run_exit_ok(code, out, tmp_path / "launcher.log")

@@ -35,7 +35,7 @@ def _edge(src: int, seq: int, inc: int) -> bytes:
 
 def test_secure_run_rejects_spoofing_and_strangers(procs, tmp_path):
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", T32, "--duration", "10", "--time-scale", "0.5", "--out", str(out), "--quiet", "--secure"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", T32, "--duration", "10", "--time-scale", "0.5", "--out", str(out), "--quiet", "--no-plots", "--secure"), log=tmp_path / "launcher.log")
     wait_for(lambda: procs.adopt(out), 60, "processes.json")
     info = json.loads((out / "processes.json").read_text())
     ep, run = info["router"]["endpoint"], info["run_id"]
@@ -166,7 +166,7 @@ def test_only_agent_i_certificate_declares_agent_i_token(procs, tmp_path):
     import signal
 
     out = tmp_path / "out"
-    p = procs.start(zswarm("run", T32, "--duration", "10", "--out", str(out), "--quiet", "--secure"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", T32, "--duration", "10", "--out", str(out), "--quiet", "--no-plots", "--secure"), log=tmp_path / "launcher.log")
     kids = {c["name"]: c["pid"] for c in wait_for(lambda: procs.adopt(out), 60, "processes.json")}
     info = json.loads((out / "processes.json").read_text())
     ep, run, certs = info["router"]["endpoint"], info["run_id"], str(out / "secure")

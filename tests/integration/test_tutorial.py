@@ -55,7 +55,7 @@ def test_tutorial_observer_on_sim_and_run(procs, tmp_path):
     assert set(ss["bearing_fit"]["edges"]) == {k for k in ss["links"] if "world" not in k}  # every agent-to-agent edge
     assert ss["bearing_fit"]["max_final"] < 0.01, ss["bearing_fit"]
     out = tmp_path / "run"
-    p = procs.start(zswarm("run", str(topo), "--duration", "15", "--out", str(out), "--quiet"), log=tmp_path / "launcher.log")
+    p = procs.start(zswarm("run", str(topo), "--duration", "15", "--out", str(out), "--quiet", "--no-plots"), log=tmp_path / "launcher.log")
     code = p.wait(120)
     procs.adopt(out)
     assert code == 0, (tmp_path / "launcher.log").read_text()

@@ -352,6 +352,7 @@ def run(
     live: tuple[str, int] | None = None,
     secure: Path | bool | None = None,
     rerun: str | None = None,
+    plots: bool = True,
 ) -> int:
     """Run the scenario over real processes; return the exit code for the CLI."""
     duration = sc.duration if duration is None else duration
@@ -479,7 +480,7 @@ def run(
     codes: dict[str, int | None] = {c.name: c.exit_code for c in la.children}
     try:
         la.write_processes(la.endpoint, la.run_id)
-        summary = results.make_report(out, sc, "run", duration, time_scale, seed, exit_codes=codes)
+        summary = results.make_report(out, sc, "run", duration, time_scale, seed, exit_codes=codes, plots=plots)
     except ValueError as exc:
         say(f"zswarm run: no report: {exc}")
         return 1

@@ -127,8 +127,11 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         kind = topic.split("/")[0]
         if envelopes and kind != "events":
             try:
-                e = payload if isinstance(payload, dict) else msgpack.unpackb(payload, raw=False, strict_map_key=False)
-                env[topic].append((float(e["t"]), int(e["inc"]), int(e["seq"])))
+                e = msgpack.unpackb(payload, raw=False, strict_map_key=False) if isinstance(payload, bytes) else payload
+                if isinstance(e, dict):  # JSON or msgpack: both leave out the incarnation at its default, 0
+                    env[topic].append((float(e["t"]), int(e.get("inc", 0)), int(e["seq"])))
+                else:  # a decoded message (sim's, the run report's read in the transcode's pass)
+                    env[topic].append((float(e.t), int(e.inc), int(e.seq)))
             except Exception:  # noqa: BLE001, S112 - malformed: counted where it is decoded
                 pass
         if kind not in ("truth", "est", "stats", "ctl"):

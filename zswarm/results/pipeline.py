@@ -22,7 +22,7 @@ import numpy as np
 
 from zswarm.families import contract as family
 from zswarm.recording.layout import write_layout
-from zswarm.recording.mcap_io import ensure_recording
+from zswarm.recording.mcap_io import recording_entries
 from zswarm.report import fault_costs as faults
 from zswarm.report import table as text
 from zswarm.report.base import THRESHOLDS
@@ -469,7 +469,7 @@ def make_report_parts(
     from them instead of reading the run again).  ``not_recorded``: channel prefixes the
     recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean).  ``keep``: entries of an
     earlier summary.json that only the launcher knew (``zswarm report`` keeps them)."""
-    rec = load_recording(ensure_recording(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
+    rec = load_recording(recording_entries(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
     known = duration is not None
     if duration is None:
         # Not known (zswarm report of a folder that does not tell it): the recording's last truth
