@@ -15,25 +15,26 @@ DOCS   := $(VENV)/.installed-docs
 # writes the packages' bytecode as it installs them, uv does not by default, and where
 # PYTHONDONTWRITEBYTECODE is set every process then compiled numpy, Zenoh's bindings and the rest
 # at each start (the first layer's CPU went from 826 s to 946 s).  The venv keeps its pip (the
-# compose test's `pip wheel` uses it).
-UV     := $(PY) -m uv pip install --quiet --compile-bytecode --python $(PY)
+# compose test's `pip wheel` uses it).  uv reads its own settings (UV_INDEX_URL ...), not pip's: where
+# it cannot be had or cannot install (behind a mirror that only pip is set up for), pip does.
+INSTALL = $(PY) -m uv pip install --quiet --compile-bytecode --python $(PY) $(1) || $(PY) -m pip install --quiet $(1)
 $(VENV)/.uv:
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet uv
+	$(PY) -m pip install --quiet uv || echo "no uv: pip installs"
 	touch $@
 
 # Everything the tests use (the viewer, Dask, Sphinx, the test tools); it serves the demo and the docs too.
 $(STAMP): pyproject.toml $(VENV)/.uv
-	$(UV) -e '.[test]'
+	$(call INSTALL,-e '.[test]')
 	touch $(STAMP) $(DEMO) $(DOCS)
 
-# What the demo needs and nothing else (343 MB, measured 2026-12-06: no viewer, Dask or test tools).
+# What the demo needs and nothing else (379 MB with uv, measured 2026-12-07: no viewer, Dask or test tools).
 $(DEMO): pyproject.toml $(VENV)/.uv
-	$(UV) -e .
+	$(call INSTALL,-e .)
 	touch $(DEMO)
 
 $(DOCS): pyproject.toml $(VENV)/.uv
-	$(UV) -e '.[docs]'
+	$(call INSTALL,-e '.[docs]')
 	touch $(DOCS) $(DEMO)
 
 ## make demo: the §3.2 scenario over real processes (router, world, 8 agents, recorder), then the summary

@@ -2,7 +2,8 @@
 # make test: the test layers in the order and on the cores that fit a 2-core machine.
 #
 # 1. Unit and component tests on four workers (by file), and the tests of real processes that need
-#    no real time kept (marker "processes": the kill -9 nemeses, the Dask cluster, the Zenoh fuzz):
+#    no real time kept (marker "processes": the kill -9 nemeses, the Dask cluster, the Zenoh fuzz,
+#    docker-compose config of the shipped scenarios):
 #    CPU-bound, each of their waits a hang's deadline, so they share the machine with the component
 #    tests rather than lengthen the real-time stream of step 2 (629 s of its 1885 on 2026-12-07,
 #    beside stress-ng --cpu 1).
@@ -41,7 +42,8 @@ PY=${1:-.venv/bin/python}
 "$PY" -m compileall -q zswarm agent world tests >/dev/null || exit $?
 
 # Each worker in a session of its own (tests/conftest.py, ZSWARM_WORKER_SESSIONS): beside another
-# session's busy process the two get two thirds of the two cores, not one core between them.
+# session's busy process, two workers get two thirds of the two cores, not one core between them
+# (the kernel shares the CPU between sessions first).
 # Four workers on the two cores: a worker often waits (for a sweep's or a nemesis' processes, a
 # pause of the fuzz), and then another has the core.  Measured 2026-12-07 beside stress-ng --cpu 1
 # (this layer alone, 916 tests): 699 s with 2 workers (1.1 cores used), 628 s with 3 (1.33),

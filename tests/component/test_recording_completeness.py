@@ -251,7 +251,6 @@ def test_the_report_read_in_the_transcodes_pass_is_the_one_read_back(tmp_path, f
     assert (tmp_path / "a" / "recording.mcap").read_bytes() == (tmp_path / "b" / "recording.mcap").read_bytes()
     # make_report on a folder the recorder left its raw file in reads it in the transcode's pass;
     # made again (the raw file gone, recording.mcap read back) it is the same summary.
-    assert _same(make_report(tmp_path / "b", sc, "run", 2.0, 1.0, sc.seed, plots=False), make_report(tmp_path / "a", sc, "run", 2.0, 1.0, sc.seed, plots=False))
     c = tmp_path / "c"
     c.mkdir()
     raw = RawOut(c / "recording.raw.mcap", {"engine": "test"})
@@ -261,3 +260,42 @@ def test_the_report_read_in_the_transcodes_pass_is_the_one_read_back(tmp_path, f
     one_pass = make_report(c, sc, "run", 2.0, 1.0, sc.seed, plots=False)
     assert not (c / "recording.raw.mcap").exists() and (c / "recording.mcap").exists()
     assert _same(one_pass, make_report(c, sc, "run", 2.0, 1.0, sc.seed, plots=False))
+
+
+def test_a_report_that_fails_while_reading_the_run_leaves_the_recording_in_place(tmp_path, fixed8, monkeypatch):
+    """The report reads the run in the transcode's pass: if the report fails part way, the
+    transcode is finished all the same (recording.mcap in place, the raw file gone, no partial
+    copy), and its error is the one raised; an iteration closed before its end (Ctrl-C) leaves
+    the raw file as it was and no recording.mcap."""
+    from zswarm.recording.mcap_io import transcoded
+    from zswarm.results import pipeline
+
+    sc, msgs = fixed8
+    raw = RawOut(tmp_path / "recording.raw.mcap", {"engine": "test"})
+    for stream, payload, t in msgs:
+        raw.message(stream, payload, t)
+    raw.close()
+    size = (tmp_path / "recording.raw.mcap").stat().st_size
+
+    def fails_half_way(entries, **_kw):
+        for k, _ in enumerate(entries):
+            if k == len(msgs) // 2:
+                raise RuntimeError("a report that failed")
+
+    monkeypatch.setattr(pipeline, "load_recording", fails_half_way)
+    with pytest.raises(RuntimeError, match="a report that failed"):
+        make_report(tmp_path, sc, "run", 2.0, 1.0, sc.seed, plots=False)
+    assert not (tmp_path / "recording.raw.mcap").exists() and not (tmp_path / "recording.mcap.part").exists()
+    assert sum(1 for _ in read(tmp_path / "recording.mcap")) == len(msgs)
+    # Closed half way: nothing moved.
+    (tmp_path / "d").mkdir()
+    raw = RawOut(tmp_path / "d" / "recording.raw.mcap", {"engine": "test"})
+    for stream, payload, t in msgs:
+        raw.message(stream, payload, t)
+    raw.close()
+    it = transcoded(tmp_path / "d" / "recording.raw.mcap", tmp_path / "d" / "recording.mcap", sc)
+    for _ in zip(range(len(msgs) // 2), it, strict=False):
+        pass
+    it.close()
+    assert (tmp_path / "d" / "recording.raw.mcap").stat().st_size == size
+    assert sorted(p.name for p in (tmp_path / "d").iterdir()) == ["recording.raw.mcap"]

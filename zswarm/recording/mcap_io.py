@@ -20,7 +20,8 @@ Every message also carries its world time ``t`` (s).
 During ``zswarm run`` the recorder does no per-message work but a copy: it
 writes the payloads as they came (msgpack, one channel per stream) into
 ``recording.raw.mcap``, flushed every 0.5 s, and the report turns that into
-``recording.mcap`` after the run (:func:`transcode`).  Decoding, validating and
+``recording.mcap`` after the run, reading the run in the same pass (:func:`transcoded`;
+``zswarm report`` of such a folder: :func:`transcode`).  Decoding, validating and
 writing JSON for every message took a quarter of a core at 8 agents; under
 load the recorder then fell behind and the router dropped what it could not
 take.  With ``--live`` the recorder writes JSON as it goes (the viewer needs it).
@@ -408,8 +409,9 @@ def transcoded(raw: Path, out: Path, scenario: Scenario | None) -> Iterator[tupl
     is): the report reads the run in the same pass as it is transcoded, not from the file
     after it.  Measured 2026-12-07 on a quiet 2-core machine, §3.2 over 40 s: from the
     recorder's end to summary.json 7.8 s reading the file back, 5.6 s in one pass.
-    ``out`` is in place (and ``raw`` gone) once the last entry has been taken; an error of
-    the transcode is raised from the iteration."""
+    ``out`` is in place (and ``raw`` gone) once the iteration has ended (the last ``next``
+    may yield nothing); an error of the transcode is raised from the iteration, and one
+    closed before its end leaves ``raw`` as it was and no ``out``."""
     yield from _transcode(raw, out, scenario, [])
 
 
@@ -504,7 +506,7 @@ class EmptyRecording(RecordingError):
 
 def ensure_recording(results: Path, scenario: Scenario | None) -> Path:
     """``results/recording.mcap``, transcoded first from ``recording.raw.mcap`` if that is
-    what the recorder left (a run, or a recorder killed before the report)."""
+    what the recorder left (a recorder killed before the report, or run without one)."""
     rec = results / "recording.mcap"
     raw = results / ("recording" + RAW_SUFFIX)
     if raw.exists():

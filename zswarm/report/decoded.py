@@ -85,13 +85,14 @@ TRUTH_GAP_S = 0.1
 TRUTH_GAP_PERIODS = 4.0
 
 
-def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool = False, duration: float | None = None) -> Recording:
+def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool = False, duration: float | None = None, source: str | None = None) -> Recording:
     """Decode a recording file, or the messages of an in-memory recording; with ``envelopes``,
     also every message's ``(t, inc, seq)`` per stream (the loss a fault caused).
 
     A message is filed under the process of its key (wire.check_stream); with ``duration``
     (else the run's ``ctl/start``, if it comes first), truth, estimates and stats stamped
-    more than OUTSIDE_RUN_MARGIN_S outside ``[0, duration]`` are counted and ignored."""
+    more than OUTSIDE_RUN_MARGIN_S outside ``[0, duration]`` are counted and ignored.
+    ``source``: the file that messages are (or will be) in, for what is said of them."""
     truth: list[dict[str, Any]] = []
     est: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
     edge_values: dict[str, dict[int, list[tuple[float, float]]]] = {}
@@ -132,7 +133,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
                     env[topic].append((float(e["t"]), int(e.get("inc", 0)), int(e["seq"])))
                 else:  # a decoded message (sim's, the run report's read in the transcode's pass)
                     env[topic].append((float(e.t), int(e.inc), int(e.seq)))
-            except Exception:  # noqa: BLE001, S112 - malformed: counted where it is decoded
+            except Exception:  # noqa: BLE001, S110 - malformed: counted where it is decoded
                 pass
         if kind not in ("truth", "est", "stats", "ctl"):
             continue
@@ -178,7 +179,7 @@ def load_recording(path: Path | Iterable[tuple[str, Any, int]], envelopes: bool 
         elif m["type"] == "stop":
             stop_seen = True
     if not truth:
-        raise NoTruth(f"{path if isinstance(path, (str, Path)) else 'recording'}: the recording holds no ground truth")
+        raise NoTruth(f"{path if isinstance(path, (str, Path)) else source or 'recording'}: the recording holds no ground truth")
     truth.sort(key=lambda m: m["t"])
     ids = truth[0]["ids"]
     return Recording(

@@ -10,11 +10,13 @@ completed.  "final" is the mean over the last second of the run.
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import csv
 import json
 import math
 from collections import defaultdict
-from collections.abc import Collection, Iterable, Mapping, Sequence
+from collections.abc import Collection, Generator, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -469,7 +471,17 @@ def make_report_parts(
     from them instead of reading the run again).  ``not_recorded``: channel prefixes the
     recorder left out on purpose (``sense``, ``edge``, ``cmd``: lean).  ``keep``: entries of an
     earlier summary.json that only the launcher knew (``zswarm report`` keeps them)."""
-    rec = load_recording(recording_entries(out_dir, sc) if messages is None else messages, envelopes=bool(sc.faults), duration=duration)
+    entries = recording_entries(out_dir, sc) if messages is None else messages
+    try:
+        rec = load_recording(entries, envelopes=bool(sc.faults), duration=duration, source=str(out_dir / "recording.mcap"))
+    except Exception:
+        if isinstance(entries, Generator):  # the transcode's pass (mcap_io.transcoded): recording.mcap written all the same
+            with contextlib.suppress(Exception):  # the report's error is the one to tell
+                collections.deque(entries, maxlen=0)
+        raise
+    finally:
+        if isinstance(entries, Generator):
+            entries.close()  # after a KeyboardInterrupt: the partial copy removed now, the raw file kept
     known = duration is not None
     if duration is None:
         # Not known (zswarm report of a folder that does not tell it): the recording's last truth
